@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Side-by-side throughput: ir-sim (Python, headless) vs twindrive's simulator on
+# the same setup (bench/irsim/run_irsim.py describes it), with and without lidar.
+# Usage: bench/sim_vs_irsim.sh   (from any directory)
+set -euo pipefail
+
+IRSIM_VERSION=2.12.0
+IRSIM_STEPS=${IRSIM_STEPS:-2000}              # lidar variant, ~3 s
+IRSIM_STEPS_NOSENSOR=${IRSIM_STEPS_NOSENSOR:-20000}
+TWINDRIVE_STEPS=${TWINDRIVE_STEPS:-200000}
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+VENV=$ROOT/.venv-irsim
+cd "$ROOT"
+
+if [[ ! -x $VENV/bin/python ]]; then
+    python3 -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check "ir-sim==$IRSIM_VERSION" >&2
+
+# last "<key> <float>" line of stdin
+value_of() { awk -v k="$1" '$1 == k { v = $2 } END { if (v == "") exit 1; print v }'; }
+
+irsim() {
+    MPLBACKEND=Agg "$VENV/bin/python" bench/irsim/run_irsim.py "$@" | value_of irsim_steps_per_s
+}
+twindrive() {
+    cargo run --release -q -p twindrive-sim --example throughput -- \
+        "$1" --steps "$TWINDRIVE_STEPS" | value_of steps_per_s
+}
+
+echo "ir-sim $IRSIM_VERSION, lidar ..." >&2
+irsim_lidar=$(irsim --steps "$IRSIM_STEPS")
+echo "ir-sim $IRSIM_VERSION, no sensor ..." >&2
+irsim_none=$(irsim --steps "$IRSIM_STEPS_NOSENSOR" --no-sensor)
+echo "twindrive, lidar ..." >&2
+td_lidar=$(twindrive bench/irsim_setup.toml)
+echo "twindrive, no sensor ..." >&2
+td_none=$(twindrive bench/irsim_setup_nosensor.toml)
+
+row() { awk -v s="$1" -v a="$2" -v b="$3" 'BEGIN { printf "%-26s %14.1f %17.1f %9.1fx\n", s, a, b, b / a }'; }
+printf '%-26s %14s %17s %10s\n' setup "ir-sim steps/s" "twindrive steps/s" ratio
+row "lidar 360 beams, 6 obst." "$irsim_lidar" "$td_lidar"
+row "no sensor, 6 obst." "$irsim_none" "$td_none"

@@ -1,0 +1,190 @@
+//! The augmented state [x, y, θ, dL, dR, b] and the analytic Jacobians of the
+//! arc step with respect to it and to the wheel rotations.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::arc::{sinc, sinc_derivative};
+
+pub type StateVec = SVector<f64, 6>;
+pub type Mat6 = SMatrix<f64, 6, 6>;
+pub type Mat6x2 = SMatrix<f64, 6, 2>;
+
+/// Index names for [`StateVec`]: pose, then the kinematic parameters.
+#[derive(Debug, Clone, Copy)]
+pub struct AugmentedState;
+
+impl AugmentedState {
+    pub const X: usize = 0;
+    pub const Y: usize = 1;
+    pub const THETA: usize = 2;
+    pub const LEFT_DIAMETER: usize = 3;
+    pub const RIGHT_DIAMETER: usize = 4;
+    pub const WHEELBASE: usize = 5;
+}
+
+/// Intermediate quantities of one step, shared by the step and its Jacobians.
+struct StepTerms {
+    ds: f64,
+    half_turn: f64,
+    chord: f64,
+    sinc_half: f64,
+    sinc_half_derivative: f64,
+    cos_mid: f64,
+    sin_mid: f64,
+}
+
+fn terms(state: &StateVec, left_rad: f64, right_rad: f64) -> StepTerms {
+    let (theta, dl, dr, b) = (state[2], state[3], state[4], state[5]);
+    let left_m = 0.5 * dl * left_rad;
+    let right_m = 0.5 * dr * right_rad;
+    let ds = 0.5 * (left_m + right_m);
+    let half_turn = 0.5 * (right_m - left_m) / b;
+    let sinc_half = sinc(half_turn);
+    let (sin_mid, cos_mid) = (theta + half_turn).sin_cos();
+    StepTerms {
+        ds,
+        half_turn,
+        chord: ds * sinc_half,
+        sinc_half,
+        sinc_half_derivative: sinc_derivative(half_turn),
+        cos_mid,
+        sin_mid,
+    }
+}
+
+/// The arc step on the augmented state; wheel rotations in radians. The
+/// parameters are carried through unchanged.
+pub fn step_augmented(state: &StateVec, left_rad: f64, right_rad: f64) -> StateVec {
+    let t = terms(state, left_rad, right_rad);
+    let mut next = *state;
+    next[0] += t.chord * t.cos_mid;
+    next[1] += t.chord * t.sin_mid;
+    next[2] += 2.0 * t.half_turn;
+    next
+}
+
+/// Jacobians of [`step_augmented`]: `F = ∂f/∂state` (6x6) and
+/// `G = ∂f/∂[left_rad, right_rad]` (6x2), the latter for mapping wheel-travel
+/// noise into the state.
+pub fn step_jacobians(state: &StateVec, left_rad: f64, right_rad: f64) -> (Mat6, Mat6x2) {
+    let t = terms(state, left_rad, right_rad);
+    let (dl, dr, b) = (state[3], state[4], state[5]);
+
+    // Column of partials of (x', y', θ') for a variable with the given
+    // partials of ds and of the half turn α.
+    let column = |dds: f64, dalpha: f64| -> [f64; 3] {
+        let dchord = dds * t.sinc_half + t.ds * t.sinc_half_derivative * dalpha;
+        [
+            dchord * t.cos_mid - t.chord * t.sin_mid * dalpha,
+            dchord * t.sin_mid + t.chord * t.cos_mid * dalpha,
+            2.0 * dalpha,
+        ]
+    };
+
+    let mut f = Mat6::identity();
+    f[(0, 2)] = -t.chord * t.sin_mid;
+    f[(1, 2)] = t.chord * t.cos_mid;
+    let param_columns = [
+        column(0.25 * left_rad, -0.25 * left_rad / b),
+        column(0.25 * right_rad, 0.25 * right_rad / b),
+        column(0.0, -t.half_turn / b),
+    ];
+    for (j, col) in param_columns.iter().enumerate() {
+        for (i, v) in col.iter().enumerate() {
+            f[(i, 3 + j)] = *v;
+        }
+    }
+
+    let mut g = Mat6x2::zeros();
+    let input_columns = [column(0.25 * dl, -0.25 * dl / b), column(0.25 * dr, 0.25 * dr / b)];
+    for (j, col) in input_columns.iter().enumerate() {
+        for (i, v) in col.iter().enumerate() {
+            g[(i, j)] = *v;
+        }
+    }
+    (f, g)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{DiffDriveParams, Pose, arc_step_wheels};
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn random_state(rng: &mut ChaCha8Rng) -> StateVec {
+        StateVec::new(
+            rng.random_range(-5.0..5.0),
+            rng.random_range(-5.0..5.0),
+            rng.random_range(-4.0..4.0),
+            rng.random_range(0.03..0.3),
+            rng.random_range(0.03..0.3),
+            rng.random_range(0.1..0.6),
+        )
+    }
+
+    /// Central differences; returns (F, G) numerically.
+    fn numeric(state: &StateVec, l: f64, r: f64) -> (Mat6, Mat6x2) {
+        let h = 1e-6;
+        let mut f = Mat6::zeros();
+        for j in 0..6 {
+            let mut plus = *state;
+            let mut minus = *state;
+            plus[j] += h;
+            minus[j] -= h;
+            let col = (step_augmented(&plus, l, r) - step_augmented(&minus, l, r)) / (2.0 * h);
+            f.set_column(j, &col);
+        }
+        let mut g = Mat6x2::zeros();
+        let cl = (step_augmented(state, l + h, r) - step_augmented(state, l - h, r)) / (2.0 * h);
+        let cr = (step_augmented(state, l, r + h) - step_augmented(state, l, r - h)) / (2.0 * h);
+        g.set_column(0, &cl);
+        g.set_column(1, &cr);
+        (f, g)
+    }
+
+    fn assert_close(label: &str, analytic: &[f64], numeric: &[f64], seed_info: &str) {
+        for (k, (a, n)) in analytic.iter().zip(numeric).enumerate() {
+            let tol = 1e-7 * (1.0 + n.abs());
+            assert!((a - n).abs() < tol, "{label}[{k}] analytic {a} vs numeric {n} ({seed_info})");
+        }
+    }
+
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let seed = 7;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        for case in 0..2000 {
+            let state = random_state(&mut rng);
+            // Mix general steps with the singular-looking special cases.
+            let (l, r) = match case % 4 {
+                0 => {
+                    let w = rng.random_range(-2.0..2.0);
+                    (w, w * state[4] / state[3]) // straight line: equal travel
+                }
+                1 => {
+                    let w = rng.random_range(-2.0..2.0);
+                    (w, -w * state[3] / state[4]) // pure rotation: opposite travel
+                }
+                2 => (rng.random_range(-1e-4..1e-4), rng.random_range(-1e-4..1e-4)),
+                _ => (rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0)),
+            };
+            let (fa, ga) = step_jacobians(&state, l, r);
+            let (fn_, gn) = numeric(&state, l, r);
+            let info = format!("seed {seed}, case {case}, state {state:?}, l {l}, r {r}");
+            assert_close("F", fa.as_slice(), fn_.as_slice(), &info);
+            assert_close("G", ga.as_slice(), gn.as_slice(), &info);
+        }
+    }
+
+    #[test]
+    fn augmented_step_matches_pose_step() {
+        let p = DiffDriveParams::new(0.07, 0.071, 0.29);
+        let pose = Pose::new(0.5, 1.5, -2.0);
+        let s = StateVec::new(0.5, 1.5, -2.0, 0.07, 0.071, 0.29);
+        let a = step_augmented(&s, 0.3, 0.5);
+        let b = arc_step_wheels(&pose, &p, 0.3, 0.5);
+        assert_eq!((a[0], a[1], a[2]), (b.x_m, b.y_m, b.heading_rad));
+        assert_eq!((a[3], a[4], a[5]), (0.07, 0.071, 0.29));
+    }
+}
