@@ -1,1 +1,265 @@
+//! Mission logs: what the twin recorded at every simulation step, and their
+//! CSV, MCAP and TUM readers and writers.
+//!
+//! A [`MissionLog`] is a header plus one [`StepRecord`] per simulation step.
+//! Sensors that sample slower than the simulation leave their fields empty
+//! (`None`, or NaN for range readings) on the steps they did not sample.
 
+mod csv_io;
+mod error;
+mod mcap_io;
+mod time;
+mod tum;
+
+pub use csv_io::{read_csv, write_csv};
+pub use error::LogError;
+pub use mcap_io::{read_mcap, write_mcap};
+pub use time::{format_seconds, ns_from_seconds, seconds_from_ns};
+pub use tum::{read_tum, write_tum};
+
+use serde::{Deserialize, Serialize};
+use twindrive_kinematics::{DiffDriveParams, Pose};
+
+/// Identifies the header of a mission log.
+pub const LOG_FORMAT: &str = "twindrive-mission-log";
+/// Bumped whenever the meaning of a field or column changes.
+pub const LOG_VERSION: u32 = 1;
+
+/// What a reader needs to interpret the per-step records.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LogHeader {
+    pub format: String,
+    pub version: u32,
+    pub scenario: String,
+    pub seed: u64,
+    pub dt_s: f64,
+    pub ticks_per_rev: u32,
+    /// The parameters the operator believes (not the twin's hidden truth).
+    pub nominal: DiffDriveParams,
+    pub footprint_radius_m: f64,
+    pub range_sensors: Vec<RangeSensorInfo>,
+}
+
+/// A range sensor as mounted on the robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RangeSensorInfo {
+    pub name: String,
+    /// Mount pose in the robot body frame.
+    pub mount: Pose,
+    pub beams: u32,
+    /// Angular field of view spanned by the beams (ignored for one beam).
+    pub fov_rad: f64,
+    pub min_range_m: f64,
+    pub max_range_m: f64,
+}
+
+impl RangeSensorInfo {
+    /// Beam angle relative to the mount heading. A full circle spreads the
+    /// beams over [-π, π); a narrower field spans [-fov/2, fov/2] inclusive.
+    pub fn beam_angle_rad(&self, beam: u32) -> f64 {
+        let (start, step) = self.angle_min_and_increment();
+        start + step * f64::from(beam)
+    }
+
+    /// `(angle_min, angle_increment)` as in a ROS `LaserScan`.
+    pub fn angle_min_and_increment(&self) -> (f64, f64) {
+        use std::f64::consts::{PI, TAU};
+        if self.beams <= 1 {
+            (0.0, 0.0)
+        } else if self.fov_rad >= TAU - 1e-9 {
+            (-PI, TAU / f64::from(self.beams))
+        } else {
+            (
+                -0.5 * self.fov_rad,
+                self.fov_rad / f64::from(self.beams - 1),
+            )
+        }
+    }
+}
+
+/// Everything recorded at one simulation step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepRecord {
+    /// Simulation time; integer nanoseconds so that every format round-trips it exactly.
+    pub t_ns: u64,
+    /// Wheel angular speeds asked for by the controller, [left, right].
+    pub cmd_wheel_rad_s: [f64; 2],
+    /// Wheel angular speeds actually reached (after speed and acceleration limits).
+    pub wheel_rad_s: [f64; 2],
+    /// Cumulative encoder counts [left, right]; `None` when the encoders did not sample.
+    pub encoder_ticks: Option<[i64; 2]>,
+    pub bump: bool,
+    /// External tracker pose; `None` when it did not sample or dropped out.
+    pub tracker: Option<Pose>,
+    pub ground_truth: Pose,
+}
+
+impl StepRecord {
+    pub fn t_s(&self) -> f64 {
+        seconds_from_ns(self.t_ns)
+    }
+}
+
+/// A whole mission as recorded by the twin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MissionLog {
+    pub header: LogHeader,
+    pub steps: Vec<StepRecord>,
+    /// Range readings, [`MissionLog::beams_per_step`] values per step in
+    /// sensor order; NaN where that sensor did not sample at that step.
+    pub ranges: Vec<f64>,
+}
+
+impl MissionLog {
+    pub fn new(header: LogHeader) -> Self {
+        Self {
+            header,
+            steps: Vec::new(),
+            ranges: Vec::new(),
+        }
+    }
+
+    /// Total beams over all range sensors.
+    pub fn beams_per_step(&self) -> usize {
+        self.header
+            .range_sensors
+            .iter()
+            .map(|s| s.beams as usize)
+            .sum()
+    }
+
+    /// Offset of each sensor's first beam within a step's readings.
+    pub fn beam_offsets(&self) -> Vec<usize> {
+        self.header
+            .range_sensors
+            .iter()
+            .scan(0usize, |acc, s| {
+                let start = *acc;
+                *acc += s.beams as usize;
+                Some(start)
+            })
+            .collect()
+    }
+
+    /// The readings of `sensor` at `step`, or `None` if it did not sample then.
+    pub fn range_reading(&self, step: usize, sensor: usize) -> Option<&[f64]> {
+        let per_step = self.beams_per_step();
+        let start = step * per_step + self.beam_offsets()[sensor];
+        let beams = self.header.range_sensors[sensor].beams as usize;
+        let slice = &self.ranges[start..start + beams];
+        if slice.first().is_some_and(|r| r.is_nan()) {
+            None
+        } else {
+            Some(slice)
+        }
+    }
+
+    /// Index of the range sensor called `name`.
+    pub fn sensor_index(&self, name: &str) -> Option<usize> {
+        self.header.range_sensors.iter().position(|s| s.name == name)
+    }
+
+    /// Ground-truth path length in metres.
+    pub fn ground_truth_distance_m(&self) -> f64 {
+        self.steps
+            .windows(2)
+            .map(|w| w[0].ground_truth.distance_to(&w[1].ground_truth))
+            .sum()
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod testutil {
+    use super::*;
+
+    /// A small log that exercises every optional field.
+    pub fn sample_log() -> MissionLog {
+        let header = LogHeader {
+            format: LOG_FORMAT.into(),
+            version: LOG_VERSION,
+            scenario: "unit".into(),
+            seed: 3,
+            dt_s: 0.01,
+            ticks_per_rev: 512,
+            nominal: DiffDriveParams::new(0.064, 0.064, 0.26),
+            footprint_radius_m: 0.17,
+            range_sensors: vec![
+                RangeSensorInfo {
+                    name: "side_ir".into(),
+                    mount: Pose::new(0.1, -0.1, -0.7),
+                    beams: 1,
+                    fov_rad: 0.0,
+                    min_range_m: 0.04,
+                    max_range_m: 0.8,
+                },
+                RangeSensorInfo {
+                    name: "scan".into(),
+                    mount: Pose::new(0.0, 0.0, 0.0),
+                    beams: 4,
+                    fov_rad: std::f64::consts::TAU,
+                    min_range_m: 0.0,
+                    max_range_m: 5.0,
+                },
+            ],
+        };
+        let mut log = MissionLog::new(header);
+        for k in 0..7u64 {
+            let x = k as f64 * 0.1 + 1.0 / 3.0;
+            log.steps.push(StepRecord {
+                t_ns: k * 10_000_000,
+                cmd_wheel_rad_s: [1.0 / 7.0, -2.5],
+                wheel_rad_s: [0.1 * k as f64, -1e-300],
+                encoder_ticks: (k % 2 == 0).then_some([k as i64 * 3, -(k as i64)]),
+                bump: k == 4,
+                tracker: (k % 3 == 0).then_some(Pose::new(x, -x, 3.0)),
+                ground_truth: Pose::new(x, 2.0 * x, -0.1 * k as f64),
+            });
+            let sampled = k % 2 == 1;
+            log.ranges.push(if sampled { 0.123456789 * k as f64 } else { f64::NAN });
+            for b in 0..4 {
+                log.ranges
+                    .push(if k != 5 { 4.0 + b as f64 / 3.0 } else { f64::NAN });
+            }
+        }
+        log
+    }
+
+    /// Equality that treats NaN == NaN (the "not sampled" marker).
+    pub fn assert_same(a: &MissionLog, b: &MissionLog) {
+        assert_eq!(a.header, b.header);
+        assert_eq!(a.steps, b.steps);
+        assert_eq!(a.ranges.len(), b.ranges.len());
+        for (i, (x, y)) in a.ranges.iter().zip(&b.ranges).enumerate() {
+            assert!(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()), "range {i}: {x} vs {y}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn range_reading_respects_not_sampled() {
+        let log = testutil::sample_log();
+        assert!(log.range_reading(0, 0).is_none());
+        assert_eq!(log.range_reading(1, 0).unwrap(), &[0.123456789]);
+        assert_eq!(log.range_reading(1, 1).unwrap().len(), 4);
+        assert!(log.range_reading(5, 1).is_none());
+    }
+
+    #[test]
+    fn beam_angles() {
+        let log = testutil::sample_log();
+        let scan = &log.header.range_sensors[1];
+        assert_eq!(scan.beam_angle_rad(0), -std::f64::consts::PI);
+        assert!((scan.beam_angle_rad(2)).abs() < 1e-15);
+        let mut narrow = scan.clone();
+        narrow.fov_rad = 1.0;
+        narrow.beams = 3;
+        assert_eq!(narrow.beam_angle_rad(0), -0.5);
+        assert_eq!(narrow.beam_angle_rad(2), 0.5);
+    }
+}

@@ -1,0 +1,83 @@
+//! TUM trajectory format (`t x y z qx qy qz qw`), as read by `evo`.
+
+use std::io::{BufRead, Write};
+use std::path::Path;
+
+use twindrive_kinematics::Pose;
+
+use crate::{LogError, format_seconds, ns_from_seconds};
+
+/// Writes planar poses as TUM lines (z = 0, rotation about +z).
+pub fn write_tum<W: Write>(poses: impl IntoIterator<Item = (u64, Pose)>, mut out: W) -> std::io::Result<()> {
+    for (t_ns, p) in poses {
+        let (qz, qw) = (0.5 * p.heading_rad).sin_cos();
+        writeln!(
+            out,
+            "{} {} {} 0 0 0 {} {}",
+            format_seconds(t_ns),
+            p.x_m,
+            p.y_m,
+            qz,
+            qw
+        )?;
+    }
+    out.flush()
+}
+
+/// Reads a TUM file into (t_ns, planar pose); `#` lines are comments.
+/// Headings are the yaw of each quaternion, in (-π, π].
+pub fn read_tum(path: &Path) -> Result<Vec<(u64, Pose)>, LogError> {
+    let file = std::fs::File::open(path).map_err(|e| LogError::io(path, e))?;
+    let mut out = Vec::new();
+    for (i, line) in std::io::BufReader::new(file).lines().enumerate() {
+        let line_no = i as u64 + 1;
+        let line = line.map_err(|e| LogError::io(path, e))?;
+        let text = line.trim();
+        if text.is_empty() || text.starts_with('#') {
+            continue;
+        }
+        let bad = |message: String| LogError::Line {
+            path: path.into(),
+            line: line_no,
+            message,
+        };
+        let values: Vec<f64> = text
+            .split_whitespace()
+            .map(|v| v.parse::<f64>().ok().filter(|v| v.is_finite()))
+            .collect::<Option<_>>()
+            .ok_or_else(|| bad(format!("expected 8 finite numbers, found `{text}`")))?;
+        let [t, x, y, _z, qx, qy, qz, qw] = values[..] else {
+            return Err(bad(format!("expected 8 numbers `t x y z qx qy qz qw`, found {}", values.len())));
+        };
+        let t_ns = ns_from_seconds(t).ok_or_else(|| bad(format!("time {t} is negative")))?;
+        if out.last().is_some_and(|(prev, _)| *prev >= t_ns) {
+            return Err(bad("time must increase from line to line".into()));
+        }
+        let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+        out.push((t_ns, Pose::new(x, y, yaw)));
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip() {
+        let poses = vec![
+            (0, Pose::new(0.0, 0.0, 0.0)),
+            (10_000_000, Pose::new(1.5, -2.25, 1.0)),
+            (20_000_000, Pose::new(3.0, 4.0, -3.0)),
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.tum");
+        write_tum(poses.clone(), std::fs::File::create(&path).unwrap()).unwrap();
+        let back = read_tum(&path).unwrap();
+        for ((t0, p0), (t1, p1)) in poses.iter().zip(&back) {
+            assert_eq!(t0, t1);
+            assert_eq!((p0.x_m, p0.y_m), (p1.x_m, p1.y_m));
+            assert!((p0.heading_rad - p1.heading_rad).abs() < 1e-12);
+        }
+    }
+}
