@@ -5,7 +5,7 @@
 set -euo pipefail
 
 IRSIM_VERSION=2.12.0
-IRSIM_STEPS=${IRSIM_STEPS:-2000}              # lidar variant, ~3 s
+IRSIM_STEPS=${IRSIM_STEPS:-2000}              # lidar variant, ~6 s here
 IRSIM_STEPS_NOSENSOR=${IRSIM_STEPS_NOSENSOR:-20000}
 TWINDRIVE_STEPS=${TWINDRIVE_STEPS:-200000}
 

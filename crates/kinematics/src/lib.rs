@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 
 /// A planar pose in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Pose {
     pub x_m: f64,
     pub y_m: f64,

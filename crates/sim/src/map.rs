@@ -1,0 +1,288 @@
+//! ROS map_server occupancy maps (YAML + PGM/PNG): loading, conversion to
+//! wall segments, and the small office map the project draws itself.
+
+use std::path::{Path, PathBuf};
+
+use parry2d_f64::math::Vector;
+use parry2d_f64::shape::Segment;
+use serde::{Deserialize, Serialize};
+
+use crate::SimError;
+
+/// The map_server YAML fields.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapYaml {
+    pub image: PathBuf,
+    pub resolution: f64,
+    /// [x, y, yaw] of the lower-left pixel in the world.
+    pub origin: [f64; 3],
+    #[serde(default = "default_occupied")]
+    pub occupied_thresh: f64,
+    #[serde(default = "default_free")]
+    pub free_thresh: f64,
+    #[serde(default)]
+    pub negate: u8,
+    #[serde(default = "default_mode")]
+    pub mode: String,
+}
+
+fn default_occupied() -> f64 {
+    0.65
+}
+fn default_free() -> f64 {
+    0.196
+}
+fn default_mode() -> String {
+    "trinary".into()
+}
+
+/// Cell states after thresholding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cell {
+    Free,
+    Occupied,
+    Unknown,
+}
+
+/// An occupancy grid; row 0 is the bottom row (lowest y), unlike the image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OccupancyGrid {
+    pub width: usize,
+    pub height: usize,
+    pub resolution_m: f64,
+    pub origin_x_m: f64,
+    pub origin_y_m: f64,
+    pub origin_yaw_rad: f64,
+    pub cells: Vec<Cell>,
+}
+
+impl OccupancyGrid {
+    pub fn cell(&self, col: usize, row: usize) -> Cell {
+        self.cells[row * self.width + col]
+    }
+
+    /// True for occupied and unknown cells, and outside the map: the robot
+    /// must not go where the map does not say it is free.
+    fn blocked(&self, col: i64, row: i64) -> bool {
+        if col < 0 || row < 0 || col >= self.width as i64 || row >= self.height as i64 {
+            return true;
+        }
+        self.cell(col as usize, row as usize) != Cell::Free
+    }
+
+    fn map_from_world(&self, x: f64, y: f64) -> (f64, f64) {
+        let (s, c) = self.origin_yaw_rad.sin_cos();
+        let (dx, dy) = (x - self.origin_x_m, y - self.origin_y_m);
+        (c * dx + s * dy, -s * dx + c * dy)
+    }
+
+    fn world_from_map(&self, u: f64, v: f64) -> Vector {
+        let (s, c) = self.origin_yaw_rad.sin_cos();
+        Vector::new(self.origin_x_m + c * u - s * v, self.origin_y_m + s * u + c * v)
+    }
+
+    /// Whether the world point lies in a blocked cell.
+    pub fn blocked_at(&self, x: f64, y: f64) -> bool {
+        let (u, v) = self.map_from_world(x, y);
+        let col = (u / self.resolution_m).floor() as i64;
+        let row = (v / self.resolution_m).floor() as i64;
+        self.blocked(col, row)
+    }
+
+    /// Edges between blocked and free cells, merged into maximal straight runs.
+    pub fn boundary_segments(&self) -> Vec<Segment> {
+        let r = self.resolution_m;
+        let mut out = Vec::new();
+        // Horizontal edges at grid line `row` (between rows row-1 and row).
+        for row in 0..=self.height as i64 {
+            let mut run_start: Option<i64> = None;
+            for col in 0..=self.width as i64 {
+                let edge = col < self.width as i64 && self.blocked(col, row - 1) != self.blocked(col, row);
+                match (edge, run_start) {
+                    (true, None) => run_start = Some(col),
+                    (false, Some(start)) => {
+                        out.push(Segment::new(
+                            self.world_from_map(start as f64 * r, row as f64 * r),
+                            self.world_from_map(col as f64 * r, row as f64 * r),
+                        ));
+                        run_start = None;
+                    }
+                    _ => {}
+                }
+            }
+        }
+        // Vertical edges at grid line `col`.
+        for col in 0..=self.width as i64 {
+            let mut run_start: Option<i64> = None;
+            for row in 0..=self.height as i64 {
+                let edge = row < self.height as i64 && self.blocked(col - 1, row) != self.blocked(col, row);
+                match (edge, run_start) {
+                    (true, None) => run_start = Some(row),
+                    (false, Some(start)) => {
+                        out.push(Segment::new(
+                            self.world_from_map(col as f64 * r, start as f64 * r),
+                            self.world_from_map(col as f64 * r, row as f64 * r),
+                        ));
+                        run_start = None;
+                    }
+                    _ => {}
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Loads a map_server YAML and its image. Errors name the file and field.
+pub fn load_map(yaml_path: &Path) -> Result<OccupancyGrid, SimError> {
+    let text = std::fs::read_to_string(yaml_path).map_err(|e| SimError::Io {
+        path: yaml_path.to_path_buf(),
+        source: e,
+    })?;
+    let meta: MapYaml = serde_yaml_ng::from_str(&text).map_err(|e| SimError::Scenario {
+        path: yaml_path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let field = |name: &str, msg: String| SimError::field(yaml_path, name, msg);
+    if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
+        return Err(field("resolution", format!("must be > 0 metres per pixel, got {}", meta.resolution)));
+    }
+    if meta.origin.iter().any(|v| !v.is_finite()) {
+        return Err(field("origin", "must be three finite numbers [x, y, yaw]".into()));
+    }
+    if !(0.0..=1.0).contains(&meta.free_thresh)
+        || !(0.0..=1.0).contains(&meta.occupied_thresh)
+        || meta.free_thresh >= meta.occupied_thresh
+    {
+        return Err(field(
+            "free_thresh",
+            format!(
+                "need 0 <= free_thresh < occupied_thresh <= 1, got {} and {}",
+                meta.free_thresh, meta.occupied_thresh
+            ),
+        ));
+    }
+    if !matches!(meta.mode.as_str(), "trinary" | "scale" | "raw") {
+        return Err(field("mode", format!("expected trinary, scale or raw, got `{}`", meta.mode)));
+    }
+    let image_path = yaml_path.parent().unwrap_or(Path::new(".")).join(&meta.image);
+    let img = image::open(&image_path)
+        .map_err(|e| field("image", format!("cannot load `{}`: {e}", image_path.display())))?
+        .to_luma8();
+    let (width, height) = (img.width() as usize, img.height() as usize);
+    let mut cells = vec![Cell::Unknown; width * height];
+    for (x, y, p) in img.enumerate_pixels() {
+        let value = f64::from(p.0[0]);
+        let cell = if meta.mode == "raw" {
+            // Raw mode: the pixel value is the occupancy percentage.
+            match value {
+                v if v >= meta.occupied_thresh * 100.0 => Cell::Occupied,
+                v if v <= meta.free_thresh * 100.0 => Cell::Free,
+                _ => Cell::Unknown,
+            }
+        } else {
+            let occ = if meta.negate != 0 { value / 255.0 } else { (255.0 - value) / 255.0 };
+            if occ > meta.occupied_thresh {
+                Cell::Occupied
+            } else if occ < meta.free_thresh {
+                Cell::Free
+            } else {
+                Cell::Unknown
+            }
+        };
+        let row = height - 1 - y as usize;
+        cells[row * width + x as usize] = cell;
+    }
+    Ok(OccupancyGrid {
+        width,
+        height,
+        resolution_m: meta.resolution,
+        origin_x_m: meta.origin[0],
+        origin_y_m: meta.origin[1],
+        origin_yaw_rad: meta.origin[2],
+        cells,
+    })
+}
+
+/// The small office floor plan shipped in `scenarios/maps/office.{pgm,yaml}`:
+/// 8 m x 6 m at 5 cm, two rooms joined by a door, a corridor and a table.
+/// Returns (PGM bytes, YAML text).
+pub fn draw_office_map() -> (Vec<u8>, String) {
+    const RES: f64 = 0.05;
+    let (w, h) = (160usize, 120usize);
+    // Drawn in map cells (col, row) with row 0 at the bottom.
+    let mut occupied = vec![false; w * h];
+    let mut fill = |c0: usize, r0: usize, c1: usize, r1: usize| {
+        for r in r0..r1 {
+            for c in c0..c1 {
+                occupied[r * w + c] = true;
+            }
+        }
+    };
+    // Outer walls, 10 cm thick.
+    fill(0, 0, w, 2);
+    fill(0, h - 2, w, h);
+    fill(0, 0, 2, h);
+    fill(w - 2, 0, w, h);
+    // Interior wall at x = 4.5 m with a 1 m door from y = 2.0 to 3.0 m.
+    fill(89, 0, 91, 40);
+    fill(89, 60, 91, h);
+    // Corridor wall at y = 4.5 m in the right room, open for its last 1.2 m.
+    fill(91, 89, 136, 91);
+    // A table in the left room.
+    fill(30, 70, 50, 84);
+    // A pillar in the right room.
+    fill(120, 30, 126, 36);
+
+    let mut pgm = format!("P5\n{w} {h}\n255\n").into_bytes();
+    for y in 0..h {
+        let row = h - 1 - y;
+        for c in 0..w {
+            pgm.push(if occupied[row * w + c] { 0 } else { 254 });
+        }
+    }
+    let yaml = format!(
+        "image: office.pgm\nresolution: {RES}\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    );
+    (pgm, yaml)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_office_map_is_the_drawn_one() {
+        let (pgm, yaml) = draw_office_map();
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/maps");
+        assert_eq!(std::fs::read(dir.join("office.pgm")).unwrap(), pgm, "run `cargo run -- draw-map scenarios/maps` to regenerate");
+        assert_eq!(std::fs::read_to_string(dir.join("office.yaml")).unwrap(), yaml);
+    }
+
+    #[test]
+    fn office_map_loads_with_expected_cells() {
+        let dir = tempfile::tempdir().unwrap();
+        let (pgm, yaml) = draw_office_map();
+        std::fs::write(dir.path().join("office.pgm"), pgm).unwrap();
+        std::fs::write(dir.path().join("office.yaml"), yaml).unwrap();
+        let grid = load_map(&dir.path().join("office.yaml")).unwrap();
+        assert_eq!((grid.width, grid.height), (160, 120));
+        assert!(grid.blocked_at(0.02, 0.02)); // outer wall corner
+        assert!(!grid.blocked_at(1.0, 1.0));
+        assert!(grid.blocked_at(4.5, 1.0)); // interior wall
+        assert!(!grid.blocked_at(4.5, 2.5)); // the door
+        assert!(grid.blocked_at(2.0, 3.9)); // table
+        assert!(grid.blocked_at(-1.0, 1.0)); // outside the map
+        let segs = grid.boundary_segments();
+        // Every boundary segment has blocked on one side and free on the other.
+        for s in &segs {
+            let mid = (s.a + s.b) * 0.5;
+            let d = (s.b - s.a).normalize();
+            let n = Vector::new(-d.y, d.x) * 0.01;
+            assert_ne!(grid.blocked_at(mid.x + n.x, mid.y + n.y), grid.blocked_at(mid.x - n.x, mid.y - n.y));
+        }
+        // Runs are merged: far fewer segments than boundary cell edges.
+        assert!(segs.len() < 40, "{} segments", segs.len());
+    }
+}

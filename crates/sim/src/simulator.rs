@@ -1,0 +1,350 @@
+//! The stepping code. All scenario data lives in [`Scenario`]; the simulator
+//! holds only the evolving state, random streams and scratch buffers.
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use twindrive_kinematics::{Pose, arc_step, body_increment, wrap_angle};
+use twindrive_log::{MissionLog, StepRecord};
+
+use crate::controller::{Controller, Observation, WallMode};
+use crate::scan::{Fan, ScanKernel};
+use crate::{Scenario, Vector};
+
+/// Iterations of the contact bisection: resolves the stopping point to
+/// 2^-30 of one step's travel.
+const CONTACT_BISECTIONS: u32 = 30;
+
+/// Random streams, one per noise source so that adding a sensor does not
+/// change the noise of the others.
+const STREAM_SLIP: u64 = 1;
+const STREAM_TRACKER: u64 = 2;
+const STREAM_RANGE_BASE: u64 = 16;
+
+/// One step's outputs, reused from step to step.
+#[derive(Debug, Clone)]
+pub struct StepOutput {
+    pub record: StepRecord,
+    /// Every beam of every range sensor; NaN where a sensor did not sample.
+    pub ranges: Vec<f64>,
+    pub wall_mode: Option<WallMode>,
+}
+
+impl StepOutput {
+    pub fn new(beams: usize) -> Self {
+        Self {
+            record: StepRecord {
+                t_ns: 0,
+                cmd_wheel_rad_s: [0.0; 2],
+                wheel_rad_s: [0.0; 2],
+                encoder_ticks: None,
+                bump: false,
+                tracker: None,
+                ground_truth: Pose::default(),
+            },
+            ranges: vec![f64::NAN; beams],
+            wall_mode: None,
+        }
+    }
+}
+
+struct RangeState {
+    kernel: Option<ScanKernel>,
+    rng: ChaCha8Rng,
+    next_ns: u64,
+    offset: usize,
+}
+
+/// Steps a [`Scenario`] forward in time.
+pub struct Simulator {
+    scenario: Scenario,
+    step: u64,
+    pose: Pose,
+    wheel_rad_s: [f64; 2],
+    wheel_angle_rad: [f64; 2],
+    controller: Controller,
+    slip_rng: ChaCha8Rng,
+    tracker_rng: ChaCha8Rng,
+    ranges: Vec<RangeState>,
+    latest_range_m: Vec<f64>,
+    next_encoder_ns: u64,
+    next_tracker_ns: u64,
+    beams: usize,
+}
+
+fn stream(seed: u64, id: u64) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(id);
+    rng
+}
+
+/// Advances a sample schedule past `t_ns`; true if a sample is due at `t_ns`.
+#[inline]
+fn due(next_ns: &mut u64, period_ns: u64, t_ns: u64) -> bool {
+    if t_ns < *next_ns {
+        return false;
+    }
+    while *next_ns <= t_ns {
+        *next_ns += period_ns;
+    }
+    true
+}
+
+impl Simulator {
+    pub fn new(scenario: Scenario) -> Self {
+        let mut offset = 0;
+        let ranges = scenario
+            .range_sensors
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let (angle_min_rad, increment_rad) = s.info.angle_min_and_increment();
+                let state = RangeState {
+                    kernel: (s.info.beams > 1).then(|| {
+                        ScanKernel::new(Fan {
+                            angle_min_rad,
+                            increment_rad,
+                            beams: s.info.beams as usize,
+                        })
+                    }),
+                    rng: stream(scenario.seed, STREAM_RANGE_BASE + i as u64),
+                    next_ns: 0,
+                    offset,
+                };
+                offset += s.info.beams as usize;
+                state
+            })
+            .collect();
+        Self {
+            step: 0,
+            pose: scenario.robot.start,
+            wheel_rad_s: [0.0; 2],
+            wheel_angle_rad: [0.0; 2],
+            controller: Controller::new(&scenario.controller),
+            slip_rng: stream(scenario.seed, STREAM_SLIP),
+            tracker_rng: stream(scenario.seed, STREAM_TRACKER),
+            latest_range_m: scenario.range_sensors.iter().map(|s| s.info.max_range_m).collect(),
+            ranges,
+            next_encoder_ns: 0,
+            next_tracker_ns: 0,
+            beams: offset,
+            scenario,
+        }
+    }
+
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// True pose now.
+    pub fn pose(&self) -> Pose {
+        self.pose
+    }
+
+    /// Total beams over all range sensors (the length of [`StepOutput::ranges`]).
+    pub fn beams(&self) -> usize {
+        self.beams
+    }
+
+    pub fn finished(&self) -> bool {
+        self.step >= self.scenario.steps
+    }
+
+    /// Cumulative true wheel rotation [left, right] in radians.
+    pub fn wheel_angle_rad(&self) -> [f64; 2] {
+        self.wheel_angle_rad
+    }
+
+    /// Senses at the current time, runs the controller, then moves the robot
+    /// over one time step. Returns false (and does nothing) once the
+    /// scenario's duration is reached.
+    pub fn step(&mut self, out: &mut StepOutput) -> bool {
+        if self.finished() {
+            return false;
+        }
+        let t_ns = self.step * self.scenario.dt_ns;
+        let bump = self.bumper_pressed();
+        self.sense_ranges(t_ns, &mut out.ranges);
+
+        let sc = &self.scenario;
+        let encoder_ticks = due(&mut self.next_encoder_ns, sc.encoder_period_ns, t_ns).then(|| {
+            [
+                sc.robot.encoder.ticks_for_angle(self.wheel_angle_rad[0]),
+                sc.robot.encoder.ticks_for_angle(self.wheel_angle_rad[1]),
+            ]
+        });
+        let tracker = self.sense_tracker(t_ns);
+
+        let obs = Observation {
+            t_ns,
+            bump,
+            latest_range_m: &self.latest_range_m,
+        };
+        let mut cmd = self.controller.command(&obs, &self.scenario.robot.nominal_params);
+        // Saturate by scaling both wheels, which keeps the commanded curvature.
+        let max = self.scenario.robot.max_wheel_speed_rad_s;
+        let peak = cmd[0].abs().max(cmd[1].abs());
+        if peak > max {
+            cmd = [cmd[0] * max / peak, cmd[1] * max / peak];
+        }
+
+        out.record = StepRecord {
+            t_ns,
+            cmd_wheel_rad_s: cmd,
+            wheel_rad_s: [0.0; 2],
+            encoder_ticks,
+            bump,
+            tracker,
+            ground_truth: self.pose,
+        };
+        out.record.wheel_rad_s = self.advance(cmd);
+        out.wall_mode = self.controller.wall_mode();
+        self.step += 1;
+        true
+    }
+
+    /// Runs to the end, calling `progress(step, total)` now and then.
+    pub fn run(mut self, mut progress: impl FnMut(u64, u64)) -> MissionLog {
+        let total = self.scenario.steps;
+        let mut log = MissionLog::new(self.scenario.log_header());
+        log.steps.reserve(total as usize);
+        log.ranges.reserve(total as usize * self.beams);
+        let mut out = StepOutput::new(self.beams);
+        while self.step(&mut out) {
+            log.steps.push(out.record);
+            log.ranges.extend_from_slice(&out.ranges);
+            if self.step % 8192 == 0 {
+                progress(self.step, total);
+            }
+        }
+        progress(total, total);
+        log
+    }
+
+    fn bumper_pressed(&self) -> bool {
+        let robot = &self.scenario.robot;
+        let bump = &self.scenario.bump;
+        let p = Vector::new(self.pose.x_m, self.pose.y_m);
+        match self
+            .scenario
+            .world
+            .nearest_within(p, robot.footprint_radius_m + bump.contact_margin_m)
+        {
+            None => false,
+            Some(n) => {
+                let d = n.point - p;
+                let bearing = wrap_angle(d.y.atan2(d.x) - self.pose.heading_rad);
+                bearing.abs() <= 0.5 * bump.arc_rad
+            }
+        }
+    }
+
+    fn sense_ranges(&mut self, t_ns: u64, out: &mut [f64]) {
+        let world = &self.scenario.world;
+        for (i, (cfg, st)) in self.scenario.range_sensors.iter().zip(&mut self.ranges).enumerate() {
+            let beams = &mut out[st.offset..st.offset + cfg.info.beams as usize];
+            if !due(&mut st.next_ns, cfg.period_ns, t_ns) {
+                beams.fill(f64::NAN);
+                continue;
+            }
+            let m = &cfg.info.mount;
+            let (ox, oy) = self.pose.transform_point(m.x_m, m.y_m);
+            let origin = Vector::new(ox, oy);
+            let heading = self.pose.heading_rad + m.heading_rad;
+            let max = cfg.info.max_range_m;
+            match &mut st.kernel {
+                None => {
+                    let dir = Vector::new(heading.cos(), heading.sin());
+                    beams[0] = world.cast_ray(origin, dir, max);
+                }
+                Some(kernel) => kernel.scan(world, origin, heading, max, beams),
+            }
+            for r in beams.iter_mut() {
+                if *r < max {
+                    let noise = if cfg.noise_std_m > 0.0 {
+                        cfg.noise_std_m * st.rng.sample::<f64, _>(StandardNormal)
+                    } else {
+                        0.0
+                    };
+                    *r = (*r + noise).clamp(cfg.info.min_range_m, max);
+                }
+            }
+            self.latest_range_m[i] = beams[0];
+        }
+    }
+
+    fn sense_tracker(&mut self, t_ns: u64) -> Option<Pose> {
+        let cfg = self.scenario.tracker.as_ref()?;
+        if !due(&mut self.next_tracker_ns, cfg.period_ns, t_ns) {
+            return None;
+        }
+        let rng = &mut self.tracker_rng;
+        let mut n = || rng.sample::<f64, _>(StandardNormal);
+        let noisy = Pose::new(
+            self.pose.x_m + cfg.position_noise_std_m * n(),
+            self.pose.y_m + cfg.position_noise_std_m * n(),
+            wrap_angle(self.pose.heading_rad + cfg.heading_noise_std_rad * n()),
+        );
+        // Draw the dropout after the noise so the noise sequence does not
+        // depend on the dropout rate.
+        let dropped = cfg.dropout_probability > 0.0 && rng.random::<f64>() < cfg.dropout_probability;
+        (!dropped).then_some(noisy)
+    }
+
+    /// Applies the wheel limits, moves the robot along the exact arc and stops
+    /// it at first contact with a wall. Returns the wheel speeds reached.
+    fn advance(&mut self, cmd: [f64; 2]) -> [f64; 2] {
+        let robot = &self.scenario.robot;
+        let dt_s = self.scenario.dt_s();
+        let max_change = robot.max_wheel_accel_rad_s2 * dt_s;
+        let mut w = [0.0; 2];
+        for i in 0..2 {
+            w[i] = self.wheel_rad_s[i] + (cmd[i] - self.wheel_rad_s[i]).clamp(-max_change, max_change);
+        }
+        let rotation = [w[0] * dt_s, w[1] * dt_s];
+        let (mut slip_l, mut slip_r) = (1.0, 1.0);
+        if robot.slip_std > 0.0 {
+            slip_l += robot.slip_std * self.slip_rng.sample::<f64, _>(StandardNormal);
+            slip_r += robot.slip_std * self.slip_rng.sample::<f64, _>(StandardNormal);
+        }
+        let p = &robot.true_params;
+        let left_m = 0.5 * p.left_diameter_m * rotation[0] * slip_l;
+        let right_m = 0.5 * p.right_diameter_m * rotation[1] * slip_r;
+        let (ds, dtheta) = body_increment(left_m, right_m, p.wheelbase_m);
+
+        let radius = robot.footprint_radius_m;
+        let world = &self.scenario.world;
+        let clear = |pose: &Pose| {
+            world
+                .nearest_within(Vector::new(pose.x_m, pose.y_m), radius)
+                .is_none_or(|n| n.distance_m >= radius)
+        };
+        let target = arc_step(&self.pose, ds, dtheta);
+        let fraction = if clear(&target) {
+            1.0
+        } else {
+            // Largest fraction of the step that keeps the footprint clear.
+            let (mut lo, mut hi) = (0.0, 1.0);
+            for _ in 0..CONTACT_BISECTIONS {
+                let mid = 0.5 * (lo + hi);
+                if clear(&arc_step(&self.pose, mid * ds, mid * dtheta)) {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            lo
+        };
+        self.pose = if fraction == 1.0 {
+            target
+        } else {
+            // Blocked: the wheels stall where the body stopped.
+            w = [w[0] * fraction, w[1] * fraction];
+            arc_step(&self.pose, fraction * ds, fraction * dtheta)
+        };
+        self.wheel_angle_rad[0] += rotation[0] * fraction;
+        self.wheel_angle_rad[1] += rotation[1] * fraction;
+        self.wheel_rad_s = w;
+        w
+    }
+}

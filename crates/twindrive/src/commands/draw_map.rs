@@ -1,0 +1,15 @@
+use std::path::Path;
+
+use anyhow::Context;
+
+use crate::output::Staging;
+
+pub fn run(dir: &Path) -> anyhow::Result<()> {
+    let (pgm, yaml) = twindrive_sim::map::draw_office_map();
+    let staging = Staging::new(dir)?;
+    std::fs::write(staging.path("office.pgm"), pgm).context("writing office.pgm")?;
+    std::fs::write(staging.path("office.yaml"), yaml).context("writing office.yaml")?;
+    staging.commit()?;
+    println!("wrote {0}/office.pgm and {0}/office.yaml", dir.display());
+    Ok(())
+}

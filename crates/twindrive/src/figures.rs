@@ -1,0 +1,117 @@
+//! The mission figures of `simulate`: the world with the driven path and bump
+//! points (paper Figs. 4 and 6a), wheel speeds and side-range readings over
+//! time (Fig. 5).
+
+use std::path::Path;
+
+use twindrive_log::MissionLog;
+use twindrive_plot::{Markers, Series, TimeFigure, WorldFigure, palette};
+use twindrive_sim::World;
+
+/// Time plots keep at most this many points per series.
+const MAX_POINTS: usize = 4000;
+
+fn stride(len: usize) -> usize {
+    len.div_ceil(MAX_POINTS).max(1)
+}
+
+/// Drops points closer than `min_step_m` to the last kept one (dense paths
+/// render as dotted lines otherwise); always keeps the last point.
+pub fn decimate(points: impl Iterator<Item = (f64, f64)>, min_step_m: f64) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    let mut last = None;
+    for p in points {
+        last = Some(p);
+        if out.last().is_none_or(|q| (p.0 - q.0).hypot(p.1 - q.1) >= min_step_m) {
+            out.push(p);
+        }
+    }
+    if let Some(p) = last
+        && out.last() != Some(&p)
+    {
+        out.push(p);
+    }
+    out
+}
+
+pub fn walls(world: &World) -> Vec<[(f64, f64); 2]> {
+    world.segments().iter().map(|s| [(s.a.x, s.a.y), (s.b.x, s.b.y)]).collect()
+}
+
+pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::Result<()> {
+    let steps = &log.steps;
+    // About 4 px between kept points at the figure's scale.
+    let extent = world.bounds().map_or(1.0, |b| (b.maxs - b.mins).max_element());
+    let path = decimate(steps.iter().map(|s| (s.ground_truth.x_m, s.ground_truth.y_m)), extent / 250.0);
+    let bump_points: Vec<(f64, f64)> = steps
+        .windows(2)
+        .filter(|w| w[1].bump && !w[0].bump)
+        .map(|w| (w[1].ground_truth.x_m, w[1].ground_truth.y_m))
+        .collect();
+    let start = [path[0]];
+    let title = format!("{}: driven path (ground truth)", log.header.scenario);
+    WorldFigure {
+        title: &title,
+        walls: &walls(world),
+        paths: &[Series { label: "path", points: &path, color: palette::TRUTH }],
+        markers: &[
+            Markers { label: "start", points: &start, color: palette::GOOD },
+            Markers { label: "bump", points: &bump_points, color: palette::BAD },
+        ],
+    }
+    .write(&dir.join("path"))?;
+
+    let k = stride(steps.len());
+    let left: Vec<(f64, f64)> = steps.iter().step_by(k).map(|s| (s.t_s(), s.wheel_rad_s[0])).collect();
+    let right: Vec<(f64, f64)> = steps.iter().step_by(k).map(|s| (s.t_s(), s.wheel_rad_s[1])).collect();
+    let bump_times: Vec<(f64, f64)> = steps.windows(2).filter(|w| w[1].bump && !w[0].bump).map(|w| (w[1].t_s(), 0.0)).collect();
+    TimeFigure {
+        title: "Wheel angular speeds",
+        x_label: "t [s]",
+        y_label: "wheel speed [rad/s]",
+        series: &[
+            Series { label: "left", points: &left, color: palette::TRUTH },
+            Series { label: "right", points: &right, color: palette::ALT },
+        ],
+        markers: &[Markers { label: "bump", points: &bump_times, color: palette::BAD }],
+    }
+    .write(&dir.join("wheel_speeds"))?;
+
+    // One figure of every single-beam range sensor (the side IR of the case study).
+    let singles: Vec<(usize, &str)> = log
+        .header
+        .range_sensors
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.beams == 1)
+        .map(|(i, s)| (i, s.name.as_str()))
+        .collect();
+    if !singles.is_empty() {
+        let readings: Vec<Vec<(f64, f64)>> = singles
+            .iter()
+            .map(|&(i, _)| {
+                let pts: Vec<(f64, f64)> = (0..steps.len())
+                    .filter_map(|k| log.range_reading(k, i).map(|r| (steps[k].t_s(), r[0])))
+                    .collect();
+                let k = stride(pts.len());
+                pts.into_iter().step_by(k).collect()
+            })
+            .collect();
+        let colors = [palette::TRUTH, palette::ALT, palette::GOOD, palette::PURPLE];
+        let series: Vec<Series> = singles
+            .iter()
+            .zip(&readings)
+            .enumerate()
+            .map(|(j, (&(_, name), pts))| Series { label: name, points: pts, color: colors[j % colors.len()] })
+            .collect();
+        TimeFigure {
+            title: "Side range sensor: distance to the wall along the beam",
+            x_label: "t [s]",
+            y_label: "range [m]",
+            series: &series,
+            markers: &[Markers { label: "bump", points: &bump_times, color: palette::BAD }],
+        }
+        .write(&dir.join("side_ir"))?;
+    }
+    Ok(())
+}
