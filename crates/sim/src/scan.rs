@@ -59,7 +59,7 @@ impl ScanKernel {
         for (w, l) in self.world_dirs.iter_mut().zip(&self.local_dirs) {
             *w = Vector::new(c * l.x - s * l.y, s * l.x + c * l.y);
         }
-        let base = heading_rad + self.fan.angle_min_rad;
+        let base = (heading_rad + self.fan.angle_min_rad).rem_euclid(TAU);
         let inc = self.fan.increment_rad;
         let query = Aabb::new(origin - Vector::splat(max_range_m), origin + Vector::splat(max_range_m));
         let segments = world.segments();
@@ -80,9 +80,16 @@ impl ScanKernel {
             }
             // Counter-clockwise angular interval from the first to the second endpoint.
             let (first, second) = if area > 0.0 { (a, b) } else { (b, a) };
-            let start = (first.y.atan2(first.x) - base).rem_euclid(TAU);
-            let span = first.perp_dot(second).atan2(first.dot(second));
-            let margin = 1e-9;
+            // Approximate angles are enough to choose candidate beams: the
+            // window is widened by the approximation's error bound and the
+            // exact test in `hit` decides.
+            // fast_atan2 is in [-π, π] and base in [0, 2π): two folds at most.
+            let mut start = fast_atan2(first.y, first.x) - base;
+            while start < 0.0 {
+                start += TAU;
+            }
+            let span = fast_atan2(first.perp_dot(second), first.dot(second));
+            let margin = FAST_ATAN2_MAX_ERROR + 1e-9;
             let mut visit = |lo: f64, hi: f64| {
                 if n == 1 || inc == 0.0 {
                     if lo - margin <= 0.0 && hi + margin >= 0.0 {
@@ -90,12 +97,12 @@ impl ScanKernel {
                     }
                     return;
                 }
-                let j0 = ((lo - margin) / inc).ceil().max(0.0) as usize;
-                let j1 = ((hi + margin) / inc).floor();
-                if j1 < 0.0 {
+                let hi = (hi + margin) / inc;
+                if hi < 0.0 {
                     return;
                 }
-                let j1 = (j1 as usize).min(n - 1);
+                let j0 = ceil_non_negative((lo - margin) / inc);
+                let j1 = (hi as usize).min(n - 1); // truncation is floor for hi >= 0
                 for j in j0..=j1 {
                     hit(&mut out[j], dirs[j], a, e);
                 }
@@ -107,6 +114,41 @@ impl ScanKernel {
     }
 }
 
+/// ceil(x) for x >= 0, 0 for x < 0, without a libm call.
+#[inline(always)]
+fn ceil_non_negative(x: f64) -> usize {
+    if x <= 0.0 {
+        return 0;
+    }
+    let t = x as usize;
+    if (t as f64) < x { t + 1 } else { t }
+}
+
+/// Upper bound (with headroom) of [`fast_atan2`]'s error in radians; the
+/// polynomial's own maximum error is about 1e-5.
+const FAST_ATAN2_MAX_ERROR: f64 = 1e-4;
+
+/// atan2 by a degree-9 minimax polynomial on [-1, 1] plus octant folding.
+#[inline(always)]
+fn fast_atan2(y: f64, x: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    if ax == 0.0 && ay == 0.0 {
+        return 0.0;
+    }
+    let swap = ay > ax;
+    let z = if swap { ax / ay } else { ay / ax };
+    let z2 = z * z;
+    let mut a = z * (0.999_866_0 + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
+    if swap {
+        a = FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = PI - a;
+    }
+    if y < 0.0 { -a } else { a }
+}
+
 /// Shortens `*best` if the ray from the origin along `dir` crosses the
 /// segment `a + u e`, u in [0, 1].
 #[inline(always)]
@@ -115,8 +157,9 @@ fn hit(best: &mut f64, dir: Vector, a: Vector, e: Vector) {
     if denom == 0.0 {
         return;
     }
-    let t = a.perp_dot(e) / denom;
-    let u = a.perp_dot(dir) / denom;
+    let inv = 1.0 / denom;
+    let t = a.perp_dot(e) * inv;
+    let u = a.perp_dot(dir) * inv;
     if t >= 0.0 && t < *best && (-1e-12..=1.0 + 1e-12).contains(&u) {
         *best = t;
     }
@@ -157,6 +200,22 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn fast_atan2_error_is_bounded() {
+        let mut worst: f64 = 0.0;
+        for k in 0..100_000 {
+            let a = -PI + TAU * k as f64 / 100_000.0;
+            for r in [1e-6, 0.3, 7.0] {
+                let (y, x) = (r * a.sin(), r * a.cos());
+                let err = (fast_atan2(y, x) - y.atan2(x)).abs();
+                // Same angle modulo a turn (±π both valid at the cut).
+                worst = worst.max(err.min((err - TAU).abs()));
+            }
+        }
+        assert!(worst < FAST_ATAN2_MAX_ERROR / 5.0, "worst error {worst}");
+        assert_eq!(fast_atan2(0.0, 0.0), 0.0);
     }
 
     #[test]

@@ -17,6 +17,8 @@ const BVH_THRESHOLD: usize = 48;
 #[derive(Clone)]
 pub struct World {
     segments: Vec<Segment>,
+    /// Box around all segments.
+    extent: Aabb,
     solids: Vec<Aabb>,
     grid: Option<OccupancyGrid>,
     bvh: Option<Bvh>,
@@ -47,8 +49,14 @@ impl World {
             let leaves: Vec<Aabb> = segments.iter().map(|s| s.local_aabb()).collect();
             Bvh::from_leaves(BvhBuildStrategy::Binned, &leaves)
         });
+        let extent = if segments.is_empty() {
+            Aabb::new_invalid()
+        } else {
+            Aabb::from_points(segments.iter().flat_map(|s| [s.a, s.b]))
+        };
         Self {
             segments,
+            extent,
             solids,
             grid,
             bvh,
@@ -65,18 +73,19 @@ impl World {
 
     /// Bounding box of all walls, `None` for an empty world.
     pub fn bounds(&self) -> Option<Aabb> {
-        (!self.segments.is_empty()).then(|| {
-            Aabb::from_points(self.segments.iter().flat_map(|s| [s.a, s.b]))
-        })
+        (!self.segments.is_empty()).then_some(self.extent)
     }
 
     /// Calls `f` with the index of every segment whose box meets `query`
-    /// (every segment for small worlds).
+    /// (every segment for small worlds, or when `query` covers much of the
+    /// world, where walking the tree costs more than it saves).
     #[inline]
     pub fn for_each_candidate(&self, query: &Aabb, mut f: impl FnMut(usize)) {
         match &self.bvh {
-            None => (0..self.segments.len()).for_each(f),
-            Some(bvh) => bvh.intersect_aabb(query).for_each(|i| f(i as usize)),
+            Some(bvh) if query.intersection(&self.extent).is_none_or(|i| 4.0 * i.volume() < self.extent.volume()) => {
+                bvh.intersect_aabb(query).for_each(|i| f(i as usize))
+            }
+            _ => (0..self.segments.len()).for_each(f),
         }
     }
 
