@@ -131,7 +131,10 @@ mod tests {
             let r = (pose.x_m - centre.0).hypot(pose.y_m - centre.1);
             max_err = max_err.max((r - radius).abs());
         }
-        assert!(pose.heading_rad > 2.0 * PI, "drove at least one full circle");
+        assert!(
+            pose.heading_rad > 2.0 * PI,
+            "drove at least one full circle"
+        );
         assert!(max_err < 1e-10, "radius error {max_err}");
     }
 

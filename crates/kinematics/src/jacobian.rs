@@ -96,7 +96,10 @@ pub fn step_jacobians(state: &StateVec, left_rad: f64, right_rad: f64) -> (Mat6,
     }
 
     let mut g = Mat6x2::zeros();
-    let input_columns = [column(0.25 * dl, -0.25 * dl / b), column(0.25 * dr, 0.25 * dr / b)];
+    let input_columns = [
+        column(0.25 * dl, -0.25 * dl / b),
+        column(0.25 * dr, 0.25 * dr / b),
+    ];
     for (j, col) in input_columns.iter().enumerate() {
         for (i, v) in col.iter().enumerate() {
             g[(i, j)] = *v;
@@ -146,7 +149,10 @@ mod tests {
     fn assert_close(label: &str, analytic: &[f64], numeric: &[f64], seed_info: &str) {
         for (k, (a, n)) in analytic.iter().zip(numeric).enumerate() {
             let tol = 1e-7 * (1.0 + n.abs());
-            assert!((a - n).abs() < tol, "{label}[{k}] analytic {a} vs numeric {n} ({seed_info})");
+            assert!(
+                (a - n).abs() < tol,
+                "{label}[{k}] analytic {a} vs numeric {n} ({seed_info})"
+            );
         }
     }
 

@@ -73,7 +73,10 @@ mod tests {
             let a = k as f64 * 0.77;
             let w = wrap_angle(a);
             assert!(w > -PI && w <= PI, "{a} -> {w}");
-            assert!(((a - w) / (2.0 * PI)).fract().abs() < 1e-9 || ((a - w) / (2.0 * PI)).fract().abs() > 1.0 - 1e-9);
+            assert!(
+                ((a - w) / (2.0 * PI)).fract().abs() < 1e-9
+                    || ((a - w) / (2.0 * PI)).fract().abs() > 1.0 - 1e-9
+            );
         }
         assert_eq!(wrap_angle(PI), PI);
         assert_eq!(wrap_angle(-PI), PI);

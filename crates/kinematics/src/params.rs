@@ -80,7 +80,9 @@ mod tests {
     fn validate_names_the_bad_field() {
         let err = DiffDriveParams::new(0.1, -0.1, 0.3).validate().unwrap_err();
         assert_eq!(err.field, "right_diameter_m");
-        let err = DiffDriveParams::new(0.1, 0.1, f64::NAN).validate().unwrap_err();
+        let err = DiffDriveParams::new(0.1, 0.1, f64::NAN)
+            .validate()
+            .unwrap_err();
         assert_eq!(err.field, "wheelbase_m");
         assert!(DiffDriveParams::new(0.1, 0.1, 0.3).validate().is_ok());
     }

@@ -47,14 +47,24 @@ fn range_columns(header: &LogHeader) -> Vec<String> {
 pub fn write_csv<W: Write>(log: &MissionLog, out: W) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(out);
     let ranges = range_columns(&log.header);
-    w.write_record(FIXED_COLUMNS.iter().copied().chain(ranges.iter().map(String::as_str)))?;
+    w.write_record(
+        FIXED_COLUMNS
+            .iter()
+            .copied()
+            .chain(ranges.iter().map(String::as_str)),
+    )?;
     let per_step = log.beams_per_step();
     let mut fields: Vec<String> = Vec::with_capacity(FIXED_COLUMNS.len() + per_step);
     let opt = |v: Option<String>| v.unwrap_or_default();
     for (k, s) in log.steps.iter().enumerate() {
         fields.clear();
         fields.push(format_seconds(s.t_ns));
-        fields.extend(s.cmd_wheel_rad_s.iter().chain(&s.wheel_rad_s).map(f64::to_string));
+        fields.extend(
+            s.cmd_wheel_rad_s
+                .iter()
+                .chain(&s.wheel_rad_s)
+                .map(f64::to_string),
+        );
         fields.push(opt(s.encoder_ticks.map(|t| t[0].to_string())));
         fields.push(opt(s.encoder_ticks.map(|t| t[1].to_string())));
         fields.push(if s.bump { "1" } else { "0" }.to_string());
@@ -64,7 +74,11 @@ pub fn write_csv<W: Write>(log: &MissionLog, out: W) -> std::io::Result<()> {
         let gt = &s.ground_truth;
         fields.extend([gt.x_m, gt.y_m, gt.heading_rad].iter().map(f64::to_string));
         for r in &log.ranges[k * per_step..(k + 1) * per_step] {
-            fields.push(if r.is_nan() { String::new() } else { r.to_string() });
+            fields.push(if r.is_nan() {
+                String::new()
+            } else {
+                r.to_string()
+            });
         }
         w.write_record(&fields)?;
     }
@@ -84,7 +98,9 @@ pub fn read_csv_from<R: Read>(
     path: &Path,
     header: &LogHeader,
 ) -> Result<MissionLog, LogError> {
-    let mut r = csv::ReaderBuilder::new().has_headers(true).from_reader(input);
+    let mut r = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .from_reader(input);
     let names: Vec<String> = r
         .headers()
         .map_err(|e| LogError::format(path, format!("cannot read the header row: {e}")))?
@@ -155,7 +171,12 @@ pub fn read_csv_from<R: Read>(
         let ticks = match (cell.optional::<i64>(5)?, cell.optional::<i64>(6)?) {
             (Some(l), Some(r)) => Some([l, r]),
             (None, None) => None,
-            _ => return Err(cell.error(6, "left_ticks and right_ticks must both be set or both empty")),
+            _ => {
+                return Err(cell.error(
+                    6,
+                    "left_ticks and right_ticks must both be set or both empty",
+                ));
+            }
         };
         let bump = match cell.text(7) {
             "0" => false,
@@ -165,7 +186,12 @@ pub fn read_csv_from<R: Read>(
         let tracker = match (cell.optional(8)?, cell.optional(9)?, cell.optional(10)?) {
             (Some(x), Some(y), Some(th)) => Some(Pose::new(x, y, th)),
             (None, None, None) => None,
-            _ => return Err(cell.error(8, "tracker_x, tracker_y and tracker_theta must all be set or all empty")),
+            _ => {
+                return Err(cell.error(
+                    8,
+                    "tracker_x, tracker_y and tracker_theta must all be set or all empty",
+                ));
+            }
         };
         log.steps.push(StepRecord {
             t_ns,
@@ -205,10 +231,7 @@ impl Cell<'_> {
         }
     }
 
-    fn optional<T: std::str::FromStr>(&self, col: usize) -> Result<Option<T>, LogError>
-    where
-        T: Finite,
-    {
+    fn optional<T: std::str::FromStr + Finite>(&self, col: usize) -> Result<Option<T>, LogError> {
         let text = self.text(col);
         if text.is_empty() {
             return Ok(None);
@@ -262,8 +285,15 @@ mod tests {
         let back = read_csv_from(bytes.as_slice(), Path::new("mem.csv"), &log.header).unwrap();
         assert_same(&log, &back);
         let text = String::from_utf8(bytes).unwrap();
-        assert!(text.starts_with("t,cmd_left_rad_s,cmd_right_rad_s,left_rad_s,right_rad_s,left_ticks,right_ticks,bump,"));
-        assert!(text.lines().next().unwrap().ends_with("range_side_ir,range_scan_0,range_scan_1,range_scan_2,range_scan_3"));
+        assert!(text.starts_with(
+            "t,cmd_left_rad_s,cmd_right_rad_s,left_rad_s,right_rad_s,left_ticks,right_ticks,bump,"
+        ));
+        assert!(
+            text.lines()
+                .next()
+                .unwrap()
+                .ends_with("range_side_ir,range_scan_0,range_scan_1,range_scan_2,range_scan_3")
+        );
     }
 
     #[test]
@@ -282,10 +312,16 @@ mod tests {
         cells[11] = "NaN";
         lines[2] = cells.join(",");
         let err = parse(&lines.join("\n")).unwrap_err().to_string();
-        assert!(err.contains("line 3, column `gt_x`: expected a finite number"), "{err}");
+        assert!(
+            err.contains("line 3, column `gt_x`: expected a finite number"),
+            "{err}"
+        );
 
         let err = parse("t,cmd_left_rad_s\n0,1\n").unwrap_err().to_string();
-        assert!(err.contains("line 1: missing column `cmd_right_rad_s`"), "{err}");
+        assert!(
+            err.contains("line 1: missing column `cmd_right_rad_s`"),
+            "{err}"
+        );
     }
 
     #[test]

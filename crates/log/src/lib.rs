@@ -158,7 +158,10 @@ impl MissionLog {
 
     /// Index of the range sensor called `name`.
     pub fn sensor_index(&self, name: &str) -> Option<usize> {
-        self.header.range_sensors.iter().position(|s| s.name == name)
+        self.header
+            .range_sensors
+            .iter()
+            .position(|s| s.name == name)
     }
 
     /// Ground-truth path length in metres.
@@ -217,10 +220,17 @@ pub(crate) mod testutil {
                 ground_truth: Pose::new(x, 2.0 * x, -0.1 * k as f64),
             });
             let sampled = k % 2 == 1;
-            log.ranges.push(if sampled { 0.123456789 * k as f64 } else { f64::NAN });
+            log.ranges.push(if sampled {
+                0.123456789 * k as f64
+            } else {
+                f64::NAN
+            });
             for b in 0..4 {
-                log.ranges
-                    .push(if k != 5 { 4.0 + b as f64 / 3.0 } else { f64::NAN });
+                log.ranges.push(if k != 5 {
+                    4.0 + b as f64 / 3.0
+                } else {
+                    f64::NAN
+                });
             }
         }
         log
@@ -232,7 +242,10 @@ pub(crate) mod testutil {
         assert_eq!(a.steps, b.steps);
         assert_eq!(a.ranges.len(), b.ranges.len());
         for (i, (x, y)) in a.ranges.iter().zip(&b.ranges).enumerate() {
-            assert!(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()), "range {i}: {x} vs {y}");
+            assert!(
+                x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()),
+                "range {i}: {x} vs {y}"
+            );
         }
     }
 }

@@ -50,7 +50,12 @@ struct Quat {
 
 fn yaw_quat(heading_rad: f64) -> Quat {
     let (z, w) = (0.5 * heading_rad).sin_cos();
-    Quat { x: 0.0, y: 0.0, z, w }
+    Quat {
+        x: 0.0,
+        y: 0.0,
+        z,
+        w,
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -62,7 +67,11 @@ struct PoseMsg {
 impl PoseMsg {
     fn planar(p: &Pose) -> Self {
         Self {
-            position: Vec3 { x: p.x_m, y: p.y_m, z: 0.0 },
+            position: Vec3 {
+                x: p.x_m,
+                y: p.y_m,
+                z: 0.0,
+            },
             orientation: yaw_quat(p.heading_rad),
         }
     }
@@ -197,7 +206,10 @@ fn add_channels<W: Write + Seek>(
     let encoders = w.add_schema(
         "twindrive.Encoders",
         "jsonschema",
-        &object_schema("twindrive.Encoders", json!({"left_ticks": int, "right_ticks": int})),
+        &object_schema(
+            "twindrive.Encoders",
+            json!({"left_ticks": int, "right_ticks": int}),
+        ),
     )?;
     let bump = w.add_schema(
         "twindrive.Bump",
@@ -254,37 +266,78 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
         let t = s.t_ns;
         let stamp = Stamp::new(t);
         let gt = &s.ground_truth;
-        emit(&mut w, ch.ground_truth, t, &PoseInFrame {
-            timestamp: stamp,
-            frame_id: "world".into(),
-            pose: PoseMsg::planar(gt),
-            heading_rad: gt.heading_rad,
-        })?;
-        emit(&mut w, ch.tf, t, &FrameTransform {
-            timestamp: stamp,
-            parent_frame_id: "world",
-            child_frame_id: "base_link",
-            translation: Vec3 { x: gt.x_m, y: gt.y_m, z: 0.0 },
-            rotation: yaw_quat(gt.heading_rad),
-        })?;
-        emit(&mut w, ch.wheels, t, &Wheels {
-            timestamp: stamp,
-            cmd_left_rad_s: s.cmd_wheel_rad_s[0],
-            cmd_right_rad_s: s.cmd_wheel_rad_s[1],
-            left_rad_s: s.wheel_rad_s[0],
-            right_rad_s: s.wheel_rad_s[1],
-        })?;
-        emit(&mut w, ch.bump, t, &Bump { timestamp: stamp, pressed: s.bump })?;
-        if let Some([l, r]) = s.encoder_ticks {
-            emit(&mut w, ch.encoders, t, &Encoders { timestamp: stamp, left_ticks: l, right_ticks: r })?;
-        }
-        if let Some(p) = &s.tracker {
-            emit(&mut w, ch.tracker, t, &PoseInFrame {
+        emit(
+            &mut w,
+            ch.ground_truth,
+            t,
+            &PoseInFrame {
                 timestamp: stamp,
                 frame_id: "world".into(),
-                pose: PoseMsg::planar(p),
-                heading_rad: p.heading_rad,
-            })?;
+                pose: PoseMsg::planar(gt),
+                heading_rad: gt.heading_rad,
+            },
+        )?;
+        emit(
+            &mut w,
+            ch.tf,
+            t,
+            &FrameTransform {
+                timestamp: stamp,
+                parent_frame_id: "world",
+                child_frame_id: "base_link",
+                translation: Vec3 {
+                    x: gt.x_m,
+                    y: gt.y_m,
+                    z: 0.0,
+                },
+                rotation: yaw_quat(gt.heading_rad),
+            },
+        )?;
+        emit(
+            &mut w,
+            ch.wheels,
+            t,
+            &Wheels {
+                timestamp: stamp,
+                cmd_left_rad_s: s.cmd_wheel_rad_s[0],
+                cmd_right_rad_s: s.cmd_wheel_rad_s[1],
+                left_rad_s: s.wheel_rad_s[0],
+                right_rad_s: s.wheel_rad_s[1],
+            },
+        )?;
+        emit(
+            &mut w,
+            ch.bump,
+            t,
+            &Bump {
+                timestamp: stamp,
+                pressed: s.bump,
+            },
+        )?;
+        if let Some([l, r]) = s.encoder_ticks {
+            emit(
+                &mut w,
+                ch.encoders,
+                t,
+                &Encoders {
+                    timestamp: stamp,
+                    left_ticks: l,
+                    right_ticks: r,
+                },
+            )?;
+        }
+        if let Some(p) = &s.tracker {
+            emit(
+                &mut w,
+                ch.tracker,
+                t,
+                &PoseInFrame {
+                    timestamp: stamp,
+                    frame_id: "world".into(),
+                    pose: PoseMsg::planar(p),
+                    heading_rad: p.heading_rad,
+                },
+            )?;
         }
         for (i, sensor) in log.header.range_sensors.iter().enumerate() {
             let start = k * per_step + offsets[i];
@@ -293,15 +346,20 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
                 continue;
             }
             let (angle_min, inc) = sensor.angle_min_and_increment();
-            emit(&mut w, ch.ranges[i], t, &LaserScan {
-                timestamp: stamp,
-                frame_id: "base_link".into(),
-                pose: PoseMsg::planar(&sensor.mount),
-                start_angle: angle_min,
-                end_angle: angle_min + inc * f64::from(sensor.beams.saturating_sub(1)),
-                ranges: ranges.to_vec(),
-                intensities: Vec::new(),
-            })?;
+            emit(
+                &mut w,
+                ch.ranges[i],
+                t,
+                &LaserScan {
+                    timestamp: stamp,
+                    frame_id: "base_link".into(),
+                    pose: PoseMsg::planar(&sensor.mount),
+                    start_angle: angle_min,
+                    end_angle: angle_min + inc * f64::from(sensor.beams.saturating_sub(1)),
+                    ranges: ranges.to_vec(),
+                    intensities: Vec::new(),
+                },
+            )?;
         }
     }
     w.finish()?;
@@ -355,7 +413,8 @@ pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
         let message = message.map_err(|e| bad(e.to_string()))?;
         let topic = message.channel.topic.as_str();
         let t = message.log_time;
-        let parse_err = |e: serde_json::Error| bad(format!("message on {topic} at t = {t} ns: {e}"));
+        let parse_err =
+            |e: serde_json::Error| bad(format!("message on {topic} at t = {t} ns: {e}"));
         if topic == "/ground_truth" {
             let msg: PoseInFrame = serde_json::from_slice(&message.data).map_err(parse_err)?;
             step_of_time.insert(t, log.steps.len());
@@ -394,7 +453,11 @@ pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
             }
             "/tracker" => {
                 let m: PoseInFrame = serde_json::from_slice(&message.data).map_err(parse_err)?;
-                step.tracker = Some(Pose::new(m.pose.position.x, m.pose.position.y, m.heading_rad));
+                step.tracker = Some(Pose::new(
+                    m.pose.position.x,
+                    m.pose.position.y,
+                    m.heading_rad,
+                ));
             }
             other => {
                 let &i = range_topics
@@ -403,7 +466,10 @@ pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
                 let m: LaserScan = serde_json::from_slice(&message.data).map_err(parse_err)?;
                 let beams = log.header.range_sensors[i].beams as usize;
                 if m.ranges.len() != beams {
-                    return Err(bad(format!("{other} at t = {t} ns has {} ranges, expected {beams}", m.ranges.len())));
+                    return Err(bad(format!(
+                        "{other} at t = {t} ns has {} ranges, expected {beams}",
+                        m.ranges.len()
+                    )));
                 }
                 let start = k * per_step + offsets[i];
                 log.ranges[start..start + beams].copy_from_slice(&m.ranges);

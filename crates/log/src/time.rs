@@ -7,7 +7,9 @@ pub fn seconds_from_ns(t_ns: u64) -> f64 {
 
 /// Nearest integer nanoseconds for a time in seconds; `None` if negative or not finite.
 pub fn ns_from_seconds(t_s: f64) -> Option<u64> {
-    (t_s.is_finite() && t_s >= 0.0 && t_s < 1.8e10).then(|| (t_s * 1e9).round() as u64)
+    (0.0..1.8e10)
+        .contains(&t_s)
+        .then(|| (t_s * 1e9).round() as u64)
 }
 
 /// Exact decimal seconds ("12.34", "0.000000001", "3").
@@ -26,7 +28,15 @@ mod tests {
 
     #[test]
     fn seconds_round_trip_exactly() {
-        for t_ns in [0, 1, 999_999_999, 1_000_000_000, 10_000_000, 3_600_000_000_123, 86_400_123_456_789] {
+        for t_ns in [
+            0,
+            1,
+            999_999_999,
+            1_000_000_000,
+            10_000_000,
+            3_600_000_000_123,
+            86_400_123_456_789,
+        ] {
             let text = format_seconds(t_ns);
             let back = ns_from_seconds(text.parse().unwrap()).unwrap();
             assert_eq!(back, t_ns, "{text}");

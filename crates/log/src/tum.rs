@@ -8,7 +8,10 @@ use twindrive_kinematics::Pose;
 use crate::{LogError, format_seconds, ns_from_seconds};
 
 /// Writes planar poses as TUM lines (z = 0, rotation about +z).
-pub fn write_tum<W: Write>(poses: impl IntoIterator<Item = (u64, Pose)>, mut out: W) -> std::io::Result<()> {
+pub fn write_tum<W: Write>(
+    poses: impl IntoIterator<Item = (u64, Pose)>,
+    mut out: W,
+) -> std::io::Result<()> {
     for (t_ns, p) in poses {
         let (qz, qw) = (0.5 * p.heading_rad).sin_cos();
         writeln!(
@@ -47,7 +50,10 @@ pub fn read_tum(path: &Path) -> Result<Vec<(u64, Pose)>, LogError> {
             .collect::<Option<_>>()
             .ok_or_else(|| bad(format!("expected 8 finite numbers, found `{text}`")))?;
         let [t, x, y, _z, qx, qy, qz, qw] = values[..] else {
-            return Err(bad(format!("expected 8 numbers `t x y z qx qy qz qw`, found {}", values.len())));
+            return Err(bad(format!(
+                "expected 8 numbers `t x y z qx qy qz qw`, found {}",
+                values.len()
+            )));
         };
         let t_ns = ns_from_seconds(t).ok_or_else(|| bad(format!("time {t} is negative")))?;
         if out.last().is_some_and(|(prev, _)| *prev >= t_ns) {

@@ -70,7 +70,11 @@ fn register_fonts() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // The bytes are a valid font shipped by the dejavu crate.
-        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            dejavu::sans::regular(),
+        );
         let _ = plotters::style::register_font("sans-serif", FontStyle::Bold, dejavu::sans::bold());
     });
 }
@@ -138,10 +142,19 @@ impl WorldFigure<'_> {
         let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(200.0, 1400.0);
         let size = (width, plot_h as u32 + 130);
         let range = (x0, x1, y0, y1);
-        write_both(base, size, |r| self.draw(&r, range), |r| self.draw(&r, range))
+        write_both(
+            base,
+            size,
+            |r| self.draw(&r, range),
+            |r| self.draw(&r, range),
+        )
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, (x0, x1, y0, y1): (f64, f64, f64, f64)) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        (x0, x1, y0, y1): (f64, f64, f64, f64),
+    ) -> Result<(), String> {
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let mut chart = ChartBuilder::on(root)
             .caption(self.title, ("sans-serif", 22))
@@ -158,15 +171,24 @@ impl WorldFigure<'_> {
             .draw()
             .map_err(|e| e.to_string())?;
         chart
-            .draw_series(self.walls.iter().map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))))
+            .draw_series(
+                self.walls
+                    .iter()
+                    .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
+            )
             .map_err(|e| e.to_string())?;
         for s in self.paths {
             let color = s.color;
             chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(1)))
+                .draw_series(LineSeries::new(
+                    s.points.iter().copied(),
+                    color.stroke_width(1),
+                ))
                 .map_err(|e| e.to_string())?
                 .label(s.label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
         }
         for m in self.markers {
             let color = m.color;
@@ -201,10 +223,19 @@ impl TimeFigure<'_> {
         })?;
         let ypad = 0.05 * (y1 - y0).max(1e-6);
         let range = (x0, x1.max(x0 + 1e-9), y0 - ypad, y1 + ypad);
-        write_both(base, (1100, 450), |r| self.draw(&r, range), |r| self.draw(&r, range))
+        write_both(
+            base,
+            (1100, 450),
+            |r| self.draw(&r, range),
+            |r| self.draw(&r, range),
+        )
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, (x0, x1, y0, y1): (f64, f64, f64, f64)) -> Result<(), String> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        (x0, x1, y0, y1): (f64, f64, f64, f64),
+    ) -> Result<(), String> {
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let mut chart = ChartBuilder::on(root)
             .caption(self.title, ("sans-serif", 22))
@@ -223,10 +254,15 @@ impl TimeFigure<'_> {
         for s in self.series {
             let color = s.color;
             chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(1)))
+                .draw_series(LineSeries::new(
+                    s.points.iter().copied(),
+                    color.stroke_width(1),
+                ))
                 .map_err(|e| e.to_string())?
                 .label(s.label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
         }
         for m in self.markers {
             let color = m.color;
@@ -254,13 +290,23 @@ mod tests {
     #[test]
     fn writes_real_svg_and_png() {
         let dir = tempfile::tempdir().unwrap();
-        let path: Vec<(f64, f64)> = (0..100).map(|i| (i as f64 * 0.05, (i as f64 * 0.1).sin())).collect();
+        let path: Vec<(f64, f64)> = (0..100)
+            .map(|i| (i as f64 * 0.05, (i as f64 * 0.1).sin()))
+            .collect();
         let walls = [[(0.0, -1.5), (5.0, -1.5)], [(0.0, 1.5), (5.0, 1.5)]];
         let files = WorldFigure {
             title: "test world",
             walls: &walls,
-            paths: &[Series { label: "path", points: &path, color: palette::TRUTH }],
-            markers: &[Markers { label: "bump", points: &[(2.0, 0.5)], color: palette::BAD }],
+            paths: &[Series {
+                label: "path",
+                points: &path,
+                color: palette::TRUTH,
+            }],
+            markers: &[Markers {
+                label: "bump",
+                points: &[(2.0, 0.5)],
+                color: palette::BAD,
+            }],
         }
         .write(&dir.path().join("world"))
         .unwrap();
@@ -275,7 +321,11 @@ mod tests {
             title: "series",
             x_label: "t [s]",
             y_label: "v",
-            series: &[Series { label: "sin", points: &path, color: palette::ALT }],
+            series: &[Series {
+                label: "sin",
+                points: &path,
+                color: palette::ALT,
+            }],
             markers: &[],
         }
         .write(&dir.path().join("series"))
@@ -286,9 +336,15 @@ mod tests {
     #[test]
     fn empty_data_is_an_error() {
         let dir = tempfile::tempdir().unwrap();
-        let err = TimeFigure { title: "empty", x_label: "", y_label: "", series: &[], markers: &[] }
-            .write(&dir.path().join("e"))
-            .unwrap_err();
+        let err = TimeFigure {
+            title: "empty",
+            x_label: "",
+            y_label: "",
+            series: &[],
+            markers: &[],
+        }
+        .write(&dir.path().join("e"))
+        .unwrap_err();
         assert!(err.to_string().contains("nothing to draw"));
     }
 }

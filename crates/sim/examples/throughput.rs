@@ -8,7 +8,9 @@ use twindrive_sim::{Scenario, Simulator, StepOutput};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let path = args.next().ok_or("usage: throughput SCENARIO.toml [--steps N]")?;
+    let path = args
+        .next()
+        .ok_or("usage: throughput SCENARIO.toml [--steps N]")?;
     let mut steps: u64 = 200_000;
     while let Some(flag) = args.next() {
         match flag.as_str() {

@@ -18,7 +18,7 @@ pub const ALL: [(&str, &str); 2] = [
 
 /// Resolves a built-in scenario by name.
 pub fn load(name: &str) -> Option<Result<Scenario, SimError>> {
-    ALL.iter().find(|(n, _)| *n == name).map(|(n, text)| {
-        Scenario::from_toml(text, Path::new(&format!("<built-in>/{n}.toml")))
-    })
+    ALL.iter()
+        .find(|(n, _)| *n == name)
+        .map(|(n, text)| Scenario::from_toml(text, Path::new(&format!("<built-in>/{n}.toml"))))
 }

@@ -92,12 +92,22 @@ impl Scenario {
         let sim = &file.simulation;
         require_positive(path, "simulation.dt_s", sim.dt_s)?;
         require_positive(path, "simulation.duration_s", sim.duration_s)?;
-        let dt_ns = ns_from_seconds(sim.dt_s).filter(|&n| n >= 1000).ok_or_else(|| {
-            SimError::field(path, "simulation.dt_s", format!("must be at least 1 µs, got {}", sim.dt_s))
-        })?;
+        let dt_ns = ns_from_seconds(sim.dt_s)
+            .filter(|&n| n >= 1000)
+            .ok_or_else(|| {
+                SimError::field(
+                    path,
+                    "simulation.dt_s",
+                    format!("must be at least 1 µs, got {}", sim.dt_s),
+                )
+            })?;
         let steps = (sim.duration_s * 1e9 / dt_ns as f64).round() as u64;
         if steps == 0 || steps > 2_000_000_000 {
-            return Err(SimError::field(path, "simulation.duration_s", format!("gives {steps} steps of dt_s; need 1 to 2e9")));
+            return Err(SimError::field(
+                path,
+                "simulation.duration_s",
+                format!("gives {steps} steps of dt_s; need 1 to 2e9"),
+            ));
         }
         let period = |field: &str, rate: Option<f64>| -> Result<u64, SimError> {
             match rate {
@@ -115,24 +125,56 @@ impl Scenario {
         let mut range_sensors = Vec::new();
         for (i, s) in file.range_sensors.iter().enumerate() {
             let f = |name: &str| format!("range_sensors[{i}].{name}");
-            if s.name.is_empty() || !s.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-                return Err(SimError::field(path, &f("name"), format!("must be non-empty letters, digits or `_`, got `{}`", s.name)));
+            if s.name.is_empty()
+                || !s
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_')
+            {
+                return Err(SimError::field(
+                    path,
+                    &f("name"),
+                    format!("must be non-empty letters, digits or `_`, got `{}`", s.name),
+                ));
             }
             if file.range_sensors[..i].iter().any(|o| o.name == s.name) {
-                return Err(SimError::field(path, &f("name"), format!("`{}` is used twice", s.name)));
+                return Err(SimError::field(
+                    path,
+                    &f("name"),
+                    format!("`{}` is used twice", s.name),
+                ));
             }
             require_positive(path, &f("max_range_m"), s.max_range_m)?;
             require_non_negative(path, &f("min_range_m"), s.min_range_m)?;
             if s.min_range_m >= s.max_range_m {
-                return Err(SimError::field(path, &f("min_range_m"), "must be below max_range_m".into()));
+                return Err(SimError::field(
+                    path,
+                    &f("min_range_m"),
+                    "must be below max_range_m".into(),
+                ));
             }
             require_non_negative(path, &f("noise_std_m"), s.noise_std_m)?;
-            require_finite(path, &f("mount"), &[s.mount.x_m, s.mount.y_m, s.mount.heading_rad])?;
+            require_finite(
+                path,
+                &f("mount"),
+                &[s.mount.x_m, s.mount.y_m, s.mount.heading_rad],
+            )?;
             if s.beams == 0 || s.beams > 100_000 {
-                return Err(SimError::field(path, &f("beams"), format!("must be 1 to 100000, got {}", s.beams)));
+                return Err(SimError::field(
+                    path,
+                    &f("beams"),
+                    format!("must be 1 to 100000, got {}", s.beams),
+                ));
             }
             if s.beams > 1 && !(s.fov_rad > 0.0 && s.fov_rad <= std::f64::consts::TAU) {
-                return Err(SimError::field(path, &f("fov_rad"), format!("must be in (0, 2π] for a multi-beam sensor, got {}", s.fov_rad)));
+                return Err(SimError::field(
+                    path,
+                    &f("fov_rad"),
+                    format!(
+                        "must be in (0, 2π] for a multi-beam sensor, got {}",
+                        s.fov_rad
+                    ),
+                ));
             }
             range_sensors.push(RangeSensorConfig {
                 info: RangeSensorInfo {
@@ -153,7 +195,11 @@ impl Scenario {
 
         let tracker = match &file.tracker {
             None => None,
-            Some(t) => Some(resolve_tracker(t, path, period("tracker.rate_hz", Some(t.rate_hz))?)?),
+            Some(t) => Some(resolve_tracker(
+                t,
+                path,
+                period("tracker.rate_hz", Some(t.rate_hz))?,
+            )?),
         };
 
         let controller = match &file.controller {
@@ -162,13 +208,21 @@ impl Scenario {
                     .iter()
                     .position(|s| s.info.name == spec.side_sensor)
                     .ok_or_else(|| {
-                        SimError::field(path, "controller.side_sensor", format!("no range sensor is named `{}`", spec.side_sensor))
+                        SimError::field(
+                            path,
+                            "controller.side_sensor",
+                            format!("no range sensor is named `{}`", spec.side_sensor),
+                        )
                     })?;
                 if range_sensors[sensor].info.beams != 1 {
-                    return Err(SimError::field(path, "controller.side_sensor", format!(
-                        "`{}` has {} beams; the wall follower needs a single-beam sensor",
-                        spec.side_sensor, range_sensors[sensor].info.beams
-                    )));
+                    return Err(SimError::field(
+                        path,
+                        "controller.side_sensor",
+                        format!(
+                            "`{}` has {} beams; the wall follower needs a single-beam sensor",
+                            spec.side_sensor, range_sensors[sensor].info.beams
+                        ),
+                    ));
                 }
                 for (name, v) in [
                     ("target_range_m", spec.target_range_m),
@@ -189,11 +243,23 @@ impl Scenario {
             }
             ControllerSection::Scripted(spec) => {
                 if spec.segments.is_empty() {
-                    return Err(SimError::field(path, "controller.segments", "needs at least one segment".into()));
+                    return Err(SimError::field(
+                        path,
+                        "controller.segments",
+                        "needs at least one segment".into(),
+                    ));
                 }
                 for (i, seg) in spec.segments.iter().enumerate() {
-                    require_positive(path, &format!("controller.segments[{i}].duration_s"), seg.duration_s)?;
-                    require_finite(path, &format!("controller.segments[{i}]"), &[seg.left_rad_s, seg.right_rad_s])?;
+                    require_positive(
+                        path,
+                        &format!("controller.segments[{i}].duration_s"),
+                        seg.duration_s,
+                    )?;
+                    require_finite(
+                        path,
+                        &format!("controller.segments[{i}]"),
+                        &[seg.left_rad_s, seg.right_rad_s],
+                    )?;
                 }
                 ControllerConfig::Scripted(spec.clone())
             }
@@ -206,15 +272,29 @@ impl Scenario {
         let world = build_world(&file, path, base)?;
         let start = Vector::new(robot.start.x_m, robot.start.y_m);
         if world.inside_obstacle(start) {
-            return Err(SimError::field(path, "robot.start", format!(
-                "({}, {}) is inside an obstacle", robot.start.x_m, robot.start.y_m
-            )));
+            return Err(SimError::field(
+                path,
+                "robot.start",
+                format!(
+                    "({}, {}) is inside an obstacle",
+                    robot.start.x_m, robot.start.y_m
+                ),
+            ));
         }
         if let Some(n) = world.nearest_within(start, robot.footprint_radius_m) {
-            return Err(SimError::field(path, "robot.start", format!(
-                "the footprint (radius {} m) at ({}, {}) overlaps a wall: nearest wall point ({:.3}, {:.3}) is {:.3} m away",
-                robot.footprint_radius_m, robot.start.x_m, robot.start.y_m, n.point.x, n.point.y, n.distance_m
-            )));
+            return Err(SimError::field(
+                path,
+                "robot.start",
+                format!(
+                    "the footprint (radius {} m) at ({}, {}) overlaps a wall: nearest wall point ({:.3}, {:.3}) is {:.3} m away",
+                    robot.footprint_radius_m,
+                    robot.start.x_m,
+                    robot.start.y_m,
+                    n.point.x,
+                    n.point.y,
+                    n.distance_m
+                ),
+            ));
         }
 
         Ok(Scenario {
@@ -261,16 +341,32 @@ fn resolve_robot(file: &ScenarioFile, path: &Path) -> Result<RobotConfig, SimErr
     let r = &file.robot;
     validate_params(path, "robot.true_params", &r.true_params)?;
     validate_params(path, "robot.nominal_params", &r.nominal_params)?;
-    require_finite(path, "robot.start", &[r.start.x_m, r.start.y_m, r.start.heading_rad])?;
+    require_finite(
+        path,
+        "robot.start",
+        &[r.start.x_m, r.start.y_m, r.start.heading_rad],
+    )?;
     require_positive(path, "robot.footprint_radius_m", r.footprint_radius_m)?;
     require_positive(path, "robot.max_wheel_speed_rad_s", r.max_wheel_speed_rad_s)?;
-    require_positive(path, "robot.max_wheel_accel_rad_s2", r.max_wheel_accel_rad_s2)?;
+    require_positive(
+        path,
+        "robot.max_wheel_accel_rad_s2",
+        r.max_wheel_accel_rad_s2,
+    )?;
     require_non_negative(path, "robot.slip_std", r.slip_std)?;
     if r.slip_std >= 0.5 {
-        return Err(SimError::field(path, "robot.slip_std", format!("must be below 0.5, got {}", r.slip_std)));
+        return Err(SimError::field(
+            path,
+            "robot.slip_std",
+            format!("must be below 0.5, got {}", r.slip_std),
+        ));
     }
     if file.encoders.ticks_per_rev == 0 {
-        return Err(SimError::field(path, "encoders.ticks_per_rev", "must be > 0".into()));
+        return Err(SimError::field(
+            path,
+            "encoders.ticks_per_rev",
+            "must be > 0".into(),
+        ));
     }
     Ok(RobotConfig {
         start: r.start,
@@ -286,11 +382,23 @@ fn resolve_robot(file: &ScenarioFile, path: &Path) -> Result<RobotConfig, SimErr
     })
 }
 
-fn resolve_tracker(t: &TrackerSection, path: &Path, period_ns: u64) -> Result<TrackerConfig, SimError> {
+fn resolve_tracker(
+    t: &TrackerSection,
+    path: &Path,
+    period_ns: u64,
+) -> Result<TrackerConfig, SimError> {
     require_non_negative(path, "tracker.position_noise_std_m", t.position_noise_std_m)?;
-    require_non_negative(path, "tracker.heading_noise_std_rad", t.heading_noise_std_rad)?;
+    require_non_negative(
+        path,
+        "tracker.heading_noise_std_rad",
+        t.heading_noise_std_rad,
+    )?;
     if !(0.0..1.0).contains(&t.dropout_probability) {
-        return Err(SimError::field(path, "tracker.dropout_probability", format!("must be in [0, 1), got {}", t.dropout_probability)));
+        return Err(SimError::field(
+            path,
+            "tracker.dropout_probability",
+            format!("must be in [0, 1), got {}", t.dropout_probability),
+        ));
     }
     Ok(TrackerConfig {
         period_ns,
@@ -305,31 +413,54 @@ fn build_world(file: &ScenarioFile, path: &Path, base: &Path) -> Result<World, S
     let mut segments = Vec::new();
     let mut solids = Vec::new();
     for (i, s) in w.segments.iter().enumerate() {
-        require_finite(path, &format!("world.segments[{i}]"), &[s[0][0], s[0][1], s[1][0], s[1][1]])?;
+        require_finite(
+            path,
+            &format!("world.segments[{i}]"),
+            &[s[0][0], s[0][1], s[1][0], s[1][1]],
+        )?;
         segments.extend(polyline_segments(s, false));
     }
     for (i, p) in w.polylines.iter().enumerate() {
         if p.points.len() < 2 {
-            return Err(SimError::field(path, &format!("world.polylines[{i}].points"), "needs at least two points".into()));
+            return Err(SimError::field(
+                path,
+                &format!("world.polylines[{i}].points"),
+                "needs at least two points".into(),
+            ));
         }
         let flat: Vec<f64> = p.points.iter().flatten().copied().collect();
         require_finite(path, &format!("world.polylines[{i}].points"), &flat)?;
         segments.extend(polyline_segments(&p.points, p.closed));
     }
     for (i, r) in w.rectangles.iter().enumerate() {
-        require_finite(path, &format!("world.rectangles[{i}]"), &[r.min[0], r.min[1], r.max[0], r.max[1]])?;
+        require_finite(
+            path,
+            &format!("world.rectangles[{i}]"),
+            &[r.min[0], r.min[1], r.max[0], r.max[1]],
+        )?;
         if r.min[0] >= r.max[0] || r.min[1] >= r.max[1] {
-            return Err(SimError::field(path, &format!("world.rectangles[{i}]"), "min must be below max in x and y".into()));
+            return Err(SimError::field(
+                path,
+                &format!("world.rectangles[{i}]"),
+                "min must be below max in x and y".into(),
+            ));
         }
         segments.extend(rectangle_segments(r.min, r.max));
-        solids.push(Aabb::new(Vector::new(r.min[0], r.min[1]), Vector::new(r.max[0], r.max[1])));
+        solids.push(Aabb::new(
+            Vector::new(r.min[0], r.min[1]),
+            Vector::new(r.max[0], r.max[1]),
+        ));
     }
     let grid = match &w.map {
         None => None,
         Some(rel) => {
             let map_path: PathBuf = base.join(rel);
             if !map_path.is_file() {
-                return Err(SimError::field(path, "world.map", format!("map file `{}` does not exist", map_path.display())));
+                return Err(SimError::field(
+                    path,
+                    "world.map",
+                    format!("map file `{}` does not exist", map_path.display()),
+                ));
             }
             let grid = map::load_map(&map_path)?;
             segments.extend(grid.boundary_segments());
@@ -337,7 +468,11 @@ fn build_world(file: &ScenarioFile, path: &Path, base: &Path) -> Result<World, S
         }
     };
     if segments.is_empty() {
-        return Err(SimError::field(path, "world", "has no walls: give segments, polylines, rectangles or a map".into()));
+        return Err(SimError::field(
+            path,
+            "world",
+            "has no walls: give segments, polylines, rectangles or a map".into(),
+        ));
     }
     Ok(World::new(segments, solids, grid))
 }

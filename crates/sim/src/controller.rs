@@ -93,7 +93,11 @@ impl Controller {
             }
             Self::Scripted { spec, ends_ns } => {
                 let total = *ends_ns.last().expect("validated non-empty");
-                let t = if spec.repeat { obs.t_ns % total } else { obs.t_ns };
+                let t = if spec.repeat {
+                    obs.t_ns % total
+                } else {
+                    obs.t_ns
+                };
                 match ends_ns.iter().position(|&end| t < end) {
                     Some(i) => [spec.segments[i].left_rad_s, spec.segments[i].right_rad_s],
                     None => [0.0, 0.0],
@@ -106,7 +110,8 @@ impl Controller {
                 match next.checked_sub(1) {
                     None => [0.0, 0.0],
                     Some(i) => {
-                        let (l, r) = wheel_speeds(nominal, commands[i].v_m_s, commands[i].omega_rad_s);
+                        let (l, r) =
+                            wheel_speeds(nominal, commands[i].v_m_s, commands[i].omega_rad_s);
                         [l, r]
                     }
                 }
@@ -124,7 +129,12 @@ impl Controller {
 
 /// The paper's routine: on a bump, reverse, then turn left, then follow the
 /// wall on the right with a proportional law on the side range reading.
-fn wall_follow(spec: &WallFollowerSpec, mode: &mut WallMode, obs: &Observation, side_range_m: f64) -> (f64, f64) {
+fn wall_follow(
+    spec: &WallFollowerSpec,
+    mode: &mut WallMode,
+    obs: &Observation,
+    side_range_m: f64,
+) -> (f64, f64) {
     let secs = |s: f64| (s * 1e9).round() as u64;
     if *mode == WallMode::Follow && obs.bump {
         *mode = WallMode::Reverse {
@@ -149,7 +159,8 @@ fn wall_follow(spec: &WallFollowerSpec, mode: &mut WallMode, obs: &Observation, 
         WallMode::Follow => {
             // Too far from the wall (positive error) turns right, towards it.
             let error = side_range_m - spec.target_range_m;
-            let omega = (-spec.gain_rad_s_per_m * error).clamp(-spec.max_turn_rate_rad_s, spec.max_turn_rate_rad_s);
+            let omega = (-spec.gain_rad_s_per_m * error)
+                .clamp(-spec.max_turn_rate_rad_s, spec.max_turn_rate_rad_s);
             (spec.cruise_speed_m_s, omega)
         }
     }
@@ -180,18 +191,34 @@ pub fn read_manual_commands(path: &Path) -> Result<Vec<ManualCommand>, SimError>
         }
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
         if cells.len() != 3 {
-            return Err(bad(line_no, format!("expected 3 columns, found {}", cells.len())));
+            return Err(bad(
+                line_no,
+                format!("expected 3 columns, found {}", cells.len()),
+            ));
         }
         let mut values = [0.0; 3];
-        for (k, (cell, name)) in cells.iter().zip(["t_s", "v_m_s", "omega_rad_s"]).enumerate() {
+        for (k, (cell, name)) in cells
+            .iter()
+            .zip(["t_s", "v_m_s", "omega_rad_s"])
+            .enumerate()
+        {
             values[k] = cell
                 .parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| bad(line_no, format!("column `{name}`: expected a finite number, found `{cell}`")))?;
+                .ok_or_else(|| {
+                    bad(
+                        line_no,
+                        format!("column `{name}`: expected a finite number, found `{cell}`"),
+                    )
+                })?;
         }
-        let t_ns = twindrive_log::ns_from_seconds(values[0])
-            .ok_or_else(|| bad(line_no, format!("column `t_s`: must be >= 0, found {}", values[0])))?;
+        let t_ns = twindrive_log::ns_from_seconds(values[0]).ok_or_else(|| {
+            bad(
+                line_no,
+                format!("column `t_s`: must be >= 0, found {}", values[0]),
+            )
+        })?;
         if out.last().is_some_and(|c| c.t_ns >= t_ns) {
             return Err(bad(line_no, "column `t_s`: times must increase".into()));
         }

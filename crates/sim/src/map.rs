@@ -79,7 +79,10 @@ impl OccupancyGrid {
 
     fn world_from_map(&self, u: f64, v: f64) -> Vector {
         let (s, c) = self.origin_yaw_rad.sin_cos();
-        Vector::new(self.origin_x_m + c * u - s * v, self.origin_y_m + s * u + c * v)
+        Vector::new(
+            self.origin_x_m + c * u - s * v,
+            self.origin_y_m + s * u + c * v,
+        )
     }
 
     /// Whether the world point lies in a blocked cell.
@@ -98,7 +101,8 @@ impl OccupancyGrid {
         for row in 0..=self.height as i64 {
             let mut run_start: Option<i64> = None;
             for col in 0..=self.width as i64 {
-                let edge = col < self.width as i64 && self.blocked(col, row - 1) != self.blocked(col, row);
+                let edge =
+                    col < self.width as i64 && self.blocked(col, row - 1) != self.blocked(col, row);
                 match (edge, run_start) {
                     (true, None) => run_start = Some(col),
                     (false, Some(start)) => {
@@ -116,7 +120,8 @@ impl OccupancyGrid {
         for col in 0..=self.width as i64 {
             let mut run_start: Option<i64> = None;
             for row in 0..=self.height as i64 {
-                let edge = row < self.height as i64 && self.blocked(col - 1, row) != self.blocked(col, row);
+                let edge = row < self.height as i64
+                    && self.blocked(col - 1, row) != self.blocked(col, row);
                 match (edge, run_start) {
                     (true, None) => run_start = Some(row),
                     (false, Some(start)) => {
@@ -146,10 +151,16 @@ pub fn load_map(yaml_path: &Path) -> Result<OccupancyGrid, SimError> {
     })?;
     let field = |name: &str, msg: String| SimError::field(yaml_path, name, msg);
     if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
-        return Err(field("resolution", format!("must be > 0 metres per pixel, got {}", meta.resolution)));
+        return Err(field(
+            "resolution",
+            format!("must be > 0 metres per pixel, got {}", meta.resolution),
+        ));
     }
     if meta.origin.iter().any(|v| !v.is_finite()) {
-        return Err(field("origin", "must be three finite numbers [x, y, yaw]".into()));
+        return Err(field(
+            "origin",
+            "must be three finite numbers [x, y, yaw]".into(),
+        ));
     }
     if !(0.0..=1.0).contains(&meta.free_thresh)
         || !(0.0..=1.0).contains(&meta.occupied_thresh)
@@ -164,11 +175,22 @@ pub fn load_map(yaml_path: &Path) -> Result<OccupancyGrid, SimError> {
         ));
     }
     if !matches!(meta.mode.as_str(), "trinary" | "scale" | "raw") {
-        return Err(field("mode", format!("expected trinary, scale or raw, got `{}`", meta.mode)));
+        return Err(field(
+            "mode",
+            format!("expected trinary, scale or raw, got `{}`", meta.mode),
+        ));
     }
-    let image_path = yaml_path.parent().unwrap_or(Path::new(".")).join(&meta.image);
+    let image_path = yaml_path
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join(&meta.image);
     let img = image::open(&image_path)
-        .map_err(|e| field("image", format!("cannot load `{}`: {e}", image_path.display())))?
+        .map_err(|e| {
+            field(
+                "image",
+                format!("cannot load `{}`: {e}", image_path.display()),
+            )
+        })?
         .to_luma8();
     let (width, height) = (img.width() as usize, img.height() as usize);
     let mut cells = vec![Cell::Unknown; width * height];
@@ -182,7 +204,11 @@ pub fn load_map(yaml_path: &Path) -> Result<OccupancyGrid, SimError> {
                 _ => Cell::Unknown,
             }
         } else {
-            let occ = if meta.negate != 0 { value / 255.0 } else { (255.0 - value) / 255.0 };
+            let occ = if meta.negate != 0 {
+                value / 255.0
+            } else {
+                (255.0 - value) / 255.0
+            };
             if occ > meta.occupied_thresh {
                 Cell::Occupied
             } else if occ < meta.free_thresh {
@@ -256,8 +282,15 @@ mod tests {
     fn shipped_office_map_is_the_drawn_one() {
         let (pgm, yaml) = draw_office_map();
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/maps");
-        assert_eq!(std::fs::read(dir.join("office.pgm")).unwrap(), pgm, "run `cargo run -- draw-map scenarios/maps` to regenerate");
-        assert_eq!(std::fs::read_to_string(dir.join("office.yaml")).unwrap(), yaml);
+        assert_eq!(
+            std::fs::read(dir.join("office.pgm")).unwrap(),
+            pgm,
+            "run `cargo run -- draw-map scenarios/maps` to regenerate"
+        );
+        assert_eq!(
+            std::fs::read_to_string(dir.join("office.yaml")).unwrap(),
+            yaml
+        );
     }
 
     #[test]
@@ -280,7 +313,10 @@ mod tests {
             let mid = (s.a + s.b) * 0.5;
             let d = (s.b - s.a).normalize();
             let n = Vector::new(-d.y, d.x) * 0.01;
-            assert_ne!(grid.blocked_at(mid.x + n.x, mid.y + n.y), grid.blocked_at(mid.x - n.x, mid.y - n.y));
+            assert_ne!(
+                grid.blocked_at(mid.x + n.x, mid.y + n.y),
+                grid.blocked_at(mid.x - n.x, mid.y - n.y)
+            );
         }
         // Runs are merged: far fewer segments than boundary cell edges.
         assert!(segs.len() < 40, "{} segments", segs.len());

@@ -61,7 +61,10 @@ impl ScanKernel {
         }
         let base = (heading_rad + self.fan.angle_min_rad).rem_euclid(TAU);
         let inc = self.fan.increment_rad;
-        let query = Aabb::new(origin - Vector::splat(max_range_m), origin + Vector::splat(max_range_m));
+        let query = Aabb::new(
+            origin - Vector::splat(max_range_m),
+            origin + Vector::splat(max_range_m),
+        );
         let segments = world.segments();
         let dirs = &self.world_dirs;
         world.for_each_candidate(&query, |k| {
@@ -139,7 +142,9 @@ fn fast_atan2(y: f64, x: f64) -> f64 {
     let swap = ay > ax;
     let z = if swap { ax / ay } else { ay / ax };
     let z2 = z * z;
-    let mut a = z * (0.999_866_0 + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
+    let mut a = z
+        * (0.999_866_0
+            + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
     if swap {
         a = FRAC_PI_2 - a;
     }
@@ -177,7 +182,10 @@ mod tests {
         let mut segs = rectangle_segments([0.0, 0.0], [10.0, 10.0]);
         for _ in 0..pieces {
             let p = [rng.random_range(0.0..10.0), rng.random_range(0.0..10.0)];
-            let q = [p[0] + rng.random_range(-2.0..2.0), p[1] + rng.random_range(-2.0..2.0)];
+            let q = [
+                p[0] + rng.random_range(-2.0..2.0),
+                p[1] + rng.random_range(-2.0..2.0),
+            ];
             segs.extend(polyline_segments(&[p, q], false));
         }
         World::new(segs, vec![], None)

@@ -232,7 +232,11 @@ pub(crate) fn require_positive(path: &Path, field: &str, value: f64) -> Result<(
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(SimError::field(path, field, format!("must be a finite number > 0, got {value}")))
+        Err(SimError::field(
+            path,
+            field,
+            format!("must be a finite number > 0, got {value}"),
+        ))
     }
 }
 
@@ -241,19 +245,35 @@ pub(crate) fn require_non_negative(path: &Path, field: &str, value: f64) -> Resu
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err(SimError::field(path, field, format!("must be a finite number >= 0, got {value}")))
+        Err(SimError::field(
+            path,
+            field,
+            format!("must be a finite number >= 0, got {value}"),
+        ))
     }
 }
 
 pub(crate) fn require_finite(path: &Path, field: &str, values: &[f64]) -> Result<(), SimError> {
     match values.iter().find(|v| !v.is_finite()) {
         None => Ok(()),
-        Some(v) => Err(SimError::field(path, field, format!("must be finite, got {v}"))),
+        Some(v) => Err(SimError::field(
+            path,
+            field,
+            format!("must be finite, got {v}"),
+        )),
     }
 }
 
-pub(crate) fn validate_params(path: &Path, section: &str, p: &DiffDriveParams) -> Result<(), SimError> {
+pub(crate) fn validate_params(
+    path: &Path,
+    section: &str,
+    p: &DiffDriveParams,
+) -> Result<(), SimError> {
     p.validate().map_err(|e| {
-        SimError::field(path, &format!("{section}.{}", e.field), format!("must be a finite number > 0, got {}", e.value))
+        SimError::field(
+            path,
+            &format!("{section}.{}", e.field),
+            format!("must be a finite number > 0, got {}", e.value),
+        )
     })
 }

@@ -123,7 +123,11 @@ impl Simulator {
             controller: Controller::new(&scenario.controller),
             slip_rng: stream(scenario.seed, STREAM_SLIP),
             tracker_rng: stream(scenario.seed, STREAM_TRACKER),
-            latest_range_m: scenario.range_sensors.iter().map(|s| s.info.max_range_m).collect(),
+            latest_range_m: scenario
+                .range_sensors
+                .iter()
+                .map(|s| s.info.max_range_m)
+                .collect(),
             ranges,
             next_encoder_ns: 0,
             next_tracker_ns: 0,
@@ -180,7 +184,9 @@ impl Simulator {
             bump,
             latest_range_m: &self.latest_range_m,
         };
-        let mut cmd = self.controller.command(&obs, &self.scenario.robot.nominal_params);
+        let mut cmd = self
+            .controller
+            .command(&obs, &self.scenario.robot.nominal_params);
         // Saturate by scaling both wheels, which keeps the commanded curvature.
         let max = self.scenario.robot.max_wheel_speed_rad_s;
         let peak = cmd[0].abs().max(cmd[1].abs());
@@ -241,7 +247,13 @@ impl Simulator {
 
     fn sense_ranges(&mut self, t_ns: u64, out: &mut [f64]) {
         let world = &self.scenario.world;
-        for (i, (cfg, st)) in self.scenario.range_sensors.iter().zip(&mut self.ranges).enumerate() {
+        for (i, (cfg, st)) in self
+            .scenario
+            .range_sensors
+            .iter()
+            .zip(&mut self.ranges)
+            .enumerate()
+        {
             let beams = &mut out[st.offset..st.offset + cfg.info.beams as usize];
             if !due(&mut st.next_ns, cfg.period_ns, t_ns) {
                 beams.fill(f64::NAN);
@@ -287,7 +299,8 @@ impl Simulator {
         );
         // Draw the dropout after the noise so the noise sequence does not
         // depend on the dropout rate.
-        let dropped = cfg.dropout_probability > 0.0 && rng.random::<f64>() < cfg.dropout_probability;
+        let dropped =
+            cfg.dropout_probability > 0.0 && rng.random::<f64>() < cfg.dropout_probability;
         (!dropped).then_some(noisy)
     }
 
@@ -299,7 +312,8 @@ impl Simulator {
         let max_change = robot.max_wheel_accel_rad_s2 * dt_s;
         let mut w = [0.0; 2];
         for i in 0..2 {
-            w[i] = self.wheel_rad_s[i] + (cmd[i] - self.wheel_rad_s[i]).clamp(-max_change, max_change);
+            w[i] =
+                self.wheel_rad_s[i] + (cmd[i] - self.wheel_rad_s[i]).clamp(-max_change, max_change);
         }
         let rotation = [w[0] * dt_s, w[1] * dt_s];
         let (mut slip_l, mut slip_r) = (1.0, 1.0);

@@ -60,7 +60,11 @@ impl MissionSummary {
             bumps,
             bump_time_s: log.steps.iter().filter(|s| s.bump).count() as f64 * dt_s,
             min_clearance_m,
-            encoder_samples: log.steps.iter().filter(|s| s.encoder_ticks.is_some()).count(),
+            encoder_samples: log
+                .steps
+                .iter()
+                .filter(|s| s.encoder_ticks.is_some())
+                .count(),
             tracker_samples: log.steps.iter().filter(|s| s.tracker.is_some()).count(),
         }
     }

@@ -82,7 +82,11 @@ impl World {
     #[inline]
     pub fn for_each_candidate(&self, query: &Aabb, mut f: impl FnMut(usize)) {
         match &self.bvh {
-            Some(bvh) if query.intersection(&self.extent).is_none_or(|i| 4.0 * i.volume() < self.extent.volume()) => {
+            Some(bvh)
+                if query
+                    .intersection(&self.extent)
+                    .is_none_or(|i| 4.0 * i.volume() < self.extent.volume()) =>
+            {
                 bvh.intersect_aabb(query).for_each(|i| f(i as usize))
             }
             _ => (0..self.segments.len()).for_each(f),
@@ -188,7 +192,10 @@ mod tests {
             let o = Vector::new(10.0 + 8.0 * (a * 0.3).sin(), 10.0 + 8.0 * (a * 0.7).cos());
             let d = Vector::new(a.cos(), a.sin());
             assert_eq!(with_bvh.cast_ray(o, d, 6.0), linear.cast_ray(o, d, 6.0));
-            assert_eq!(with_bvh.nearest_within(o, 1.5), linear.nearest_within(o, 1.5));
+            assert_eq!(
+                with_bvh.nearest_within(o, 1.5),
+                linear.nearest_within(o, 1.5)
+            );
         }
     }
 }

@@ -10,19 +10,32 @@ fn error_of(text: &str) -> String {
 }
 
 fn base() -> String {
-    common::scenario_toml("", "kind = \"scripted\"\nsegments = [{ duration_s = 1.0, left_rad_s = 1.0, right_rad_s = 1.0 }]", 5.0, 0.0)
+    common::scenario_toml(
+        "",
+        "kind = \"scripted\"\nsegments = [{ duration_s = 1.0, left_rad_s = 1.0, right_rad_s = 1.0 }]",
+        5.0,
+        0.0,
+    )
 }
 
 #[test]
 fn unknown_key() {
     let text = base().replace("seed = 11", "seed = 11\nsed = 12");
     let err = error_of(&text);
-    assert!(err.starts_with("test.toml:") && err.contains("unknown field `sed`") && err.contains("line"), "{err}");
+    assert!(
+        err.starts_with("test.toml:")
+            && err.contains("unknown field `sed`")
+            && err.contains("line"),
+        "{err}"
+    );
 }
 
 #[test]
 fn non_positive_diameter() {
-    let text = base().replace("true_params = { left_diameter_m = 0.0652", "true_params = { left_diameter_m = -0.0652");
+    let text = base().replace(
+        "true_params = { left_diameter_m = 0.0652",
+        "true_params = { left_diameter_m = -0.0652",
+    );
     let err = error_of(&text);
     assert!(err.contains("test.toml: field `robot.true_params.left_diameter_m` must be a finite number > 0, got -0.0652"), "{err}");
 }
@@ -30,30 +43,57 @@ fn non_positive_diameter() {
 #[test]
 fn non_positive_time_step() {
     let err = error_of(&base().replace("dt_s = 0.01", "dt_s = 0.0"));
-    assert!(err.contains("field `simulation.dt_s` must be a finite number > 0"), "{err}");
+    assert!(
+        err.contains("field `simulation.dt_s` must be a finite number > 0"),
+        "{err}"
+    );
 }
 
 #[test]
 fn robot_inside_a_wall() {
     let text = base().replace("x_m = 5.0, y_m = 5.0", "x_m = 0.1, y_m = 5.0");
     let err = error_of(&text);
-    assert!(err.contains("field `robot.start`") && err.contains("overlaps a wall"), "{err}");
-    let text = base().replace("[world]\n", "[world]\nrectangles = [{ min = [4.0, 4.0], max = [6.0, 6.0] }]\n");
+    assert!(
+        err.contains("field `robot.start`") && err.contains("overlaps a wall"),
+        "{err}"
+    );
+    let text = base().replace(
+        "[world]\n",
+        "[world]\nrectangles = [{ min = [4.0, 4.0], max = [6.0, 6.0] }]\n",
+    );
     let err = error_of(&text);
-    assert!(err.contains("field `robot.start`") && err.contains("inside an obstacle"), "{err}");
+    assert!(
+        err.contains("field `robot.start`") && err.contains("inside an obstacle"),
+        "{err}"
+    );
 }
 
 #[test]
 fn missing_map_file() {
     let text = base().replace("[world]\n", "[world]\nmap = \"no/such/map.yaml\"\n");
     let err = error_of(&text);
-    assert!(err.contains("field `world.map`") && err.contains("no/such/map.yaml") && err.contains("does not exist"), "{err}");
+    assert!(
+        err.contains("field `world.map`")
+            && err.contains("no/such/map.yaml")
+            && err.contains("does not exist"),
+        "{err}"
+    );
 }
 
 #[test]
 fn unknown_side_sensor_and_bad_rates() {
-    let text = common::scenario_toml("", "kind = \"wall_follower\"\nside_sensor = \"ir\"\ntarget_range_m = 0.3\ncruise_speed_m_s = 0.2\ngain_rad_s_per_m = 1.0\nmax_turn_rate_rad_s = 1.0\nreverse_speed_m_s = 0.1\nreverse_duration_s = 1.0\nturn_rate_rad_s = 1.0\nturn_duration_s = 1.0", 5.0, 0.0);
-    assert!(error_of(&text).contains("field `controller.side_sensor` no range sensor is named `ir`"));
-    let text = base().replace("ticks_per_rev = 512", "ticks_per_rev = 512\nrate_hz = -50.0");
+    let text = common::scenario_toml(
+        "",
+        "kind = \"wall_follower\"\nside_sensor = \"ir\"\ntarget_range_m = 0.3\ncruise_speed_m_s = 0.2\ngain_rad_s_per_m = 1.0\nmax_turn_rate_rad_s = 1.0\nreverse_speed_m_s = 0.1\nreverse_duration_s = 1.0\nturn_rate_rad_s = 1.0\nturn_duration_s = 1.0",
+        5.0,
+        0.0,
+    );
+    assert!(
+        error_of(&text).contains("field `controller.side_sensor` no range sensor is named `ir`")
+    );
+    let text = base().replace(
+        "ticks_per_rev = 512",
+        "ticks_per_rev = 512\nrate_hz = -50.0",
+    );
     assert!(error_of(&text).contains("field `encoders.rate_hz` must be a finite number > 0"));
 }

@@ -18,7 +18,12 @@ pub fn load(name: &str) -> Scenario {
 }
 
 /// A 10 m room with an ordinary robot, plus `world` and `controller` TOML.
-pub fn scenario_toml(extra_world: &str, controller: &str, duration_s: f64, slip_std: f64) -> String {
+pub fn scenario_toml(
+    extra_world: &str,
+    controller: &str,
+    duration_s: f64,
+    slip_std: f64,
+) -> String {
     format!(
         r#"
 name = "test"

@@ -25,7 +25,12 @@ fn assert_same(a: &MissionLog, b: &MissionLog) {
     assert_eq!(a.header, b.header);
     assert_eq!(a.steps, b.steps);
     assert_eq!(a.ranges.len(), b.ranges.len());
-    assert!(a.ranges.iter().zip(&b.ranges).all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan())));
+    assert!(
+        a.ranges
+            .iter()
+            .zip(&b.ranges)
+            .all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
+    );
 }
 
 #[test]
@@ -45,7 +50,10 @@ fn csv_and_mcap_round_trip_real_logs() {
         let (csv, mcap) = bytes(&log);
         std::fs::write(dir.path().join("log.csv"), csv).unwrap();
         std::fs::write(dir.path().join("log.mcap"), mcap).unwrap();
-        assert_same(&log, &read_csv(&dir.path().join("log.csv"), &log.header).unwrap());
+        assert_same(
+            &log,
+            &read_csv(&dir.path().join("log.csv"), &log.header).unwrap(),
+        );
         assert_same(&log, &read_mcap(&dir.path().join("log.mcap")).unwrap());
     }
 }
@@ -54,9 +62,26 @@ fn csv_and_mcap_round_trip_real_logs() {
 fn csv_has_the_documented_columns() {
     let log = run("wall_following.toml", None);
     let (csv, _) = bytes(&log);
-    let header = String::from_utf8(csv).unwrap().lines().next().unwrap().to_string();
-    for col in ["t", "left_ticks", "right_ticks", "gt_x", "gt_y", "gt_theta", "bump", "range_side_ir"] {
-        assert!(header.split(',').any(|c| c == col), "missing {col} in {header}");
+    let header = String::from_utf8(csv)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .to_string();
+    for col in [
+        "t",
+        "left_ticks",
+        "right_ticks",
+        "gt_x",
+        "gt_y",
+        "gt_theta",
+        "bump",
+        "range_side_ir",
+    ] {
+        assert!(
+            header.split(',').any(|c| c == col),
+            "missing {col} in {header}"
+        );
     }
 }
 
@@ -66,7 +91,10 @@ fn office_map_lidar_sees_the_drawn_walls() {
     let lidar = log.sensor_index("lidar").unwrap();
     let info = &log.header.range_sensors[lidar];
     let first = log.range_reading(0, lidar).unwrap();
-    let beam_at = |angle: f64| ((angle - info.beam_angle_rad(0)) / (info.beam_angle_rad(1) - info.beam_angle_rad(0))).round() as usize;
+    let beam_at = |angle: f64| {
+        ((angle - info.beam_angle_rad(0)) / (info.beam_angle_rad(1) - info.beam_angle_rad(0)))
+            .round() as usize
+    };
     // From (1.0, 2.5) facing +x: the outer walls' inner faces are at y = 5.9 and y = 0.1.
     let left = first[beam_at(std::f64::consts::FRAC_PI_2)];
     let right = first[beam_at(-std::f64::consts::FRAC_PI_2)];

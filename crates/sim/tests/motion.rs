@@ -13,7 +13,10 @@ fn constant_wheel_speeds_drive_the_closed_form_circle() {
 segments = [{ duration_s = 60.0, left_rad_s = 4.0, right_rad_s = 6.0 }]"#;
     let sc = common::parse(&common::scenario_toml("", ctrl, 40.0, 0.0)).unwrap();
     let p = sc.robot.true_params;
-    let (vl, vr) = (4.0 * p.left_diameter_m / 2.0, 6.0 * p.right_diameter_m / 2.0);
+    let (vl, vr) = (
+        4.0 * p.left_diameter_m / 2.0,
+        6.0 * p.right_diameter_m / 2.0,
+    );
     let radius = 0.5 * p.wheelbase_m * (vr + vl) / (vr - vl);
     let mut sim = Simulator::new(sc);
     let mut out = StepOutput::new(sim.beams());
@@ -26,9 +29,16 @@ segments = [{ duration_s = 60.0, left_rad_s = 4.0, right_rad_s = 6.0 }]"#;
             continue;
         }
         let g = s.ground_truth;
-        let c = *centre.get_or_insert((g.x_m - radius * g.heading_rad.sin(), g.y_m + radius * g.heading_rad.cos()));
+        let c = *centre.get_or_insert((
+            g.x_m - radius * g.heading_rad.sin(),
+            g.y_m + radius * g.heading_rad.cos(),
+        ));
         let r = (g.x_m - c.0).hypot(g.y_m - c.1);
-        assert!((r - radius).abs() < 1e-9, "t = {} s: radius {r} vs closed form {radius}", s.t_s());
+        assert!(
+            (r - radius).abs() < 1e-9,
+            "t = {} s: radius {r} vs closed form {radius}",
+            s.t_s()
+        );
         checked += 1;
     }
     assert!(checked > 3900, "{checked} steps at constant speed");
@@ -57,11 +67,18 @@ segments = [
         if !sim.step(&mut out) {
             break;
         }
-        let ticks = out.record.encoder_ticks.expect("encoders sample every step by default");
+        let ticks = out
+            .record
+            .encoder_ticks
+            .expect("encoders sample every step by default");
         for w in 0..2 {
             let exact_ticks = true_angle[w] / enc.rad_per_tick();
             let lag = exact_ticks - ticks[w] as f64;
-            assert!((0.0..1.0).contains(&lag), "wheel {w}: {} ticks for {exact_ticks} exact", ticks[w]);
+            assert!(
+                (0.0..1.0).contains(&lag),
+                "wheel {w}: {} ticks for {exact_ticks} exact",
+                ticks[w]
+            );
             // The logged actual wheel speeds integrate to the same rotation.
             assert!((integrated[w] - true_angle[w]).abs() < 1e-9);
         }
@@ -112,8 +129,18 @@ segments = [[[1.0, 8.0], [4.0, 7.0]], [[7.0, 1.0], [7.0, 3.5]]]"#;
         }
         contacts += usize::from(out.record.bump);
     }
-    assert!(min_gap >= -1e-12, "seed {seed}: footprint penetrated a wall by {}", -min_gap);
-    assert!(min_gap < 1e-3, "seed {seed}: never touched a wall, the test proves nothing");
-    assert!(contacts > 20, "seed {seed}: only {contacts} steps with the bumper pressed");
+    assert!(
+        min_gap >= -1e-12,
+        "seed {seed}: footprint penetrated a wall by {}",
+        -min_gap
+    );
+    assert!(
+        min_gap < 1e-3,
+        "seed {seed}: never touched a wall, the test proves nothing"
+    );
+    assert!(
+        contacts > 20,
+        "seed {seed}: only {contacts} steps with the bumper pressed"
+    );
     assert!(distance > 30.0, "seed {seed}: drove only {distance} m");
 }

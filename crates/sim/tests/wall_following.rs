@@ -9,7 +9,8 @@ use twindrive_sim::{Simulator, StepOutput};
 #[test]
 fn keeps_its_set_distance_and_backs_up_after_bumps() {
     let sc = common::load("wall_following.toml");
-    let twindrive_sim::ControllerConfig::WallFollower { spec, sensor } = sc.controller.clone() else {
+    let twindrive_sim::ControllerConfig::WallFollower { spec, sensor } = sc.controller.clone()
+    else {
         panic!("wall_following.toml uses the wall follower");
     };
     let max_range = sc.range_sensors[sensor].info.max_range_m;
@@ -50,11 +51,17 @@ fn keeps_its_set_distance_and_backs_up_after_bumps() {
             assert!(matches!(modes[k].0, WallMode::Reverse { .. }));
             let [l, r] = modes[k].2;
             assert!(l < 0.0 && r < 0.0, "reversing commands {l}, {r}");
-            let turn = modes[k..].iter().find(|m| matches!(m.0, WallMode::Turn { .. })).expect("a turn follows");
+            let turn = modes[k..]
+                .iter()
+                .find(|m| matches!(m.0, WallMode::Turn { .. }))
+                .expect("a turn follows");
             assert!(turn.2[1] > turn.2[0], "turns left");
             episodes += 1;
         }
     }
-    assert!(episodes >= 2, "{episodes} bump-and-back-up episodes, the paper has at least two");
+    assert!(
+        episodes >= 2,
+        "{episodes} bump-and-back-up episodes, the paper has at least two"
+    );
     let _ = dt_ns;
 }

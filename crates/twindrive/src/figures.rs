@@ -22,7 +22,10 @@ pub fn decimate(points: impl Iterator<Item = (f64, f64)>, min_step_m: f64) -> Ve
     let mut last = None;
     for p in points {
         last = Some(p);
-        if out.last().is_none_or(|q| (p.0 - q.0).hypot(p.1 - q.1) >= min_step_m) {
+        if out
+            .last()
+            .is_none_or(|q| (p.0 - q.0).hypot(p.1 - q.1) >= min_step_m)
+        {
             out.push(p);
         }
     }
@@ -35,14 +38,25 @@ pub fn decimate(points: impl Iterator<Item = (f64, f64)>, min_step_m: f64) -> Ve
 }
 
 pub fn walls(world: &World) -> Vec<[(f64, f64); 2]> {
-    world.segments().iter().map(|s| [(s.a.x, s.a.y), (s.b.x, s.b.y)]).collect()
+    world
+        .segments()
+        .iter()
+        .map(|s| [(s.a.x, s.a.y), (s.b.x, s.b.y)])
+        .collect()
 }
 
 pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::Result<()> {
     let steps = &log.steps;
     // About 4 px between kept points at the figure's scale.
-    let extent = world.bounds().map_or(1.0, |b| (b.maxs - b.mins).max_element());
-    let path = decimate(steps.iter().map(|s| (s.ground_truth.x_m, s.ground_truth.y_m)), extent / 250.0);
+    let extent = world
+        .bounds()
+        .map_or(1.0, |b| (b.maxs - b.mins).max_element());
+    let path = decimate(
+        steps
+            .iter()
+            .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m)),
+        extent / 250.0,
+    );
     let bump_points: Vec<(f64, f64)> = steps
         .windows(2)
         .filter(|w| w[1].bump && !w[0].bump)
@@ -53,27 +67,63 @@ pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::R
     WorldFigure {
         title: &title,
         walls: &walls(world),
-        paths: &[Series { label: "path", points: &path, color: palette::TRUTH }],
+        paths: &[Series {
+            label: "path",
+            points: &path,
+            color: palette::TRUTH,
+        }],
         markers: &[
-            Markers { label: "start", points: &start, color: palette::GOOD },
-            Markers { label: "bump", points: &bump_points, color: palette::BAD },
+            Markers {
+                label: "start",
+                points: &start,
+                color: palette::GOOD,
+            },
+            Markers {
+                label: "bump",
+                points: &bump_points,
+                color: palette::BAD,
+            },
         ],
     }
     .write(&dir.join("path"))?;
 
     let k = stride(steps.len());
-    let left: Vec<(f64, f64)> = steps.iter().step_by(k).map(|s| (s.t_s(), s.wheel_rad_s[0])).collect();
-    let right: Vec<(f64, f64)> = steps.iter().step_by(k).map(|s| (s.t_s(), s.wheel_rad_s[1])).collect();
-    let bump_times: Vec<(f64, f64)> = steps.windows(2).filter(|w| w[1].bump && !w[0].bump).map(|w| (w[1].t_s(), 0.0)).collect();
+    let left: Vec<(f64, f64)> = steps
+        .iter()
+        .step_by(k)
+        .map(|s| (s.t_s(), s.wheel_rad_s[0]))
+        .collect();
+    let right: Vec<(f64, f64)> = steps
+        .iter()
+        .step_by(k)
+        .map(|s| (s.t_s(), s.wheel_rad_s[1]))
+        .collect();
+    let bump_times: Vec<(f64, f64)> = steps
+        .windows(2)
+        .filter(|w| w[1].bump && !w[0].bump)
+        .map(|w| (w[1].t_s(), 0.0))
+        .collect();
     TimeFigure {
         title: "Wheel angular speeds",
         x_label: "t [s]",
         y_label: "wheel speed [rad/s]",
         series: &[
-            Series { label: "left", points: &left, color: palette::TRUTH },
-            Series { label: "right", points: &right, color: palette::ALT },
+            Series {
+                label: "left",
+                points: &left,
+                color: palette::TRUTH,
+            },
+            Series {
+                label: "right",
+                points: &right,
+                color: palette::ALT,
+            },
         ],
-        markers: &[Markers { label: "bump", points: &bump_times, color: palette::BAD }],
+        markers: &[Markers {
+            label: "bump",
+            points: &bump_times,
+            color: palette::BAD,
+        }],
     }
     .write(&dir.join("wheel_speeds"))?;
 
@@ -102,14 +152,22 @@ pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::R
             .iter()
             .zip(&readings)
             .enumerate()
-            .map(|(j, (&(_, name), pts))| Series { label: name, points: pts, color: colors[j % colors.len()] })
+            .map(|(j, (&(_, name), pts))| Series {
+                label: name,
+                points: pts,
+                color: colors[j % colors.len()],
+            })
             .collect();
         TimeFigure {
             title: "Side range sensor: distance to the wall along the beam",
             x_label: "t [s]",
             y_label: "range [m]",
             series: &series,
-            markers: &[Markers { label: "bump", points: &bump_times, color: palette::BAD }],
+            markers: &[Markers {
+                label: "bump",
+                points: &bump_times,
+                color: palette::BAD,
+            }],
         }
         .write(&dir.join("side_ir"))?;
     }

@@ -23,7 +23,8 @@ impl Staging {
         if dest.exists() && !dest.is_dir() {
             anyhow::bail!("{} exists and is not a directory", dest.display());
         }
-        std::fs::create_dir_all(&parent).with_context(|| format!("creating {}", parent.display()))?;
+        std::fs::create_dir_all(&parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
         let dir = tempfile::Builder::new()
             .prefix(".twindrive-staging-")
             .tempdir_in(&parent)
@@ -68,8 +69,13 @@ impl Staging {
         for entry in std::fs::read_dir(self.dir.path())? {
             let entry = entry?;
             let target = self.dest.join(entry.file_name());
-            std::fs::rename(entry.path(), &target)
-                .with_context(|| format!("moving {} into {}", entry.file_name().to_string_lossy(), self.dest.display()))?;
+            std::fs::rename(entry.path(), &target).with_context(|| {
+                format!(
+                    "moving {} into {}",
+                    entry.file_name().to_string_lossy(),
+                    self.dest.display()
+                )
+            })?;
         }
         Ok(())
     }

@@ -11,6 +11,9 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
     let dir = out.join("wall_following");
     let summary = simulate_into(scenario, &dir)?;
     print_summary(&summary, &dir);
-    println!("open {}/path.png for the driven path and bump points", dir.display());
+    println!(
+        "open {}/path.png for the driven path and bump points",
+        dir.display()
+    );
     Ok(())
 }

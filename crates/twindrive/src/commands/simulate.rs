@@ -6,7 +6,12 @@ use twindrive_sim::{MissionSummary, Scenario, Simulator};
 use crate::output::Staging;
 use crate::{figures, progress};
 
-pub fn run(scenario_path: &Path, out: &Path, seed: Option<u64>, duration_s: Option<f64>) -> anyhow::Result<()> {
+pub fn run(
+    scenario_path: &Path,
+    out: &Path,
+    seed: Option<u64>,
+    duration_s: Option<f64>,
+) -> anyhow::Result<()> {
     let mut scenario = Scenario::load(scenario_path)?;
     if let Some(seed) = seed {
         scenario.seed = seed;
@@ -31,13 +36,22 @@ pub fn simulate_into(scenario: Scenario, out: &Path) -> anyhow::Result<MissionSu
     bar.finish_and_clear();
 
     let summary = MissionSummary::new(&log, &world);
-    staging.write_with("log.csv", |w| twindrive_log::write_csv(&log, w).map_err(Into::into))?;
-    staging.write_with("log.meta.json", |w| serde_json::to_writer_pretty(w, &log.header).map_err(Into::into))?;
-    staging.write_with("log.mcap", |w| twindrive_log::write_mcap(&log, w).map_err(Into::into))?;
-    staging.write_with("ground_truth.tum", |w| {
-        twindrive_log::write_tum(log.steps.iter().map(|s| (s.t_ns, s.ground_truth)), w).map_err(Into::into)
+    staging.write_with("log.csv", |w| {
+        twindrive_log::write_csv(&log, w).map_err(Into::into)
     })?;
-    staging.write_with("summary.json", |w| serde_json::to_writer_pretty(w, &summary).map_err(Into::into))?;
+    staging.write_with("log.meta.json", |w| {
+        serde_json::to_writer_pretty(w, &log.header).map_err(Into::into)
+    })?;
+    staging.write_with("log.mcap", |w| {
+        twindrive_log::write_mcap(&log, w).map_err(Into::into)
+    })?;
+    staging.write_with("ground_truth.tum", |w| {
+        twindrive_log::write_tum(log.steps.iter().map(|s| (s.t_ns, s.ground_truth)), w)
+            .map_err(Into::into)
+    })?;
+    staging.write_with("summary.json", |w| {
+        serde_json::to_writer_pretty(w, &summary).map_err(Into::into)
+    })?;
     figures::mission_figures(&log, &world, staging.dir()).context("drawing figures")?;
     staging.commit()?;
     Ok(summary)
@@ -48,5 +62,8 @@ pub fn print_summary(s: &MissionSummary, out: &Path) {
         "{}: {:.1} s, {:.2} m driven, {} bump episode(s), min clearance {:.3} m",
         s.scenario, s.duration_s, s.distance_m, s.bumps, s.min_clearance_m
     );
-    println!("results in {}/ (log.csv, log.mcap, ground_truth.tum, summary.json, figures)", out.display());
+    println!(
+        "results in {}/ (log.csv, log.mcap, ground_truth.tum, summary.json, figures)",
+        out.display()
+    );
 }
