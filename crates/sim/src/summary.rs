@@ -39,15 +39,16 @@ impl MissionSummary {
             })
             .filter(|&r| r)
             .count();
-        // Clearance beyond 1 m does not matter for the summary.
+        // Any wall lies within the world's diagonal of any point inside it.
+        let reach = world.bounds().map_or(1.0, |b| (b.maxs - b.mins).length());
         let min_clearance_m = log
             .steps
             .iter()
             .map(|s| {
                 let p = Vector::new(s.ground_truth.x_m, s.ground_truth.y_m);
                 world
-                    .nearest_within(p, radius + 1.0)
-                    .map_or(1.0, |n| n.distance_m - radius)
+                    .nearest_within(p, reach)
+                    .map_or(reach, |n| n.distance_m - radius)
             })
             .fold(f64::INFINITY, f64::min);
         Self {
