@@ -141,71 +141,22 @@ impl WorldFigure<'_> {
         let plot_w = 900.0;
         let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(200.0, 1400.0);
         let size = (width, plot_h as u32 + 130);
-        let range = (x0, x1, y0, y1);
+        let spec = ChartSpec {
+            title: self.title,
+            x_label: "x [m]",
+            y_label: "y [m]",
+            range: (x0, x1, y0, y1),
+            walls: self.walls,
+            series: self.paths,
+            markers: self.markers,
+            marker_radius: 5,
+        };
         write_both(
             base,
             size,
-            |r| self.draw(&r, range),
-            |r| self.draw(&r, range),
+            |r| draw_chart(&r, &spec),
+            |r| draw_chart(&r, &spec),
         )
-    }
-
-    fn draw<DB: DrawingBackend>(
-        &self,
-        root: &DrawingArea<DB, Shift>,
-        (x0, x1, y0, y1): (f64, f64, f64, f64),
-    ) -> Result<(), String> {
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut chart = ChartBuilder::on(root)
-            .caption(self.title, ("sans-serif", 22))
-            .margin(15)
-            .x_label_area_size(40)
-            .y_label_area_size(55)
-            .build_cartesian_2d(x0..x1, y0..y1)
-            .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .x_desc("x [m]")
-            .y_desc("y [m]")
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()
-            .map_err(|e| e.to_string())?;
-        chart
-            .draw_series(
-                self.walls
-                    .iter()
-                    .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
-            )
-            .map_err(|e| e.to_string())?;
-        for s in self.paths {
-            let color = s.color;
-            chart
-                .draw_series(LineSeries::new(
-                    s.points.iter().copied(),
-                    color.stroke_width(1),
-                ))
-                .map_err(|e| e.to_string())?
-                .label(s.label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-        }
-        for m in self.markers {
-            let color = m.color;
-            chart
-                .draw_series(m.points.iter().map(|&p| Circle::new(p, 5, color.filled())))
-                .map_err(|e| e.to_string())?
-                .label(m.label)
-                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|e| e.to_string())?;
-        root.present().map_err(|e| e.to_string())
     }
 }
 
@@ -223,64 +174,99 @@ impl TimeFigure<'_> {
         })?;
         let ypad = 0.05 * (y1 - y0).max(1e-6);
         let range = (x0, x1.max(x0 + 1e-9), y0 - ypad, y1 + ypad);
+        let spec = ChartSpec {
+            title: self.title,
+            x_label: self.x_label,
+            y_label: self.y_label,
+            range,
+            walls: &[],
+            series: self.series,
+            markers: self.markers,
+            marker_radius: 3,
+        };
         write_both(
             base,
             (1100, 450),
-            |r| self.draw(&r, range),
-            |r| self.draw(&r, range),
+            |r| draw_chart(&r, &spec),
+            |r| draw_chart(&r, &spec),
         )
     }
+}
 
-    fn draw<DB: DrawingBackend>(
-        &self,
-        root: &DrawingArea<DB, Shift>,
-        (x0, x1, y0, y1): (f64, f64, f64, f64),
-    ) -> Result<(), String> {
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut chart = ChartBuilder::on(root)
-            .caption(self.title, ("sans-serif", 22))
-            .margin(15)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x0..x1, y0..y1)
-            .map_err(|e| e.to_string())?;
+/// What one chart shows; both figure kinds draw through [`draw_chart`].
+struct ChartSpec<'a> {
+    title: &'a str,
+    x_label: &'a str,
+    y_label: &'a str,
+    range: (f64, f64, f64, f64),
+    walls: &'a [[(f64, f64); 2]],
+    series: &'a [Series<'a>],
+    markers: &'a [Markers<'a>],
+    marker_radius: i32,
+}
+
+fn draw_chart<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    spec: &ChartSpec,
+) -> Result<(), String> {
+    let (x0, x1, y0, y1) = spec.range;
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let mut chart = ChartBuilder::on(root)
+        .caption(spec.title, ("sans-serif", 22))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc(spec.x_label)
+        .y_desc(spec.y_label)
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    chart
+        .draw_series(
+            spec.walls
+                .iter()
+                .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
+        )
+        .map_err(|e| e.to_string())?;
+    // Width 1: plotters' bitmap backend leaves gaps in thicker polylines.
+    for s in spec.series {
+        let color = s.color;
         chart
-            .configure_mesh()
-            .x_desc(self.x_label)
-            .y_desc(self.y_label)
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()
-            .map_err(|e| e.to_string())?;
-        for s in self.series {
-            let color = s.color;
-            chart
-                .draw_series(LineSeries::new(
-                    s.points.iter().copied(),
-                    color.stroke_width(1),
-                ))
-                .map_err(|e| e.to_string())?
-                .label(s.label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-        }
-        for m in self.markers {
-            let color = m.color;
-            chart
-                .draw_series(m.points.iter().map(|&p| Circle::new(p, 3, color.filled())))
-                .map_err(|e| e.to_string())?
-                .label(m.label)
-                .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|e| e.to_string())?;
-        root.present().map_err(|e| e.to_string())
+            .draw_series(LineSeries::new(
+                s.points.iter().copied(),
+                color.stroke_width(1),
+            ))
+            .map_err(|e| e.to_string())?
+            .label(s.label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
     }
+    let radius = spec.marker_radius;
+    for m in spec.markers {
+        let color = m.color;
+        chart
+            .draw_series(
+                m.points
+                    .iter()
+                    .map(|&p| Circle::new(p, radius, color.filled())),
+            )
+            .map_err(|e| e.to_string())?
+            .label(m.label)
+            .legend(move |(x, y)| Circle::new((x + 10, y), radius, color.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

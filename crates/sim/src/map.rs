@@ -96,46 +96,50 @@ impl OccupancyGrid {
     /// Edges between blocked and free cells, merged into maximal straight runs.
     pub fn boundary_segments(&self) -> Vec<Segment> {
         let r = self.resolution_m;
+        let (w, h) = (self.width as i64, self.height as i64);
         let mut out = Vec::new();
-        // Horizontal edges at grid line `row` (between rows row-1 and row).
-        for row in 0..=self.height as i64 {
-            let mut run_start: Option<i64> = None;
-            for col in 0..=self.width as i64 {
-                let edge =
-                    col < self.width as i64 && self.blocked(col, row - 1) != self.blocked(col, row);
-                match (edge, run_start) {
-                    (true, None) => run_start = Some(col),
-                    (false, Some(start)) => {
-                        out.push(Segment::new(
-                            self.world_from_map(start as f64 * r, row as f64 * r),
-                            self.world_from_map(col as f64 * r, row as f64 * r),
-                        ));
-                        run_start = None;
-                    }
-                    _ => {}
-                }
-            }
-        }
-        // Vertical edges at grid line `col`.
-        for col in 0..=self.width as i64 {
-            let mut run_start: Option<i64> = None;
-            for row in 0..=self.height as i64 {
-                let edge = row < self.height as i64
-                    && self.blocked(col - 1, row) != self.blocked(col, row);
-                match (edge, run_start) {
-                    (true, None) => run_start = Some(row),
-                    (false, Some(start)) => {
-                        out.push(Segment::new(
-                            self.world_from_map(col as f64 * r, start as f64 * r),
-                            self.world_from_map(col as f64 * r, row as f64 * r),
-                        ));
-                        run_start = None;
-                    }
-                    _ => {}
-                }
-            }
-        }
+        // Horizontal edges on grid line `row`, between rows row-1 and row.
+        let horizontal = |row: i64, col: i64| self.blocked(col, row - 1) != self.blocked(col, row);
+        edge_runs(h, w, horizontal, |row, c0, c1| {
+            let y = row as f64 * r;
+            out.push(Segment::new(
+                self.world_from_map(c0 as f64 * r, y),
+                self.world_from_map(c1 as f64 * r, y),
+            ));
+        });
+        // Vertical edges on grid line `col`, between columns col-1 and col.
+        let vertical = |col: i64, row: i64| self.blocked(col - 1, row) != self.blocked(col, row);
+        edge_runs(w, h, vertical, |col, r0, r1| {
+            let x = col as f64 * r;
+            out.push(Segment::new(
+                self.world_from_map(x, r0 as f64 * r),
+                self.world_from_map(x, r1 as f64 * r),
+            ));
+        });
         out
+    }
+}
+
+/// Calls `emit(line, start, end)` for every maximal run of cells `k` in
+/// `start..end` with `edge(line, k)`, on grid lines `0..=lines` of `len` cells.
+fn edge_runs(
+    lines: i64,
+    len: i64,
+    edge: impl Fn(i64, i64) -> bool,
+    mut emit: impl FnMut(i64, i64, i64),
+) {
+    for line in 0..=lines {
+        let mut start = None;
+        for k in 0..=len {
+            match (k < len && edge(line, k), start) {
+                (true, None) => start = Some(k),
+                (false, Some(s0)) => {
+                    emit(line, s0, k);
+                    start = None;
+                }
+                _ => {}
+            }
+        }
     }
 }
 
