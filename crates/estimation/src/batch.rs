@@ -1,0 +1,359 @@
+//! An independent batch estimate of (dL, dR, b): Levenberg-Marquardt over the
+//! relative motion between pose samples, used as a cross-check of the EKF and
+//! for the identifiability analysis.
+//!
+//! The poses are cut into windows of about `window_s`. Each window starts
+//! from the measured pose, dead-reckons through the encoder increments with
+//! the candidate parameters and compares the end with the measured pose. The
+//! residual covariance accounts for the reference noise at both ends and the
+//! odometry noise of the window; a Huber weight tames slip and glitches.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use serde::{Deserialize, Serialize};
+use twindrive_kinematics::{StateVec, step_augmented, step_jacobians, wrap_angle};
+
+use crate::dead_reckoning::wheel_angles_at;
+use crate::ekf::NoiseModel;
+use crate::online::{CalibrationError, PoseSample, WheelSample};
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BatchConfig {
+    /// Target length of each window in seconds.
+    pub window_s: f64,
+    pub max_iterations: usize,
+    /// Huber threshold on the whitened residual norm.
+    pub huber_k: f64,
+    pub noise: NoiseModel,
+}
+
+impl Default for BatchConfig {
+    fn default() -> Self {
+        Self {
+            window_s: 1.0,
+            max_iterations: 50,
+            huber_k: 3.0,
+            noise: NoiseModel::default(),
+        }
+    }
+}
+
+/// The fit and what it says about the data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BatchResult {
+    /// [dL, dR, b] in metres.
+    pub params: [f64; 3],
+    /// Standard deviations from the inverse information.
+    pub std: [f64; 3],
+    pub iterations: usize,
+    pub windows: usize,
+    /// Root mean square of the whitened residuals (≈ 1 when the noise model fits).
+    pub whitened_rms: f64,
+    /// RMS of the raw end-of-window residuals [x (m), y (m), θ (rad)].
+    pub residual_rms: [f64; 3],
+    pub identifiability: Identifiability,
+}
+
+/// How well the drive excites each parameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Identifiability {
+    /// Eigenvalues of the information matrix in relative units (parameters
+    /// scaled by their values), ascending.
+    pub eigenvalues: [f64; 3],
+    pub condition_number: f64,
+    /// Relative standard deviation of each parameter.
+    pub relative_std: [f64; 3],
+    /// The least-determined combination of relative changes of (dL, dR, b).
+    pub weakest_direction: [f64; 3],
+    pub well_determined: bool,
+    /// A sentence for people.
+    pub verdict: String,
+}
+
+/// Relative standard deviation above which a combination counts as not pinned.
+const POOR_RELATIVE_STD: f64 = 0.002;
+
+impl Identifiability {
+    /// From the information matrix `h` (per metre²) at `params`.
+    pub fn from_information(h: &Matrix3<f64>, params: [f64; 3]) -> Self {
+        let d = Matrix3::from_diagonal(&Vector3::from(params));
+        let rel = d * h * d;
+        let eig = SymmetricEigen::new(rel);
+        let mut order = [0, 1, 2];
+        order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+        let eigenvalues = order.map(|i| eig.eigenvalues[i]);
+        let weakest = eig.eigenvectors.column(order[0]);
+        let sign = if weakest.iter().map(|v| v.abs()).fold(0.0, f64::max) == weakest.max() {
+            1.0
+        } else {
+            -1.0
+        };
+        let weakest_direction = [sign * weakest[0], sign * weakest[1], sign * weakest[2]];
+        let condition_number = if eigenvalues[0] > 0.0 {
+            eigenvalues[2] / eigenvalues[0]
+        } else {
+            f64::INFINITY
+        };
+        let cov = rel.try_inverse();
+        let relative_std = match cov {
+            Some(c) => [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt()),
+            None => [f64::INFINITY; 3],
+        };
+        let weakest_std = if eigenvalues[0] > 0.0 {
+            1.0 / eigenvalues[0].sqrt()
+        } else {
+            f64::INFINITY
+        };
+        let well_determined = weakest_std < POOR_RELATIVE_STD;
+        let names = ["dL", "dR", "b"];
+        let combo: Vec<String> = weakest_direction
+            .iter()
+            .zip(names)
+            .filter(|(v, _)| v.abs() > 0.1)
+            .map(|(v, n)| format!("{v:+.2}·{n}"))
+            .collect();
+        let verdict = if well_determined {
+            format!(
+                "all three parameters are determined (weakest combination {} known to {:.3} %)",
+                combo.join(" "),
+                100.0 * weakest_std
+            )
+        } else {
+            format!(
+                "WARNING: this drive cannot separate the parameters: the relative change {} is only known to {:.2} % \
+                 (condition number {:.1e}). One constant curvature pins only two combinations of (dL, dR, b); \
+                 drive at least two different curvatures (circles of different radii, both directions, a spin in place)",
+                combo.join(" "),
+                100.0 * weakest_std,
+                condition_number
+            )
+        };
+        Self {
+            eigenvalues,
+            condition_number,
+            relative_std,
+            weakest_direction,
+            well_determined,
+            verdict,
+        }
+    }
+}
+
+/// One window: start and end pose samples.
+struct Window {
+    start: PoseSample,
+    end: PoseSample,
+}
+
+fn windows(poses: &[PoseSample], wheels: &[WheelSample], window_s: f64) -> Vec<Window> {
+    let (Some(w0), Some(w1)) = (wheels.first(), wheels.last()) else {
+        return Vec::new();
+    };
+    let usable: Vec<&PoseSample> = poses
+        .iter()
+        .filter(|p| p.heading_rad.is_some() && p.t_s >= w0.t_s && p.t_s <= w1.t_s)
+        .collect();
+    let mut out = Vec::new();
+    let mut k = 0;
+    while k < usable.len() {
+        let start = usable[k];
+        let Some(end_idx) = (k + 1..usable.len()).find(|&j| usable[j].t_s - start.t_s >= window_s)
+        else {
+            break;
+        };
+        out.push(Window {
+            start: *start,
+            end: *usable[end_idx],
+        });
+        k = end_idx;
+    }
+    out
+}
+
+/// Residual (world frame), its Jacobian w.r.t. the parameters and its covariance for one window.
+fn window_terms(
+    w: &Window,
+    wheels: &[WheelSample],
+    params: [f64; 3],
+    noise: &NoiseModel,
+) -> Option<(Vector3<f64>, Matrix3<f64>, Matrix3<f64>)> {
+    let h0 = w.start.heading_rad?;
+    let h1 = w.end.heading_rad?;
+    let mut state = StateVec::new(
+        w.start.x_m,
+        w.start.y_m,
+        h0,
+        params[0],
+        params[1],
+        params[2],
+    );
+    let mut at = wheel_angles_at(wheels, w.start.t_s)?;
+    let end = wheel_angles_at(wheels, w.end.t_s)?;
+    let mut jac = Matrix3::zeros(); // d pose / d params
+    let mut pose_prop = Matrix3::identity(); // d pose_end / d pose_start
+    let mut odo_cov = Matrix3::zeros();
+    let first = wheels.partition_point(|s| s.t_s <= w.start.t_s);
+    let inner = wheels[first..]
+        .iter()
+        .take_while(|s| s.t_s < w.end.t_s)
+        .map(|s| (s.left_rad, s.right_rad));
+    for next in inner.chain(std::iter::once(end)) {
+        let (l, r) = (next.0 - at.0, next.1 - at.1);
+        at = next;
+        let (f, g) = step_jacobians(&state, l, r);
+        state = step_augmented(&state, l, r);
+        let a: Matrix3<f64> = f.fixed_view::<3, 3>(0, 0).into_owned();
+        let b: Matrix3<f64> = f.fixed_view::<3, 3>(0, 3).into_owned();
+        jac = a * jac + b;
+        pose_prop = a * pose_prop;
+        let q = [
+            noise.wheel_rad2_per_rad * l.abs() + noise.wheel_floor_rad2,
+            noise.wheel_rad2_per_rad * r.abs() + noise.wheel_floor_rad2,
+        ];
+        let g3 = g.fixed_view::<3, 2>(0, 0);
+        odo_cov = a * odo_cov * a.transpose()
+            + g3 * nalgebra::Matrix2::new(q[0], 0.0, 0.0, q[1]) * g3.transpose();
+    }
+    let residual = Vector3::new(
+        w.end.x_m - state[0],
+        w.end.y_m - state[1],
+        wrap_angle(h1 - state[2]),
+    );
+    let r = Matrix3::from_diagonal(&Vector3::new(
+        noise.position_std_m.powi(2),
+        noise.position_std_m.powi(2),
+        noise.heading_std_rad.powi(2),
+    ));
+    let cov = pose_prop * r * pose_prop.transpose() + odo_cov + r;
+    // The residual decreases as the prediction grows: ∂r/∂params = −J.
+    Some((residual, -jac, cov))
+}
+
+/// Normal equations at `params`: (information, gradient, cost, whitened rms, raw rms, windows used).
+fn normal_equations(
+    ws: &[Window],
+    wheels: &[WheelSample],
+    params: [f64; 3],
+    cfg: &BatchConfig,
+) -> (Matrix3<f64>, Vector3<f64>, f64, f64, [f64; 3], usize) {
+    let mut h = Matrix3::zeros();
+    let mut g = Vector3::zeros();
+    let (mut cost, mut sq, mut n) = (0.0, 0.0, 0usize);
+    let mut raw = [0.0; 3];
+    for w in ws {
+        let Some((r, j, c)) = window_terms(w, wheels, params, &cfg.noise) else {
+            continue;
+        };
+        let Some(chol) = c.cholesky() else { continue };
+        let c_inv_r = chol.solve(&r);
+        let m2 = r.dot(&c_inv_r);
+        let m = m2.sqrt();
+        // Huber IRLS weight.
+        let weight = if m <= cfg.huber_k {
+            1.0
+        } else {
+            cfg.huber_k / m
+        };
+        let c_inv_j = chol.solve(&j);
+        h += weight * j.transpose() * c_inv_j;
+        g += weight * j.transpose() * c_inv_r;
+        cost += if m <= cfg.huber_k {
+            0.5 * m2
+        } else {
+            cfg.huber_k * (m - 0.5 * cfg.huber_k)
+        };
+        sq += m2;
+        for (acc, v) in raw.iter_mut().zip(r.iter()) {
+            *acc += v * v;
+        }
+        n += 1;
+    }
+    let nf = n.max(1) as f64;
+    let rms = (sq / (3.0 * nf)).sqrt();
+    (h, g, cost, rms, raw.map(|v| (v / nf).sqrt()), n)
+}
+
+/// Fits (dL, dR, b) by Levenberg-Marquardt from `initial`.
+pub fn fit(
+    wheels: &[WheelSample],
+    poses: &[PoseSample],
+    initial: [f64; 3],
+    cfg: &BatchConfig,
+) -> Result<BatchResult, CalibrationError> {
+    let ws = windows(poses, wheels, cfg.window_s);
+    if ws.len() < 3 {
+        return Err(CalibrationError::Input(format!(
+            "only {} windows of {} s with heading references overlap the encoder data; the batch fit needs at least 3",
+            ws.len(),
+            cfg.window_s
+        )));
+    }
+    let mut params = initial;
+    let mut lambda = 1e-3;
+    let (mut h, mut g, mut cost, _, _, _) = normal_equations(&ws, wheels, params, cfg);
+    let mut iterations = 0;
+    while iterations < cfg.max_iterations {
+        iterations += 1;
+        let mut damped = h;
+        for i in 0..3 {
+            damped[(i, i)] *= 1.0 + lambda;
+        }
+        // Gauss-Newton on r(p) with ∂r/∂p = J: step = −(JᵀJ)⁻¹ Jᵀ r.
+        let Some(step) = damped.cholesky().map(|c| -c.solve(&g)) else {
+            lambda *= 10.0;
+            continue;
+        };
+        let candidate = [
+            params[0] + step[0],
+            params[1] + step[1],
+            params[2] + step[2],
+        ];
+        if candidate.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            lambda *= 10.0;
+            continue;
+        }
+        let (h2, g2, cost2, _, _, _) = normal_equations(&ws, wheels, candidate, cfg);
+        if cost2 <= cost {
+            let rel = (0..3)
+                .map(|i| (step[i] / params[i]).abs())
+                .fold(0.0, f64::max);
+            params = candidate;
+            (h, g, cost) = (h2, g2, cost2);
+            lambda = (lambda * 0.3).max(1e-9);
+            if rel < 1e-10 {
+                break;
+            }
+        } else {
+            lambda *= 10.0;
+            if lambda > 1e12 {
+                break;
+            }
+        }
+    }
+    let (h, _, _, whitened_rms, residual_rms, used) = normal_equations(&ws, wheels, params, cfg);
+    let std = match h.try_inverse() {
+        Some(c) => [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt()),
+        None => [f64::INFINITY; 3],
+    };
+    Ok(BatchResult {
+        params,
+        std,
+        iterations,
+        windows: used,
+        whitened_rms,
+        residual_rms,
+        identifiability: Identifiability::from_information(&h, params),
+    })
+}
+
+/// The information the data carries about the parameters at `params`
+/// (no fitting): for judging a drive whatever method estimated it.
+pub fn identifiability(
+    wheels: &[WheelSample],
+    poses: &[PoseSample],
+    params: [f64; 3],
+    cfg: &BatchConfig,
+) -> Option<Identifiability> {
+    let ws = windows(poses, wheels, cfg.window_s);
+    let (h, _, _, _, _, n) = normal_equations(&ws, wheels, params, cfg);
+    (n >= 3).then(|| Identifiability::from_information(&h, params))
+}

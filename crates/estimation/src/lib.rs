@@ -1,0 +1,34 @@
+//! Kinematic calibration of a differential-drive robot (paper sections
+//! 4.3-4.5): estimate the wheel diameters and the wheelbase from encoder
+//! counts and an external absolute pose.
+//!
+//! - [`AugmentedEkf`]: the filter over [x, y, θ, dL, dR, b];
+//! - [`OnlineCalibrator`]: samples as they arrive, at any rates;
+//! - [`run_filter`] and [`rts_smooth`]: the same filter over a whole log, and
+//!   its smoother;
+//! - [`batch`]: an independent Levenberg-Marquardt fit used as a cross-check;
+//! - [`clock`]: the offset between an encoder clock and a pose clock;
+//! - [`ellipse_fit`], [`dead_reckoning`]: for the paper's evidence.
+//!
+//! REP-103 throughout; the paper's eq. (3) has the opposite heading sign.
+
+pub mod batch;
+pub mod clock;
+pub mod dead_reckoning;
+mod ekf;
+pub mod ellipse_fit;
+mod offline;
+mod online;
+mod smoother;
+
+pub use ekf::{
+    AugmentedEkf, FilterError, FilterStats, GateConfig, NoiseModel, StateAndCovariance,
+    UpdateOutcome, chi2_quantile, nees,
+};
+pub use offline::{FilterRun, run_filter, smooth};
+pub use online::{
+    CalibrationError, Estimate, FilterConfig, FilterHistory, InnovationRecord, OnlineCalibrator,
+    PoseSample, WheelSample, initial_estimate,
+};
+pub use smoother::rts_smooth;
+pub use twindrive_kinematics::{AugmentedState, Mat6, StateVec};

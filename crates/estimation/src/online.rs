@@ -1,0 +1,311 @@
+//! Online calibration: encoder and pose samples arrive as they come, at
+//! different rates and times, and the filter keeps a current estimate.
+//!
+//! Samples must be pushed in time order across both streams (merge them by
+//! timestamp). A pose stamped between two encoder samples waits for the
+//! later one; the encoder increment is then split at the pose time (linear
+//! interpolation of the cumulative wheel angles), the filter predicts to the
+//! pose time, fuses the pose and predicts the rest of the increment.
+
+use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
+use twindrive_kinematics::{Mat6, StateVec};
+
+use crate::ekf::{
+    AugmentedEkf, FilterError, FilterStats, GateConfig, NoiseModel, StateAndCovariance,
+    UpdateOutcome,
+};
+
+/// Cumulative wheel rotation (radians, forward positive) at a time.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WheelSample {
+    pub t_s: f64,
+    pub left_rad: f64,
+    pub right_rad: f64,
+}
+
+/// An absolute reference pose; `heading_rad: None` for position-only.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseSample {
+    pub t_s: f64,
+    pub x_m: f64,
+    pub y_m: f64,
+    pub heading_rad: Option<f64>,
+}
+
+/// Filter settings.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct FilterConfig {
+    pub noise: NoiseModel,
+    pub gate: GateConfig,
+}
+
+/// The estimate at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    pub t_s: f64,
+    pub state: StateVec,
+    pub covariance: Mat6,
+}
+
+impl Estimate {
+    /// Standard deviation of state component `i`.
+    pub fn std(&self, i: usize) -> f64 {
+        self.covariance[(i, i)].max(0.0).sqrt()
+    }
+}
+
+/// Calibration input that cannot be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalibrationError {
+    #[error(transparent)]
+    Filter(#[from] FilterError),
+    #[error(
+        "{stream} sample at t = {t_s} s arrived after t = {after_s} s; push samples in time order"
+    )]
+    OutOfOrder {
+        stream: &'static str,
+        t_s: f64,
+        after_s: f64,
+    },
+    #[error("{0}")]
+    Input(String),
+}
+
+/// One fused pose: time, innovation components and NIS, for plots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InnovationRecord {
+    pub t_s: f64,
+    pub innovation: [f64; 3],
+    pub nis: f64,
+    pub accepted: bool,
+}
+
+/// Filter nodes kept for the Rauch-Tung-Striebel smoother: one per fused
+/// pose, with the prediction that led to it.
+#[derive(Debug, Clone, Default)]
+pub struct FilterHistory {
+    pub t_s: Vec<f64>,
+    /// Filtered estimate at each node.
+    pub filtered: Vec<StateAndCovariance>,
+    /// Prediction into each node from the previous one (unused for node 0).
+    pub predicted: Vec<StateAndCovariance>,
+    /// Jacobian of the whole transition from the previous node.
+    pub transition: Vec<Mat6>,
+    pub innovations: Vec<InnovationRecord>,
+}
+
+/// The online calibrator.
+#[derive(Debug, Clone)]
+pub struct OnlineCalibrator {
+    ekf: AugmentedEkf,
+    t_s: f64,
+    last_wheels: Option<WheelSample>,
+    pending: Vec<PoseSample>,
+    last_pose_t_s: f64,
+    history: Option<FilterHistory>,
+    /// Product of step Jacobians since the last node, and the prediction
+    /// state there, for the history.
+    transition: Mat6,
+}
+
+impl OnlineCalibrator {
+    /// Starts from `initial` at time `t0_s`. With `keep_history` every fused
+    /// pose is kept for smoothing and plotting.
+    pub fn new(
+        initial: StateAndCovariance,
+        t0_s: f64,
+        config: FilterConfig,
+        keep_history: bool,
+    ) -> Self {
+        let history = keep_history.then(|| {
+            let mut h = FilterHistory::default();
+            h.t_s.push(t0_s);
+            h.filtered.push(initial);
+            h.predicted.push(initial);
+            h.transition.push(Mat6::identity());
+            h
+        });
+        Self {
+            ekf: AugmentedEkf::new(initial, config.noise, config.gate),
+            t_s: t0_s,
+            last_wheels: None,
+            pending: Vec::new(),
+            last_pose_t_s: f64::NEG_INFINITY,
+            history,
+            transition: Mat6::identity(),
+        }
+    }
+
+    pub fn estimate(&self) -> Estimate {
+        let e = self.ekf.estimate();
+        Estimate {
+            t_s: self.t_s,
+            state: e.state,
+            covariance: e.covariance,
+        }
+    }
+
+    pub fn stats(&self) -> &FilterStats {
+        self.ekf.stats()
+    }
+
+    /// The kept history (if asked for in [`OnlineCalibrator::new`]).
+    pub fn into_history(self) -> Option<FilterHistory> {
+        self.history
+    }
+
+    /// Fuses an encoder sample; any poses stamped up to its time are fused
+    /// at their own times first.
+    pub fn push_wheels(&mut self, w: WheelSample) -> Result<(), CalibrationError> {
+        let Some(prev) = self.last_wheels else {
+            // The first sample only anchors the wheel angles.
+            self.last_wheels = Some(w);
+            self.t_s = self.t_s.max(w.t_s);
+            self.pending.retain(|p| p.t_s > w.t_s);
+            return Ok(());
+        };
+        if w.t_s <= prev.t_s {
+            return Err(CalibrationError::OutOfOrder {
+                stream: "encoder",
+                t_s: w.t_s,
+                after_s: prev.t_s,
+            });
+        }
+        let mut at = prev; // wheel angles at the filter's current time
+        let pending = std::mem::take(&mut self.pending);
+        let mut keep = Vec::new();
+        for pose in pending {
+            if pose.t_s > w.t_s {
+                keep.push(pose);
+                continue;
+            }
+            let frac = (pose.t_s - prev.t_s) / (w.t_s - prev.t_s);
+            let mid = WheelSample {
+                t_s: pose.t_s,
+                left_rad: prev.left_rad + frac * (w.left_rad - prev.left_rad),
+                right_rad: prev.right_rad + frac * (w.right_rad - prev.right_rad),
+            };
+            self.predict_between(&at, &mid);
+            at = mid;
+            self.fuse(&pose)?;
+        }
+        self.pending = keep;
+        self.predict_between(&at, &w);
+        self.last_wheels = Some(w);
+        Ok(())
+    }
+
+    /// Queues a pose; it is fused when the encoder sample at or after its
+    /// time arrives (at once if one already has).
+    pub fn push_pose(&mut self, pose: PoseSample) -> Result<(), CalibrationError> {
+        if pose.t_s < self.last_pose_t_s {
+            return Err(CalibrationError::OutOfOrder {
+                stream: "pose",
+                t_s: pose.t_s,
+                after_s: self.last_pose_t_s,
+            });
+        }
+        self.last_pose_t_s = pose.t_s;
+        match self.last_wheels {
+            Some(w) if pose.t_s < w.t_s => Err(CalibrationError::OutOfOrder {
+                stream: "pose",
+                t_s: pose.t_s,
+                after_s: w.t_s,
+            }),
+            Some(w) if pose.t_s == w.t_s => self.fuse(&pose),
+            _ => {
+                self.pending.push(pose);
+                Ok(())
+            }
+        }
+    }
+
+    fn predict_between(&mut self, from: &WheelSample, to: &WheelSample) {
+        let dt = to.t_s - from.t_s;
+        if dt <= 0.0 {
+            return;
+        }
+        let f = self.ekf.predict(
+            to.left_rad - from.left_rad,
+            to.right_rad - from.right_rad,
+            dt,
+        );
+        if self.history.is_some() {
+            self.transition = f * self.transition;
+        }
+        self.t_s = to.t_s;
+    }
+
+    fn fuse(&mut self, pose: &PoseSample) -> Result<(), CalibrationError> {
+        let before = *self.ekf.estimate();
+        let outcome = match pose.heading_rad {
+            Some(h) => self.ekf.update_pose(pose.t_s, pose.x_m, pose.y_m, h)?,
+            None => self.ekf.update_position(pose.t_s, pose.x_m, pose.y_m)?,
+        };
+        self.t_s = pose.t_s;
+        if let Some(h) = &mut self.history {
+            let s = &before.state;
+            let innovation = [
+                pose.x_m - s[0],
+                pose.y_m - s[1],
+                pose.heading_rad
+                    .map_or(0.0, |th| twindrive_kinematics::wrap_angle(th - s[2])),
+            ];
+            let (nis, accepted) = match outcome {
+                UpdateOutcome::Accepted { nis, .. } => (nis, true),
+                UpdateOutcome::Rejected { nis, .. } => (nis, false),
+            };
+            h.innovations.push(InnovationRecord {
+                t_s: pose.t_s,
+                innovation,
+                nis,
+                accepted,
+            });
+            if accepted {
+                h.t_s.push(pose.t_s);
+                h.predicted.push(before);
+                h.filtered.push(*self.ekf.estimate());
+                h.transition.push(self.transition);
+                self.transition = Mat6::identity();
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Sensible initial covariance: the first pose's noise for the pose, and a
+/// relative standard deviation for the parameters.
+pub fn initial_estimate(
+    pose: &PoseSample,
+    params: [f64; 3],
+    noise: &NoiseModel,
+    param_rel_std: f64,
+) -> StateAndCovariance {
+    let mut cov = Mat6::zeros();
+    let pos_var = noise.position_std_m.powi(2);
+    cov.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::from_diagonal(&nalgebra::Vector3::new(
+            pos_var,
+            pos_var,
+            if pose.heading_rad.is_some() {
+                noise.heading_std_rad.powi(2)
+            } else {
+                0.5f64.powi(2)
+            },
+        )));
+    for (i, p) in params.iter().enumerate() {
+        cov[(3 + i, 3 + i)] = (param_rel_std * p).powi(2);
+    }
+    StateAndCovariance {
+        state: StateVec::new(
+            pose.x_m,
+            pose.y_m,
+            pose.heading_rad.unwrap_or(0.0),
+            params[0],
+            params[1],
+            params[2],
+        ),
+        covariance: cov,
+    }
+}
