@@ -11,7 +11,10 @@ mod inverse;
 mod jacobian;
 mod params;
 
-pub use arc::{arc_step, arc_step_wheels, body_increment, sinc, sinc_derivative, wheel_travel_m};
+pub use arc::{
+    arc_step, arc_step_wheels, body_increment, encoder_increment, sinc, sinc_derivative,
+    wheel_travel_m,
+};
 pub use inverse::{body_velocity, wheel_speeds};
 pub use jacobian::{AugmentedState, Mat6, Mat6x2, StateVec, step_augmented, step_jacobians};
 pub use params::{DiffDriveParams, EncoderSpec, ParamError};

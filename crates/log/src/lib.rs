@@ -11,7 +11,7 @@ mod mcap_io;
 mod time;
 mod tum;
 
-pub use csv_io::{read_csv, write_csv};
+pub use csv_io::{read_csv, read_csv_from, write_csv};
 pub use error::LogError;
 pub use mcap_io::{read_mcap, write_mcap};
 pub use time::{format_seconds, ns_from_seconds, seconds_from_ns};
@@ -24,6 +24,35 @@ use twindrive_kinematics::{DiffDriveParams, Pose};
 pub const LOG_FORMAT: &str = "twindrive-mission-log";
 /// Bumped whenever the meaning of a field or column changes.
 pub const LOG_VERSION: u32 = 1;
+
+/// Reads a log header written as JSON (`log.meta.json`).
+pub fn read_header_json(path: &std::path::Path) -> Result<LogHeader, LogError> {
+    let text = std::fs::read_to_string(path).map_err(|e| LogError::Io {
+        path: path.into(),
+        source: e,
+    })?;
+    let header: LogHeader = serde_json::from_str(&text).map_err(|e| LogError::Line {
+        path: path.into(),
+        line: e.line() as u64,
+        message: e.to_string(),
+    })?;
+    if header.format != LOG_FORMAT || header.version != LOG_VERSION {
+        return Err(LogError::Format {
+            path: path.into(),
+            message: format!(
+                "is `{}` version {}, expected `{LOG_FORMAT}` version {LOG_VERSION}",
+                header.format, header.version
+            ),
+        });
+    }
+    Ok(header)
+}
+
+/// Reads a simulator output directory: `log.meta.json` and `log.csv`.
+pub fn read_log_dir(dir: &std::path::Path) -> Result<MissionLog, LogError> {
+    let header = read_header_json(&dir.join("log.meta.json"))?;
+    read_csv(&dir.join("log.csv"), &header)
+}
 
 /// What a reader needs to interpret the per-step records.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -253,6 +282,26 @@ pub(crate) mod testutil {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn log_directory_round_trip() {
+        let log = testutil::sample_log();
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("log.meta.json"),
+            serde_json::to_string(&log.header).unwrap(),
+        )
+        .unwrap();
+        write_csv(
+            &log,
+            std::fs::File::create(dir.path().join("log.csv")).unwrap(),
+        )
+        .unwrap();
+        testutil::assert_same(&log, &read_log_dir(dir.path()).unwrap());
+        std::fs::write(dir.path().join("log.meta.json"), "{\"format\": 3}").unwrap();
+        let err = read_log_dir(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("log.meta.json, line 1"), "{err}");
+    }
 
     #[test]
     fn range_reading_respects_not_sampled() {

@@ -191,7 +191,42 @@ impl Scenario {
         }
 
         require_positive(path, "bump.arc_rad", file.bump.arc_rad)?;
-        require_non_negative(path, "bump.contact_margin_m", file.bump.contact_margin_m)?;
+        if file.bump.arc_rad > std::f64::consts::TAU + 1e-9 {
+            return Err(SimError::field(
+                path,
+                "bump.arc_rad",
+                format!("must be at most 2π, got {}", file.bump.arc_rad),
+            ));
+        }
+        // Contact leaves the footprint a hair outside the wall; a zero margin
+        // would never see it.
+        require_positive(path, "bump.contact_margin_m", file.bump.contact_margin_m)?;
+        if file.bump.contact_margin_m >= robot.footprint_radius_m {
+            return Err(SimError::field(
+                path,
+                "bump.contact_margin_m",
+                "must be below robot.footprint_radius_m".into(),
+            ));
+        }
+        // Walls are checked at the end of each step; a step shorter than half
+        // the footprint radius cannot jump over one.
+        let p = &robot.true_params;
+        let max_step_m = robot.max_wheel_speed_rad_s
+            * sim.dt_s
+            * 0.5
+            * p.left_diameter_m.max(p.right_diameter_m)
+            * (1.0 + 5.0 * robot.slip_std);
+        if max_step_m >= 0.5 * robot.footprint_radius_m {
+            return Err(SimError::field(
+                path,
+                "simulation.dt_s",
+                format!(
+                    "is too long: at robot.max_wheel_speed_rad_s a wheel moves {max_step_m:.3} m per step, \
+                 which must stay below half the footprint radius ({:.3} m)",
+                    0.5 * robot.footprint_radius_m
+                ),
+            ));
+        }
 
         let tracker = match &file.tracker {
             None => None,
@@ -255,6 +290,16 @@ impl Scenario {
                         &format!("controller.segments[{i}].duration_s"),
                         seg.duration_s,
                     )?;
+                    if seg.duration_s < sim.dt_s {
+                        return Err(SimError::field(
+                            path,
+                            &format!("controller.segments[{i}].duration_s"),
+                            format!(
+                                "must be at least one time step ({} s), got {}",
+                                sim.dt_s, seg.duration_s
+                            ),
+                        ));
+                    }
                     require_finite(
                         path,
                         &format!("controller.segments[{i}]"),
@@ -313,6 +358,23 @@ impl Scenario {
         })
     }
 
+    /// Changes the duration, with the same checks as the scenario file's.
+    pub fn set_duration_s(&mut self, duration_s: f64) -> Result<(), String> {
+        self.steps = steps_for(duration_s, self.dt_ns)?;
+        Ok(())
+    }
+
+    /// Bytes the in-memory log of this scenario needs, roughly.
+    pub fn log_size_bytes(&self) -> u64 {
+        let beams: u64 = self
+            .range_sensors
+            .iter()
+            .map(|s| u64::from(s.info.beams))
+            .sum();
+        let per_step = std::mem::size_of::<twindrive_log::StepRecord>() as u64 + 8 * beams;
+        self.steps.saturating_mul(per_step)
+    }
+
     pub fn dt_s(&self) -> f64 {
         self.dt_ns as f64 * 1e-9
     }
@@ -335,6 +397,18 @@ impl Scenario {
             range_sensors: self.range_sensors.iter().map(|s| s.info.clone()).collect(),
         }
     }
+}
+
+/// Number of steps of `dt_ns` in `duration_s`, at most 2e9.
+fn steps_for(duration_s: f64, dt_ns: u64) -> Result<u64, String> {
+    if !(duration_s.is_finite() && duration_s > 0.0) {
+        return Err(format!("must be a finite number > 0, got {duration_s}"));
+    }
+    let steps = (duration_s * 1e9 / dt_ns as f64).round();
+    if !(1.0..=2e9).contains(&steps) {
+        return Err(format!("gives {steps} steps of dt_s; need 1 to 2e9"));
+    }
+    Ok(steps as u64)
 }
 
 fn resolve_robot(file: &ScenarioFile, path: &Path) -> Result<RobotConfig, SimError> {

@@ -67,7 +67,7 @@ impl Controller {
                     .segments
                     .iter()
                     .map(|s| {
-                        total += (s.duration_s * 1e9).round() as u64;
+                        total = total.saturating_add((s.duration_s * 1e9).round() as u64);
                         total
                     })
                     .collect();
@@ -138,14 +138,14 @@ fn wall_follow(
     let secs = |s: f64| (s * 1e9).round() as u64;
     if *mode == WallMode::Follow && obs.bump {
         *mode = WallMode::Reverse {
-            until_ns: obs.t_ns + secs(spec.reverse_duration_s),
+            until_ns: obs.t_ns.saturating_add(secs(spec.reverse_duration_s)),
         };
     }
     if let WallMode::Reverse { until_ns } = *mode
         && obs.t_ns >= until_ns
     {
         *mode = WallMode::Turn {
-            until_ns: obs.t_ns + secs(spec.turn_duration_s),
+            until_ns: obs.t_ns.saturating_add(secs(spec.turn_duration_s)),
         };
     }
     if let WallMode::Turn { until_ns } = *mode

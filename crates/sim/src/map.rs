@@ -298,6 +298,71 @@ mod tests {
     }
 
     #[test]
+    fn image_row_zero_is_the_top_of_the_map() {
+        // 3 x 2 pixels, one black pixel in the top-left corner of the image.
+        let dir = tempfile::tempdir().unwrap();
+        let mut pgm = b"P5\n3 2\n255\n".to_vec();
+        pgm.extend_from_slice(&[0, 254, 254, 254, 254, 254]);
+        std::fs::write(dir.path().join("m.pgm"), pgm).unwrap();
+        std::fs::write(
+            dir.path().join("m.yaml"),
+            "image: m.pgm\nresolution: 1.0\norigin: [10.0, 20.0, 0.0]\n",
+        )
+        .unwrap();
+        let grid = load_map(&dir.path().join("m.yaml")).unwrap();
+        assert!(grid.blocked_at(10.5, 21.5), "top-left cell");
+        assert!(!grid.blocked_at(10.5, 20.5), "bottom-left cell");
+        assert!(!grid.blocked_at(12.5, 21.5), "top-right cell");
+        // With a yaw of 90° the map's x axis points along world +y.
+        std::fs::write(
+            dir.path().join("r.yaml"),
+            "image: m.pgm\nresolution: 1.0\norigin: [0.0, 0.0, 1.5707963267948966]\n",
+        )
+        .unwrap();
+        let grid = load_map(&dir.path().join("r.yaml")).unwrap();
+        assert!(grid.blocked_at(-1.5, 0.5), "map (0.5, 1.5) rotated by 90°");
+        assert!(!grid.blocked_at(-0.5, 2.5), "map (2.5, 0.5), a free cell");
+    }
+
+    #[test]
+    fn bad_map_files_name_the_field() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("a.yaml"),
+            "image: none.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n",
+        )
+        .unwrap();
+        let err = load_map(&dir.path().join("a.yaml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("a.yaml: field `image`") && err.contains("none.pgm"),
+            "{err}"
+        );
+        std::fs::write(
+            dir.path().join("b.yaml"),
+            "image: x.pgm\nresolution: -1\norigin: [0.0, 0.0, 0.0]\n",
+        )
+        .unwrap();
+        let err = load_map(&dir.path().join("b.yaml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("field `resolution`"), "{err}");
+        std::fs::write(
+            dir.path().join("c.yaml"),
+            "image: x.pgm\nresolution: 1\norigin: [0.0, 0.0, 0.0]\ncolour: 3\n",
+        )
+        .unwrap();
+        let err = load_map(&dir.path().join("c.yaml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("c.yaml") && err.contains("unknown field `colour`"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn office_map_loads_with_expected_cells() {
         let dir = tempfile::tempdir().unwrap();
         let (pgm, yaml) = draw_office_map();

@@ -74,7 +74,58 @@ impl ScanKernel {
             let e = b - a;
             let area = a.perp_dot(b);
             if area == 0.0 {
-                return; // seen edge-on: no beam crosses it except through an endpoint
+                // On a line through the sensor. A sensor on the wall itself
+                // reads 0 on every beam; otherwise only the beam along the
+                // line meets it, at the nearer endpoint (as parry2d reports).
+                if e.length_squared() == 0.0 {
+                    return;
+                }
+                if a.dot(b) <= 0.0 {
+                    out.fill(0.0);
+                    return;
+                }
+                let near = if a.length_squared() <= b.length_squared() {
+                    a
+                } else {
+                    b
+                };
+                let dist = near.length();
+                {
+                    let d = near;
+                    let mut rel = fast_atan2(d.y, d.x) - base;
+                    while rel < 0.0 {
+                        rel += TAU;
+                    }
+                    let margin = FAST_ATAN2_MAX_ERROR + 1e-9;
+                    for shift in [0.0, -TAU] {
+                        let (lo, hi) = (rel + shift - margin, rel + shift + margin);
+                        let (j0, j1) = if n == 1 || inc == 0.0 {
+                            if lo <= 0.0 && hi >= 0.0 {
+                                (0, 0)
+                            } else {
+                                continue;
+                            }
+                        } else {
+                            if hi < 0.0 {
+                                continue;
+                            }
+                            (
+                                ceil_non_negative(lo / inc),
+                                ((hi / inc) as usize).min(n - 1),
+                            )
+                        };
+                        for j in j0..=j1 {
+                            let dir = dirs[j];
+                            if dir.perp_dot(d).abs() <= 1e-12 * d.length()
+                                && dir.dot(d) > 0.0
+                                && dist < out[j]
+                            {
+                                out[j] = dist;
+                            }
+                        }
+                    }
+                }
+                return;
             }
             // Skip segments entirely beyond range.
             let t = (-a.dot(e) / e.length_squared()).clamp(0.0, 1.0);
@@ -224,6 +275,52 @@ mod tests {
         }
         assert!(worst < FAST_ATAN2_MAX_ERROR / 5.0, "worst error {worst}");
         assert_eq!(fast_atan2(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn walls_seen_edge_on_match_parry() {
+        // Segments on lines through the sensor, in front of, behind and through it.
+        let segs = polyline_segments(&[[2.0, 0.0], [3.0, 0.0]], false)
+            .into_iter()
+            .chain(polyline_segments(&[[0.0, -1.5], [0.0, -4.0]], false))
+            .chain(polyline_segments(&[[-1.0, -1.0], [-2.0, -2.0]], false))
+            .collect();
+        let world = World::new(segs, vec![], None);
+        let fan = Fan {
+            angle_min_rad: -PI,
+            increment_rad: TAU / 360.0,
+            beams: 360,
+        };
+        let mut kernel = ScanKernel::new(fan);
+        let mut out = vec![0.0; 360];
+        kernel.scan(&world, Vector::ZERO, 0.0, 10.0, &mut out);
+        for (i, got) in out.iter().enumerate() {
+            let a = fan.angle_min_rad + fan.increment_rad * i as f64;
+            let want = world.cast_ray(Vector::ZERO, Vector::new(a.cos(), a.sin()), 10.0);
+            assert!(
+                (got - want).abs() < 1e-9,
+                "beam {i} ({:.1}°): sweep {got} vs parry {want}",
+                a.to_degrees()
+            );
+        }
+        assert_eq!(out[180], 2.0, "straight ahead along the first wall");
+        assert_eq!(out[90], 1.5, "straight down along the second wall");
+        assert!(
+            (out[45] - 2f64.sqrt()).abs() < 1e-12,
+            "down-left along the third wall"
+        );
+        // A sensor sitting on a wall reads 0 everywhere.
+        let on_wall = World::new(
+            polyline_segments(&[[-1.0, -1.0], [1.0, 1.0]], false),
+            vec![],
+            None,
+        );
+        kernel.scan(&on_wall, Vector::ZERO, 0.3, 10.0, &mut out);
+        assert!(out.iter().all(|&r| r == 0.0));
+        assert_eq!(
+            on_wall.cast_ray(Vector::ZERO, Vector::new(0.0, 1.0), 10.0),
+            0.0
+        );
     }
 
     #[test]

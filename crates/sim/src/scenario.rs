@@ -138,8 +138,9 @@ pub struct BumpSection {
     pub contact_margin_m: f64,
 }
 
+/// A bumper all round by default.
 fn default_bump_arc() -> f64 {
-    std::f64::consts::PI
+    std::f64::consts::TAU
 }
 
 fn default_contact_margin() -> f64 {

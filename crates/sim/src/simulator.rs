@@ -16,10 +16,21 @@ use crate::{Scenario, Vector};
 const CONTACT_BISECTIONS: u32 = 30;
 
 /// Random streams, one per noise source so that adding a sensor does not
-/// change the noise of the others.
+/// change the noise of the others. Range sensors use a stream named after
+/// the sensor, so their order in the file does not matter either.
 const STREAM_SLIP: u64 = 1;
 const STREAM_TRACKER: u64 = 2;
-const STREAM_RANGE_BASE: u64 = 16;
+
+/// FNV-1a of the sensor name, with the top bit set to stay clear of the
+/// fixed streams above.
+fn named_stream(name: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in name.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h | (1 << 63)
+}
 
 /// One step's outputs, reused from step to step.
 #[derive(Debug, Clone)]
@@ -96,8 +107,7 @@ impl Simulator {
         let ranges = scenario
             .range_sensors
             .iter()
-            .enumerate()
-            .map(|(i, s)| {
+            .map(|s| {
                 let (angle_min_rad, increment_rad) = s.info.angle_min_and_increment();
                 let state = RangeState {
                     kernel: (s.info.beams > 1).then(|| {
@@ -107,7 +117,7 @@ impl Simulator {
                             beams: s.info.beams as usize,
                         })
                     }),
-                    rng: stream(scenario.seed, STREAM_RANGE_BASE + i as u64),
+                    rng: stream(scenario.seed, named_stream(&s.info.name)),
                     next_ns: 0,
                     offset,
                 };

@@ -97,3 +97,40 @@ fn unknown_side_sensor_and_bad_rates() {
     );
     assert!(error_of(&text).contains("field `encoders.rate_hz` must be a finite number > 0"));
 }
+
+#[test]
+fn steps_that_could_jump_a_wall_and_unseeable_contact() {
+    let err = error_of(&base().replace("dt_s = 0.01", "dt_s = 1.0"));
+    assert!(err.contains("field `simulation.dt_s` is too long"), "{err}");
+    let err = error_of(&base().replace("[encoders]", "[bump]\ncontact_margin_m = 0.0\n[encoders]"));
+    assert!(
+        err.contains("field `bump.contact_margin_m` must be a finite number > 0"),
+        "{err}"
+    );
+    let text = base().replace(
+        "segments = [{ duration_s = 1.0,",
+        "segments = [{ duration_s = 1e-10,",
+    );
+    let err = error_of(&text);
+    assert!(
+        err.contains("field `controller.segments[0].duration_s` must be at least one time step"),
+        "{err}"
+    );
+}
+
+#[test]
+fn duration_overrides_are_checked_like_the_file() {
+    let mut sc = common::parse(&base()).unwrap();
+    assert!(
+        sc.set_duration_s(-1.0)
+            .unwrap_err()
+            .contains("must be a finite number > 0")
+    );
+    assert!(
+        sc.set_duration_s(1e12)
+            .unwrap_err()
+            .contains("need 1 to 2e9")
+    );
+    sc.set_duration_s(2.5).unwrap();
+    assert_eq!(sc.steps, 250);
+}

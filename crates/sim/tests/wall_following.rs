@@ -14,7 +14,6 @@ fn keeps_its_set_distance_and_backs_up_after_bumps() {
         panic!("wall_following.toml uses the wall follower");
     };
     let max_range = sc.range_sensors[sensor].info.max_range_m;
-    let dt_ns = sc.dt_ns;
     let mut sim = Simulator::new(sc);
     let mut out = StepOutput::new(sim.beams());
 
@@ -63,5 +62,4 @@ fn keeps_its_set_distance_and_backs_up_after_bumps() {
         episodes >= 2,
         "{episodes} bump-and-back-up episodes, the paper has at least two"
     );
-    let _ = dt_ns;
 }

@@ -19,11 +19,13 @@ pub enum Command {
     ///
     /// Writes log.csv, log.meta.json, log.mcap, ground_truth.tum,
     /// summary.json and figures (path, wheel_speeds, side_ir as SVG and PNG)
-    /// into DIR. Files are staged and moved into DIR only when all are written.
+    /// into DIR. Files are staged beside DIR and moved in only when all are
+    /// written; a failed move puts back the previous files. Files in DIR that
+    /// twindrive did not write are never replaced.
     Simulate {
         /// Scenario TOML file.
         scenario: PathBuf,
-        /// Output directory (created if missing; other files in it are kept).
+        /// Output directory (created if missing; files twindrive did not write are kept).
         #[arg(long)]
         out: PathBuf,
         /// Override the scenario's random seed.

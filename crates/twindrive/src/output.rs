@@ -1,28 +1,42 @@
-//! Output directories: files are written into a hidden staging directory
-//! next to the destination and moved in only when everything succeeded, so
-//! a failure leaves no partial output, and files already in the destination
-//! that we do not produce are kept.
+//! Output directories. Files are written into a hidden staging directory
+//! next to the destination and moved in only when every one was written:
+//! a failure leaves no partial output and no new directories. Into an
+//! existing directory the files move one by one, and a failed move puts back
+//! what was there. Files twindrive wrote there last time (listed in
+//! `.twindrive-files`) and does not write now are removed; anything else in
+//! the directory is left alone.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use anyhow::{Context, bail};
+
+/// Lists the files twindrive wrote into a directory.
+const MANIFEST: &str = ".twindrive-files";
 
 pub struct Staging {
     dest: PathBuf,
-    dir: tempfile::TempDir,
+    dir: Option<tempfile::TempDir>,
+    /// The outermost directory this staging created, removed again if the
+    /// output is never committed.
+    created: Option<PathBuf>,
 }
 
 impl Staging {
     pub fn new(dest: &Path) -> anyhow::Result<Self> {
+        if dest.exists() && !dest.is_dir() {
+            bail!("{} exists and is not a directory", dest.display());
+        }
         let parent = match dest.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
-        if dest.exists() && !dest.is_dir() {
-            anyhow::bail!("{} exists and is not a directory", dest.display());
-        }
+        let created = parent
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+            .last()
+            .map(Path::to_path_buf);
         std::fs::create_dir_all(&parent)
             .with_context(|| format!("creating {}", parent.display()))?;
         let dir = tempfile::Builder::new()
@@ -31,16 +45,17 @@ impl Staging {
             .with_context(|| format!("creating a staging directory in {}", parent.display()))?;
         Ok(Self {
             dest: dest.to_path_buf(),
-            dir,
+            dir: Some(dir),
+            created,
         })
     }
 
     pub fn dir(&self) -> &Path {
-        self.dir.path()
+        self.dir.as_ref().expect("present until commit").path()
     }
 
     pub fn path(&self, name: &str) -> PathBuf {
-        self.dir.path().join(name)
+        self.dir().join(name)
     }
 
     /// Creates `name` in the staging directory and fills it with `write`.
@@ -57,26 +72,201 @@ impl Staging {
         Ok(())
     }
 
-    /// Moves everything into the destination. A missing destination is
-    /// created by renaming the whole staging directory.
-    pub fn commit(self) -> anyhow::Result<()> {
+    /// Moves everything into the destination.
+    pub fn commit(mut self) -> anyhow::Result<()> {
+        let staged = self.dir().to_path_buf();
+        let mut names: Vec<String> = std::fs::read_dir(&staged)?
+            .map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned()))
+            .collect::<Result<_, _>>()?;
+        names.sort();
+        std::fs::write(staged.join(MANIFEST), names.join("\n") + "\n")
+            .context("writing the file list")?;
+
         if !self.dest.exists() {
-            let staged = self.dir.keep();
             std::fs::rename(&staged, &self.dest)
                 .with_context(|| format!("moving results into {}", self.dest.display()))?;
+            // Renamed away: nothing left for the TempDir to delete.
+            let _ = self.dir.take().map(tempfile::TempDir::keep);
+            self.created = None;
             return Ok(());
         }
-        for entry in std::fs::read_dir(self.dir.path())? {
-            let entry = entry?;
-            let target = self.dest.join(entry.file_name());
-            std::fs::rename(entry.path(), &target).with_context(|| {
-                format!(
-                    "moving {} into {}",
-                    entry.file_name().to_string_lossy(),
-                    self.dest.display()
-                )
-            })?;
+
+        let previous: Vec<String> = std::fs::read_to_string(self.dest.join(MANIFEST))
+            .map(|t| {
+                t.lines()
+                    .filter(|l| !l.is_empty())
+                    .map(str::to_owned)
+                    .collect()
+            })
+            .unwrap_or_default();
+        // Never overwrite what twindrive did not write.
+        for name in &names {
+            if self.dest.join(name).exists() && !previous.contains(name) {
+                bail!(
+                    "{} already exists and was not written by twindrive; move it away or choose another output directory",
+                    self.dest.join(name).display()
+                );
+            }
+        }
+        let names_with_manifest: Vec<&str> =
+            names.iter().map(String::as_str).chain([MANIFEST]).collect();
+        move_all(&names_with_manifest, &staged, &self.dest, |from, to| {
+            std::fs::rename(from, to)
+        })?;
+        for stale in previous
+            .iter()
+            .filter(|p| !names.contains(p) && p.as_str() != MANIFEST)
+        {
+            // Only plain file names from our own list.
+            if !stale.contains(['/', '\\']) {
+                let _ = std::fs::remove_file(self.dest.join(stale));
+            }
         }
         Ok(())
+    }
+}
+
+/// Moves `names` from `staged` into `dest`, keeping previous versions in
+/// `staged/.previous` until all moves succeeded; on a failure every move is
+/// undone.
+fn move_all(
+    names: &[&str],
+    staged: &Path,
+    dest: &Path,
+    mut rename: impl FnMut(&Path, &Path) -> std::io::Result<()>,
+) -> anyhow::Result<()> {
+    let backup = staged.join(".previous");
+    std::fs::create_dir(&backup)?;
+    let mut moved: Vec<(&str, bool)> = Vec::new(); // (name, had a previous version)
+    for &name in names {
+        let target = dest.join(name);
+        let had = target.exists();
+        if had && let Err(e) = rename(&target, &backup.join(name)) {
+            undo(&moved, dest, &backup);
+            return Err(anyhow::Error::new(e).context(format!("moving the previous {name} aside")));
+        }
+        if let Err(e) = rename(&staged.join(name), &target) {
+            if had {
+                let _ = std::fs::rename(backup.join(name), &target);
+            }
+            undo(&moved, dest, &backup);
+            return Err(
+                anyhow::Error::new(e).context(format!("moving {name} into {}", dest.display()))
+            );
+        }
+        moved.push((name, had));
+    }
+    Ok(())
+}
+
+fn undo(moved: &[(&str, bool)], dest: &Path, backup: &Path) {
+    for (name, had) in moved.iter().rev() {
+        let target = dest.join(name);
+        let _ = std::fs::remove_file(&target);
+        if *had {
+            let _ = std::fs::rename(backup.join(name), &target);
+        }
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        // Delete the staging directory first, then any directories we created.
+        drop(self.dir.take());
+        if let Some(created) = self.created.take() {
+            let parent = match self.dest.parent() {
+                Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                _ => return,
+            };
+            for dir in parent.ancestors() {
+                if std::fs::remove_dir(dir).is_err() || dir == created {
+                    break;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn uncommitted_output_leaves_nothing() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dest = tmp.path().join("a/b/out");
+        let s = Staging::new(&dest).unwrap();
+        s.write_with("x.txt", |w| Ok(w.write_all(b"x")?)).unwrap();
+        drop(s);
+        assert!(names(tmp.path()).is_empty(), "{:?}", names(tmp.path()));
+    }
+
+    #[test]
+    fn replaces_own_files_keeps_others_removes_stale() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dest = tmp.path().join("out");
+        let s = Staging::new(&dest).unwrap();
+        s.write_with("a.txt", |w| Ok(w.write_all(b"1")?)).unwrap();
+        s.write_with("old.txt", |w| Ok(w.write_all(b"1")?)).unwrap();
+        s.commit().unwrap();
+        std::fs::write(dest.join("mine.txt"), "user").unwrap();
+
+        let s = Staging::new(&dest).unwrap();
+        s.write_with("a.txt", |w| Ok(w.write_all(b"2")?)).unwrap();
+        s.commit().unwrap();
+        assert_eq!(names(&dest), vec![".twindrive-files", "a.txt", "mine.txt"]);
+        assert_eq!(std::fs::read_to_string(dest.join("a.txt")).unwrap(), "2");
+        assert_eq!(names(tmp.path()), vec!["out"]);
+    }
+
+    #[test]
+    fn a_failed_move_restores_the_previous_files() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (staged, dest) = (tmp.path().join("staged"), tmp.path().join("dest"));
+        std::fs::create_dir_all(&staged).unwrap();
+        std::fs::create_dir_all(&dest).unwrap();
+        for n in ["a", "b", "c"] {
+            std::fs::write(staged.join(n), "new").unwrap();
+        }
+        std::fs::write(dest.join("a"), "old").unwrap();
+        std::fs::write(dest.join("b"), "old").unwrap();
+        let err = move_all(&["a", "b", "c"], &staged, &dest, |from, to| {
+            if to.ends_with("c") {
+                Err(std::io::Error::other("disk full"))
+            } else {
+                std::fs::rename(from, to)
+            }
+        })
+        .unwrap_err();
+        assert!(format!("{err:#}").contains("moving c into"), "{err:#}");
+        assert_eq!(names(&dest), vec!["a", "b"]);
+        assert_eq!(std::fs::read_to_string(dest.join("a")).unwrap(), "old");
+        assert_eq!(std::fs::read_to_string(dest.join("b")).unwrap(), "old");
+    }
+
+    #[test]
+    fn files_not_written_by_twindrive_are_never_replaced() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dest = tmp.path().join("out");
+        std::fs::create_dir(&dest).unwrap();
+        std::fs::write(dest.join("a.txt"), "user").unwrap();
+        let s = Staging::new(&dest).unwrap();
+        s.write_with("a.txt", |w| Ok(w.write_all(b"new")?)).unwrap();
+        let err = s.commit().unwrap_err().to_string();
+        assert!(
+            err.contains("a.txt already exists and was not written by twindrive"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read_to_string(dest.join("a.txt")).unwrap(), "user");
+        assert_eq!(names(tmp.path()), vec!["out"]);
     }
 }

@@ -1,3 +1,4 @@
+use std::io::Write;
 use std::path::Path;
 
 use anyhow::Context;
@@ -10,10 +11,11 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
         .context("the built-in wall-following scenario")?;
     let dir = out.join("wall_following");
     let summary = simulate_into(scenario, &dir)?;
-    print_summary(&summary, &dir);
-    println!(
+    print_summary(&summary, &dir)?;
+    writeln!(
+        std::io::stdout().lock(),
         "open {}/path.png for the driven path and bump points",
         dir.display()
-    );
+    )?;
     Ok(())
 }

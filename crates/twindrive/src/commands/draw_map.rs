@@ -1,3 +1,4 @@
+use std::io::Write;
 use std::path::Path;
 
 use anyhow::Context;
@@ -10,6 +11,10 @@ pub fn run(dir: &Path) -> anyhow::Result<()> {
     std::fs::write(staging.path("office.pgm"), pgm).context("writing office.pgm")?;
     std::fs::write(staging.path("office.yaml"), yaml).context("writing office.yaml")?;
     staging.commit()?;
-    println!("wrote {0}/office.pgm and {0}/office.yaml", dir.display());
+    writeln!(
+        std::io::stdout().lock(),
+        "wrote {0}/office.pgm and {0}/office.yaml",
+        dir.display()
+    )?;
     Ok(())
 }

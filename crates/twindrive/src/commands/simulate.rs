@@ -1,4 +1,6 @@
+use std::io::Write;
 use std::path::Path;
+use std::time::Instant;
 
 use anyhow::{Context, bail};
 use twindrive_sim::{MissionSummary, Scenario, Simulator};
@@ -17,23 +19,37 @@ pub fn run(
         scenario.seed = seed;
     }
     if let Some(d) = duration_s {
-        if !(d.is_finite() && d > 0.0) {
-            bail!("--duration-s must be a finite number > 0, got {d}");
-        }
-        scenario.steps = ((d / scenario.dt_s()).round() as u64).max(1);
+        scenario
+            .set_duration_s(d)
+            .map_err(|m| anyhow::anyhow!("--duration-s {m}"))?;
     }
     let summary = simulate_into(scenario, out)?;
-    print_summary(&summary, out);
-    Ok(())
+    print_summary(&summary, out)
 }
+
+/// In-memory logs larger than this are refused up front.
+const LOG_BUDGET_BYTES: u64 = 4 << 30;
 
 /// Simulates `scenario` and writes every artefact into `out`, atomically per file.
 pub fn simulate_into(scenario: Scenario, out: &Path) -> anyhow::Result<MissionSummary> {
+    let needed = scenario.log_size_bytes();
+    if needed > LOG_BUDGET_BYTES {
+        bail!(
+            "{}: {} steps would need about {:.1} GiB for the log (limit {} GiB); shorten the run, lengthen dt_s or lower the range sensor rates",
+            scenario.name,
+            scenario.steps,
+            needed as f64 / (1u64 << 30) as f64,
+            LOG_BUDGET_BYTES >> 30
+        );
+    }
     let staging = Staging::new(out)?;
     let world = scenario.world.clone();
+    tracing::info!(scenario = %scenario.name, steps = scenario.steps, "simulating");
+    let started = Instant::now();
     let bar = progress::bar(scenario.steps, &format!("simulating {}", scenario.name));
     let log = Simulator::new(scenario).run(|done, _| bar.set_position(done));
     bar.finish_and_clear();
+    tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "simulated");
 
     let summary = MissionSummary::new(&log, &world);
     staging.write_with("log.csv", |w| {
@@ -54,16 +70,21 @@ pub fn simulate_into(scenario: Scenario, out: &Path) -> anyhow::Result<MissionSu
     })?;
     figures::mission_figures(&log, &world, staging.dir()).context("drawing figures")?;
     staging.commit()?;
+    tracing::info!(dir = %out.display(), elapsed_s = started.elapsed().as_secs_f64(), "wrote results");
     Ok(summary)
 }
 
-pub fn print_summary(s: &MissionSummary, out: &Path) {
-    println!(
+pub fn print_summary(s: &MissionSummary, out: &Path) -> anyhow::Result<()> {
+    let mut stdout = std::io::stdout().lock();
+    writeln!(
+        stdout,
         "{}: {:.1} s, {:.2} m driven, {} bump episode(s), min clearance {:.3} m",
         s.scenario, s.duration_s, s.distance_m, s.bumps, s.min_clearance_m
-    );
-    println!(
+    )?;
+    writeln!(
+        stdout,
         "results in {}/ (log.csv, log.mcap, ground_truth.tum, summary.json, figures)",
         out.display()
-    );
+    )?;
+    Ok(())
 }
