@@ -25,7 +25,25 @@ fn encoder_rate(wheels: &[WheelSample], params: [f64; 3], t0: f64, dt: f64, n: u
     let samples: Vec<f64> = (0..=n)
         .map(|k| heading(t0 + k as f64 * dt).unwrap_or(f64::NAN))
         .collect();
-    samples.windows(2).map(|w| (w[1] - w[0]) / dt).collect()
+    central_rate(&samples, dt)
+}
+
+/// Half-width of the symmetric difference that turns angles into rates: long
+/// enough to average out reference noise, symmetric so it shifts nothing.
+const RATE_HALF_WINDOW_S: f64 = 0.1;
+
+/// `(v[k + w] − v[k − w]) / (2 w dt)`, NaN where the window leaves the data.
+fn central_rate(samples: &[f64], dt: f64) -> Vec<f64> {
+    let w = ((RATE_HALF_WINDOW_S / dt).round() as usize).max(1);
+    (0..samples.len())
+        .map(|k| {
+            if k < w || k + w >= samples.len() {
+                f64::NAN
+            } else {
+                (samples[k + w] - samples[k - w]) / (2.0 * w as f64 * dt)
+            }
+        })
+        .collect()
 }
 
 /// Heading-rate (or, without headings, speed) signal of the poses.
@@ -62,7 +80,7 @@ fn pose_rate(poses: &[PoseSample], t0: f64, dt: f64, n: usize, use_heading: bool
         a.1 + (t - a.0) / (b.0 - a.0) * (b.1 - a.1)
     };
     let samples: Vec<f64> = (0..=n).map(|k| at(t0 + k as f64 * dt)).collect();
-    samples.windows(2).map(|w| (w[1] - w[0]) / dt).collect()
+    central_rate(&samples, dt)
 }
 
 fn value_last(v: &[(f64, f64, f64)], default: f64) -> f64 {

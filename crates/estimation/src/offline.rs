@@ -57,30 +57,12 @@ pub fn run_filter(
         init.covariance[(2, 2)] = 0.3f64.powi(2);
     }
     let mut cal = OnlineCalibrator::new(init, first.t_s, config, keep_history);
-    // Wheels up to the first pose anchor the angles; the state starts there.
+    // Feed both streams in time order, from the first pose on (earlier
+    // encoder samples only anchor the wheel angles).
     let (mut i, mut j) = (0, 1);
-    while i < wheels.len() && wheels[i].t_s <= first.t_s {
-        i += 1;
-    }
-    if i > 0 {
-        // Anchor at the first pose time by interpolating the bracketing samples.
-        let a = &wheels[i - 1];
-        let anchor = match wheels.get(i) {
-            Some(b) if a.t_s < first.t_s => {
-                let f = (first.t_s - a.t_s) / (b.t_s - a.t_s);
-                WheelSample {
-                    t_s: first.t_s,
-                    left_rad: a.left_rad + f * (b.left_rad - a.left_rad),
-                    right_rad: a.right_rad + f * (b.right_rad - a.right_rad),
-                }
-            }
-            _ => *a,
-        };
-        cal.push_wheels(anchor)?;
-    }
-    let total = wheels.len() - i + poses.len() - 1;
+    let total = wheels.len() + poses.len() - 1;
     let mut done = 0;
-    while i < wheels.len() || j < poses.len() {
+    while j < poses.len() || i < wheels.len() {
         let take_pose = match (wheels.get(i), poses.get(j)) {
             (Some(w), Some(p)) => p.t_s <= w.t_s,
             (None, Some(_)) => true,

@@ -101,6 +101,9 @@ pub struct OnlineCalibrator {
     ekf: AugmentedEkf,
     t_s: f64,
     last_wheels: Option<WheelSample>,
+    /// The latest encoder sample before the start time, to interpolate the
+    /// wheel angles at the start.
+    before_start: Option<WheelSample>,
     pending: Vec<PoseSample>,
     last_pose_t_s: f64,
     history: Option<FilterHistory>,
@@ -130,6 +133,7 @@ impl OnlineCalibrator {
             ekf: AugmentedEkf::new(initial, config.noise, config.gate),
             t_s: t0_s,
             last_wheels: None,
+            before_start: None,
             pending: Vec::new(),
             last_pose_t_s: f64::NEG_INFINITY,
             history,
@@ -156,14 +160,33 @@ impl OnlineCalibrator {
     }
 
     /// Fuses an encoder sample; any poses stamped up to its time are fused
-    /// at their own times first.
+    /// at their own times first. Samples before the start time only serve
+    /// to interpolate the wheel angles at the start.
     pub fn push_wheels(&mut self, w: WheelSample) -> Result<(), CalibrationError> {
         let Some(prev) = self.last_wheels else {
-            // The first sample only anchors the wheel angles.
-            self.last_wheels = Some(w);
-            self.t_s = self.t_s.max(w.t_s);
-            self.pending.retain(|p| p.t_s > w.t_s);
-            return Ok(());
+            if w.t_s < self.t_s {
+                self.before_start = Some(w);
+                return Ok(());
+            }
+            let anchor = match self.before_start.take() {
+                Some(b) if w.t_s > self.t_s => {
+                    let f = (self.t_s - b.t_s) / (w.t_s - b.t_s);
+                    WheelSample {
+                        t_s: self.t_s,
+                        left_rad: b.left_rad + f * (w.left_rad - b.left_rad),
+                        right_rad: b.right_rad + f * (w.right_rad - b.right_rad),
+                    }
+                }
+                // No sample before the start: the state is taken to hold
+                // at this first sample.
+                _ => {
+                    self.t_s = w.t_s;
+                    w
+                }
+            };
+            self.last_wheels = Some(anchor);
+            self.pending.retain(|p| p.t_s >= anchor.t_s);
+            return if anchor.t_s < w.t_s { self.push_wheels(w) } else { Ok(()) };
         };
         if w.t_s <= prev.t_s {
             return Err(CalibrationError::OutOfOrder {
