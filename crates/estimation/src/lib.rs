@@ -17,6 +17,7 @@ pub mod clock;
 pub mod dead_reckoning;
 mod ekf;
 pub mod ellipse_fit;
+pub mod evaluation;
 mod offline;
 mod online;
 mod smoother;

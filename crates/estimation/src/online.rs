@@ -186,7 +186,11 @@ impl OnlineCalibrator {
             };
             self.last_wheels = Some(anchor);
             self.pending.retain(|p| p.t_s >= anchor.t_s);
-            return if anchor.t_s < w.t_s { self.push_wheels(w) } else { Ok(()) };
+            return if anchor.t_s < w.t_s {
+                self.push_wheels(w)
+            } else {
+                Ok(())
+            };
         };
         if w.t_s <= prev.t_s {
             return Err(CalibrationError::OutOfOrder {
