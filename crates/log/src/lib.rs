@@ -5,6 +5,7 @@
 //! Sensors that sample slower than the simulation leave their fields empty
 //! (`None`, or NaN for range readings) on the steps they did not sample.
 
+pub mod calib_csv;
 mod csv_io;
 mod error;
 mod mcap_io;

@@ -17,6 +17,8 @@ const MANIFEST: &str = ".twindrive-files";
 
 pub struct Staging {
     dest: PathBuf,
+    /// Which command wrote the files; only its own stale files are removed.
+    producer: String,
     dir: Option<tempfile::TempDir>,
     /// The outermost directory this staging created, removed again if the
     /// output is never committed.
@@ -24,7 +26,7 @@ pub struct Staging {
 }
 
 impl Staging {
-    pub fn new(dest: &Path) -> anyhow::Result<Self> {
+    pub fn new(dest: &Path, producer: &str) -> anyhow::Result<Self> {
         if dest.exists() && !dest.is_dir() {
             bail!("{} exists and is not a directory", dest.display());
         }
@@ -45,6 +47,7 @@ impl Staging {
             .with_context(|| format!("creating a staging directory in {}", parent.display()))?;
         Ok(Self {
             dest: dest.to_path_buf(),
+            producer: producer.to_string(),
             dir: Some(dir),
             created,
         })
@@ -79,8 +82,22 @@ impl Staging {
             .map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned()))
             .collect::<Result<_, _>>()?;
         names.sort();
-        std::fs::write(staged.join(MANIFEST), names.join("\n") + "\n")
-            .context("writing the file list")?;
+        // The list: `producer<TAB>file` lines, ours replacing our old ones.
+        let previous: Vec<(String, String)> = std::fs::read_to_string(self.dest.join(MANIFEST))
+            .map(|t| {
+                t.lines()
+                    .filter_map(|l| l.split_once('\t'))
+                    .map(|(p, n)| (p.to_owned(), n.to_owned()))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let mut manifest: Vec<String> = previous
+            .iter()
+            .filter(|(p, n)| *p != self.producer && !names.contains(n))
+            .map(|(p, n)| format!("{p}\t{n}"))
+            .collect();
+        manifest.extend(names.iter().map(|n| format!("{}\t{n}", self.producer)));
+        std::fs::write(staged.join(MANIFEST), manifest.join("\n") + "\n").context("writing the file list")?;
 
         if !self.dest.exists() {
             std::fs::rename(&staged, &self.dest)
@@ -91,34 +108,20 @@ impl Staging {
             return Ok(());
         }
 
-        let previous: Vec<String> = std::fs::read_to_string(self.dest.join(MANIFEST))
-            .map(|t| {
-                t.lines()
-                    .filter(|l| !l.is_empty())
-                    .map(str::to_owned)
-                    .collect()
-            })
-            .unwrap_or_default();
         // Never overwrite what twindrive did not write.
         for name in &names {
-            if self.dest.join(name).exists() && !previous.contains(name) {
+            if self.dest.join(name).exists() && !previous.iter().any(|(_, n)| n == name) {
                 bail!(
                     "{} already exists and was not written by twindrive; move it away or choose another output directory",
                     self.dest.join(name).display()
                 );
             }
         }
-        let names_with_manifest: Vec<&str> =
-            names.iter().map(String::as_str).chain([MANIFEST]).collect();
-        move_all(&names_with_manifest, &staged, &self.dest, |from, to| {
-            std::fs::rename(from, to)
-        })?;
-        for stale in previous
-            .iter()
-            .filter(|p| !names.contains(p) && p.as_str() != MANIFEST)
-        {
-            // Only plain file names from our own list.
-            if !stale.contains(['/', '\\']) {
+        let names_with_manifest: Vec<&str> = names.iter().map(String::as_str).chain([MANIFEST]).collect();
+        move_all(&names_with_manifest, &staged, &self.dest, |from, to| std::fs::rename(from, to))?;
+        // This command's files from its last run that it did not write now.
+        for (_, stale) in previous.iter().filter(|(p, n)| *p == self.producer && !names.contains(n)) {
+            if !stale.contains(['/', '\\']) && stale != MANIFEST {
                 let _ = std::fs::remove_file(self.dest.join(stale));
             }
         }
@@ -204,7 +207,7 @@ mod tests {
     fn uncommitted_output_leaves_nothing() {
         let tmp = tempfile::tempdir().unwrap();
         let dest = tmp.path().join("a/b/out");
-        let s = Staging::new(&dest).unwrap();
+        let s = Staging::new(&dest, "test").unwrap();
         s.write_with("x.txt", |w| Ok(w.write_all(b"x")?)).unwrap();
         drop(s);
         assert!(names(tmp.path()).is_empty(), "{:?}", names(tmp.path()));
@@ -214,17 +217,25 @@ mod tests {
     fn replaces_own_files_keeps_others_removes_stale() {
         let tmp = tempfile::tempdir().unwrap();
         let dest = tmp.path().join("out");
-        let s = Staging::new(&dest).unwrap();
+        let s = Staging::new(&dest, "test").unwrap();
         s.write_with("a.txt", |w| Ok(w.write_all(b"1")?)).unwrap();
         s.write_with("old.txt", |w| Ok(w.write_all(b"1")?)).unwrap();
         s.commit().unwrap();
         std::fs::write(dest.join("mine.txt"), "user").unwrap();
 
-        let s = Staging::new(&dest).unwrap();
+        let s = Staging::new(&dest, "test").unwrap();
         s.write_with("a.txt", |w| Ok(w.write_all(b"2")?)).unwrap();
         s.commit().unwrap();
         assert_eq!(names(&dest), vec![".twindrive-files", "a.txt", "mine.txt"]);
-        assert_eq!(std::fs::read_to_string(dest.join("a.txt")).unwrap(), "2");
+        // Another command's files in the same directory are left alone.
+        let s = Staging::new(&dest, "other").unwrap();
+        s.write_with("b.txt", |w| Ok(w.write_all(b"b")?)).unwrap();
+        s.commit().unwrap();
+        let s = Staging::new(&dest, "test").unwrap();
+        s.write_with("a.txt", |w| Ok(w.write_all(b"3")?)).unwrap();
+        s.commit().unwrap();
+        assert_eq!(names(&dest), vec![".twindrive-files", "a.txt", "b.txt", "mine.txt"]);
+        assert_eq!(std::fs::read_to_string(dest.join("a.txt")).unwrap(), "3");
         assert_eq!(names(tmp.path()), vec!["out"]);
     }
 
@@ -259,7 +270,7 @@ mod tests {
         let dest = tmp.path().join("out");
         std::fs::create_dir(&dest).unwrap();
         std::fs::write(dest.join("a.txt"), "user").unwrap();
-        let s = Staging::new(&dest).unwrap();
+        let s = Staging::new(&dest, "test").unwrap();
         s.write_with("a.txt", |w| Ok(w.write_all(b"new")?)).unwrap();
         let err = s.commit().unwrap_err().to_string();
         assert!(

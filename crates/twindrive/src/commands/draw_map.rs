@@ -7,7 +7,7 @@ use crate::output::Staging;
 
 pub fn run(dir: &Path) -> anyhow::Result<()> {
     let (pgm, yaml) = twindrive_sim::map::draw_office_map();
-    let staging = Staging::new(dir)?;
+    let staging = Staging::new(dir, "draw-map")?;
     std::fs::write(staging.path("office.pgm"), pgm).context("writing office.pgm")?;
     std::fs::write(staging.path("office.yaml"), yaml).context("writing office.yaml")?;
     staging.commit()?;

@@ -42,7 +42,7 @@ pub fn simulate_into(scenario: Scenario, out: &Path) -> anyhow::Result<MissionSu
             LOG_BUDGET_BYTES >> 30
         );
     }
-    let staging = Staging::new(out)?;
+    let staging = Staging::new(out, "simulate")?;
     let world = scenario.world.clone();
     tracing::info!(scenario = %scenario.name, steps = scenario.steps, "simulating");
     let started = Instant::now();
