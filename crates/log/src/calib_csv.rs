@@ -41,46 +41,81 @@ struct Table<'a> {
 
 impl Table<'_> {
     fn column(&self, name: &str, expected: &str) -> Result<usize, LogError> {
-        self.names.iter().position(|n| n == name).ok_or_else(|| LogError::Line {
-            path: self.path.into(),
-            line: 1,
-            message: format!("missing column `{name}`: expected a header {expected}, found `{}`", self.names.join(",")),
-        })
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| LogError::Line {
+                path: self.path.into(),
+                line: 1,
+                message: format!(
+                    "missing column `{name}`: expected a header {expected}, found `{}`",
+                    self.names.join(",")
+                ),
+            })
     }
 
     fn error(&self, line: u64, col: usize, message: String) -> LogError {
-        LogError::Field { path: self.path.into(), line, column: self.names[col].clone(), message }
+        LogError::Field {
+            path: self.path.into(),
+            line,
+            column: self.names[col].clone(),
+            message,
+        }
     }
 }
 
 fn field<'r>(record: &'r csv::ByteRecord, col: usize) -> &'r str {
-    std::str::from_utf8(record.get(col).unwrap_or(b"")).unwrap_or("\u{fffd}").trim()
+    std::str::from_utf8(record.get(col).unwrap_or(b""))
+        .unwrap_or("\u{fffd}")
+        .trim()
 }
 
 fn number(table: &Table, record: &csv::ByteRecord, line: u64, col: usize) -> Result<f64, LogError> {
     let text = field(record, col);
     match text.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(table.error(line, col, format!("expected a finite number, found `{text}`"))),
+        _ => Err(table.error(
+            line,
+            col,
+            format!("expected a finite number, found `{text}`"),
+        )),
     }
 }
 
-fn integer(table: &Table, record: &csv::ByteRecord, line: u64, col: usize) -> Result<f64, LogError> {
+fn integer(
+    table: &Table,
+    record: &csv::ByteRecord,
+    line: u64,
+    col: usize,
+) -> Result<f64, LogError> {
     let text = field(record, col);
     match text.parse::<i64>() {
         Ok(v) if v.unsigned_abs() < (1 << 53) => Ok(v as f64),
-        _ => Err(table.error(line, col, format!("expected an integer tick count, found `{text}`"))),
+        _ => Err(table.error(
+            line,
+            col,
+            format!("expected an integer tick count, found `{text}`"),
+        )),
     }
 }
 
 /// Opens a CSV and reads its header; errors for empty files.
-fn open<'a>(path: &'a Path, expected: &str) -> Result<(csv::Reader<std::fs::File>, Table<'a>), LogError> {
+fn open<'a>(
+    path: &'a Path,
+    expected: &str,
+) -> Result<(csv::Reader<std::fs::File>, Table<'a>), LogError> {
     let file = std::fs::File::open(path).map_err(|e| LogError::io(path, e))?;
     let meta = file.metadata().map_err(|e| LogError::io(path, e))?;
     if meta.len() == 0 {
-        return Err(LogError::format(path, format!("is empty: expected a header {expected} and data rows")));
+        return Err(LogError::format(
+            path,
+            format!("is empty: expected a header {expected} and data rows"),
+        ));
     }
-    let mut reader = csv::ReaderBuilder::new().trim(csv::Trim::All).flexible(false).from_reader(file);
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .flexible(false)
+        .from_reader(file);
     let names = reader
         .headers()
         .map_err(|e| LogError::format(path, format!("cannot read the header: {e}")))?
@@ -116,10 +151,20 @@ fn rows(
         let t = number(table, &record, line, t_col)?;
         if let Some(&prev) = times.last() {
             if t == prev {
-                return Err(table.error(line, t_col, format!("duplicate timestamp {t} (also on line {prev_line})")));
+                return Err(table.error(
+                    line,
+                    t_col,
+                    format!("duplicate timestamp {t} (also on line {prev_line})"),
+                ));
             }
             if t < prev {
-                return Err(table.error(line, t_col, format!("time {t} goes back from {prev} on line {prev_line}; times must increase")));
+                return Err(table.error(
+                    line,
+                    t_col,
+                    format!(
+                        "time {t} goes back from {prev} on line {prev_line}; times must increase"
+                    ),
+                ));
             }
         }
         row(&record, line)?;
@@ -127,7 +172,10 @@ fn rows(
         prev_line = line;
     }
     if times.is_empty() {
-        return Err(LogError::format(table.path, "has a header but no data rows"));
+        return Err(LogError::format(
+            table.path,
+            "has a header but no data rows",
+        ));
     }
     Ok(times)
 }
@@ -144,7 +192,10 @@ pub fn read_encoder_csv(path: &Path) -> Result<EncoderCsv, LogError> {
         return Err(LogError::Line {
             path: path.into(),
             line: 1,
-            message: format!("expected a header {EXPECTED}, found `{}`", table.names.join(",")),
+            message: format!(
+                "expected a header {EXPECTED}, found `{}`",
+                table.names.join(",")
+            ),
         });
     };
     let (l_name, r_name) = match columns {
@@ -152,7 +203,10 @@ pub fn read_encoder_csv(path: &Path) -> Result<EncoderCsv, LogError> {
         WheelColumns::RadPerSecond => ("left_rad_s", "right_rad_s"),
     };
     let t_col = table.column("t", EXPECTED)?;
-    let (l_col, r_col) = (table.column(l_name, EXPECTED)?, table.column(r_name, EXPECTED)?);
+    let (l_col, r_col) = (
+        table.column(l_name, EXPECTED)?,
+        table.column(r_name, EXPECTED)?,
+    );
     let (mut left, mut right) = (Vec::new(), Vec::new());
     let t_s = rows(&mut reader, &table, t_col, |rec, line| {
         let parse = match columns {
@@ -163,7 +217,12 @@ pub fn read_encoder_csv(path: &Path) -> Result<EncoderCsv, LogError> {
         right.push(parse(&table, rec, line, r_col)?);
         Ok(())
     })?;
-    Ok(EncoderCsv { columns, t_s, left, right })
+    Ok(EncoderCsv {
+        columns,
+        t_s,
+        left,
+        right,
+    })
 }
 
 /// Reads a pose reference.
@@ -171,15 +230,28 @@ pub fn read_pose_csv(path: &Path) -> Result<PoseCsv, LogError> {
     const EXPECTED: &str = "`t,x,y,theta`";
     let (mut reader, table) = open(path, EXPECTED)?;
     let t_col = table.column("t", EXPECTED)?;
-    let (x_col, y_col, th_col) = (table.column("x", EXPECTED)?, table.column("y", EXPECTED)?, table.column("theta", EXPECTED)?);
+    let (x_col, y_col, th_col) = (
+        table.column("x", EXPECTED)?,
+        table.column("y", EXPECTED)?,
+        table.column("theta", EXPECTED)?,
+    );
     let (mut x_m, mut y_m, mut theta_rad) = (Vec::new(), Vec::new(), Vec::new());
     let t_s = rows(&mut reader, &table, t_col, |rec, line| {
         x_m.push(number(&table, rec, line, x_col)?);
         y_m.push(number(&table, rec, line, y_col)?);
-        theta_rad.push(if field(rec, th_col).is_empty() { f64::NAN } else { number(&table, rec, line, th_col)? });
+        theta_rad.push(if field(rec, th_col).is_empty() {
+            f64::NAN
+        } else {
+            number(&table, rec, line, th_col)?
+        });
         Ok(())
     })?;
-    Ok(PoseCsv { t_s, x_m, y_m, theta_rad })
+    Ok(PoseCsv {
+        t_s,
+        x_m,
+        y_m,
+        theta_rad,
+    })
 }
 
 #[cfg(test)]
@@ -210,7 +282,10 @@ mod tests {
         assert_eq!(e.columns, WheelColumns::Ticks);
         assert_eq!((e.left[1], e.right[1]), (5.0, -7.0));
         let (_d, p) = write("t,left_rad_s,right_rad_s,extra\n1,0.5,0.25,x\n2,0.5,0.5,y\n");
-        assert_eq!(read_encoder_csv(&p).unwrap().columns, WheelColumns::RadPerSecond);
+        assert_eq!(
+            read_encoder_csv(&p).unwrap().columns,
+            WheelColumns::RadPerSecond
+        );
         let (_d, p) = write("t,x,y,theta\n0,1,2,\n0.5,1.5,2,0.1\n");
         let poses = read_pose_csv(&p).unwrap();
         assert!(poses.theta_rad[0].is_nan() && poses.theta_rad[1] == 0.1);
@@ -224,17 +299,34 @@ mod tests {
         let e = enc_err("t,left_ticks\n0,1\n");
         assert!(e.contains("line 1: missing column `right_ticks`"), "{e}");
         let e = enc_err("t,left_ticks,right_ticks\n0,0,0\n0.02,abc,1\n");
-        assert!(e.contains("in.csv, line 3, column `left_ticks`: expected an integer tick count, found `abc`"), "{e}");
+        assert!(
+            e.contains(
+                "in.csv, line 3, column `left_ticks`: expected an integer tick count, found `abc`"
+            ),
+            "{e}"
+        );
         let e = enc_err("t,left_rad_s,right_rad_s\n0,0,0\n0.02,NaN,1\n");
-        assert!(e.contains("line 3, column `left_rad_s`: expected a finite number, found `NaN`"), "{e}");
+        assert!(
+            e.contains("line 3, column `left_rad_s`: expected a finite number, found `NaN`"),
+            "{e}"
+        );
         let e = enc_err("t,left_ticks,right_ticks\n0,0,0\n0,1,1\n");
-        assert!(e.contains("line 3, column `t`: duplicate timestamp 0 (also on line 2)"), "{e}");
+        assert!(
+            e.contains("line 3, column `t`: duplicate timestamp 0 (also on line 2)"),
+            "{e}"
+        );
         let e = pose_err("t,x,y,theta\n1,0,0,0\n0.5,0,0,0\n");
-        assert!(e.contains("line 3, column `t`: time 0.5 goes back from 1 on line 2"), "{e}");
+        assert!(
+            e.contains("line 3, column `t`: time 0.5 goes back from 1 on line 2"),
+            "{e}"
+        );
         let e = pose_err("t,x,theta\n1,0,0\n");
         assert!(e.contains("missing column `y`"), "{e}");
         let e = pose_err("t,x,y,theta\n1,0,inf,0\n");
-        assert!(e.contains("column `y`: expected a finite number, found `inf`"), "{e}");
+        assert!(
+            e.contains("column `y`: expected a finite number, found `inf`"),
+            "{e}"
+        );
         let e = pose_err("t,x,y,theta\n1,0,0\n");
         assert!(e.contains("line 2"), "{e}");
     }

@@ -47,6 +47,16 @@ pub struct Markers<'a> {
     pub color: RGBColor,
 }
 
+/// A shaded band between two curves sampled at the same x values (for
+/// example an estimate ± 3σ).
+#[derive(Debug, Clone, Copy)]
+pub struct Band<'a> {
+    pub label: &'a str,
+    pub lower: &'a [(f64, f64)],
+    pub upper: &'a [(f64, f64)],
+    pub color: RGBColor,
+}
+
 /// A top-down view of walls, paths and markers, axes equal.
 #[derive(Debug, Clone, Copy)]
 pub struct WorldFigure<'a> {
@@ -64,6 +74,7 @@ pub struct TimeFigure<'a> {
     pub y_label: &'a str,
     pub series: &'a [Series<'a>],
     pub markers: &'a [Markers<'a>],
+    pub bands: &'a [Band<'a>],
 }
 
 fn register_fonts() {
@@ -149,6 +160,7 @@ impl WorldFigure<'_> {
             walls: self.walls,
             series: self.paths,
             markers: self.markers,
+            bands: &[],
             marker_radius: 5,
         };
         write_both(
@@ -167,7 +179,12 @@ impl TimeFigure<'_> {
             .series
             .iter()
             .flat_map(|s| s.points.iter())
-            .chain(self.markers.iter().flat_map(|m| m.points.iter()));
+            .chain(self.markers.iter().flat_map(|m| m.points.iter()))
+            .chain(
+                self.bands
+                    .iter()
+                    .flat_map(|b| b.lower.iter().chain(b.upper.iter())),
+            );
         let ((x0, x1), (y0, y1)) = bounds(all).ok_or_else(|| PlotError::Data {
             what: self.title.into(),
             message: "nothing to draw".into(),
@@ -182,6 +199,7 @@ impl TimeFigure<'_> {
             walls: &[],
             series: self.series,
             markers: self.markers,
+            bands: self.bands,
             marker_radius: 3,
         };
         write_both(
@@ -202,6 +220,7 @@ struct ChartSpec<'a> {
     walls: &'a [[(f64, f64); 2]],
     series: &'a [Series<'a>],
     markers: &'a [Markers<'a>],
+    bands: &'a [Band<'a>],
     marker_radius: i32,
 }
 
@@ -232,6 +251,25 @@ fn draw_chart<DB: DrawingBackend>(
                 .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
         )
         .map_err(|e| e.to_string())?;
+    for b in spec.bands {
+        let color = b.color;
+        let outline: Vec<(f64, f64)> = b
+            .upper
+            .iter()
+            .chain(b.lower.iter().rev())
+            .copied()
+            .collect();
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                outline,
+                color.mix(0.25).filled(),
+            )))
+            .map_err(|e| e.to_string())?
+            .label(b.label)
+            .legend(move |(x, y)| {
+                Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(0.25).filled())
+            });
+    }
     // Width 1: plotters' bitmap backend leaves gaps in thicker polylines.
     for s in spec.series {
         let color = s.color;
@@ -313,6 +351,12 @@ mod tests {
                 color: palette::ALT,
             }],
             markers: &[],
+            bands: &[Band {
+                label: "band",
+                lower: &path,
+                upper: &path,
+                color: palette::TRUTH,
+            }],
         }
         .write(&dir.path().join("series"))
         .unwrap();
@@ -328,6 +372,7 @@ mod tests {
             y_label: "",
             series: &[],
             markers: &[],
+            bands: &[],
         }
         .write(&dir.path().join("e"))
         .unwrap_err();

@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
+use serde::Serialize;
 
 /// Operate differential-drive robots over slow, lossy links through a digital twin.
 #[derive(Debug, Parser)]
@@ -35,6 +36,16 @@ pub enum Command {
         #[arg(long, value_name = "SECONDS")]
         duration_s: Option<f64>,
     },
+    /// Estimate wheel diameters and wheelbase from encoders and an absolute pose.
+    ///
+    /// Input: a simulator output directory (log.csv + log.meta.json), or
+    /// --encoders E.csv (`t,left_ticks,right_ticks` cumulative counts, or
+    /// `t,left_rad_s,right_rad_s`) with --poses P.csv (`t,x,y,theta`; theta
+    /// may be empty for position-only references). Writes --out (JSON) and,
+    /// beside it, figures of each parameter over time with its ±3σ band and
+    /// of the innovations, and TUM trajectories of the reference and of dead
+    /// reckoning with the initial and calibrated parameters.
+    Calibrate(CalibrateArgs),
     /// Run the paper's case study end to end into ./twindrive-out/.
     ///
     /// Currently: the built-in wall-following mission on the twin, with its
@@ -50,4 +61,76 @@ pub enum Command {
         /// Directory for office.pgm and office.yaml.
         dir: PathBuf,
     },
+}
+
+/// Which estimate `calibrate` reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The augmented EKF's final estimate.
+    Ekf,
+    /// The EKF followed by a Rauch-Tung-Striebel smoother (same final
+    /// parameters, better history).
+    Smoother,
+    /// Levenberg-Marquardt over relative motions between pose samples.
+    Batch,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct CalibrateArgs {
+    /// Simulator output directory (instead of --encoders/--poses).
+    pub log_dir: Option<PathBuf>,
+    /// Encoder CSV: `t,left_ticks,right_ticks` or `t,left_rad_s,right_rad_s`.
+    #[arg(long, requires = "poses")]
+    pub encoders: Option<PathBuf>,
+    /// Pose CSV: `t,x,y,theta` (theta may be empty).
+    #[arg(long, requires = "encoders")]
+    pub poses: Option<PathBuf>,
+    /// Encoder ticks per wheel revolution (for tick counts).
+    #[arg(long)]
+    pub ticks_per_rev: Option<u32>,
+    /// Initial guess DL,DR,B in metres (default for logs: their nominal values).
+    #[arg(long, value_name = "DL,DR,B")]
+    pub initial: Option<String>,
+    /// -1 for a left counter that runs backwards when driving forward.
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    pub left_sign: i8,
+    /// -1 for a right counter that runs backwards when driving forward.
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    pub right_sign: i8,
+    /// Offset added to encoder times to put them on the pose clock: seconds, or `auto`.
+    #[arg(
+        long,
+        default_value = "0",
+        allow_negative_numbers = true,
+        value_name = "auto|SECONDS"
+    )]
+    pub time_offset: String,
+    /// Which estimate to report.
+    #[arg(long, value_enum, default_value_t = Method::Smoother)]
+    pub method: Method,
+    /// Output JSON; figures and trajectories go beside it.
+    #[arg(long, default_value = "calib.json")]
+    pub out: PathBuf,
+    /// Use poses from this time on (pose clock, seconds).
+    #[arg(long, allow_negative_numbers = true)]
+    pub start_s: Option<f64>,
+    /// Use poses up to this time (pose clock, seconds).
+    #[arg(long, allow_negative_numbers = true)]
+    pub end_s: Option<f64>,
+    /// Standard deviation of the reference position.
+    #[arg(long, default_value_t = 0.002)]
+    pub position_std_m: f64,
+    /// Standard deviation of the reference heading.
+    #[arg(long, default_value_t = 0.005)]
+    pub heading_std_rad: f64,
+    /// Wheel rotation noise: variance per radian of rotation (rad²/rad).
+    #[arg(long, default_value_t = 1e-4)]
+    pub wheel_noise: f64,
+    /// Random walk of each parameter (m²/s); off unless given.
+    #[arg(long)]
+    pub param_random_walk: Option<f64>,
+    /// Length of the batch estimator's relative-motion windows.
+    #[arg(long, default_value_t = 1.0)]
+    pub batch_window_s: f64,
 }

@@ -97,7 +97,8 @@ impl Staging {
             .map(|(p, n)| format!("{p}\t{n}"))
             .collect();
         manifest.extend(names.iter().map(|n| format!("{}\t{n}", self.producer)));
-        std::fs::write(staged.join(MANIFEST), manifest.join("\n") + "\n").context("writing the file list")?;
+        std::fs::write(staged.join(MANIFEST), manifest.join("\n") + "\n")
+            .context("writing the file list")?;
 
         if !self.dest.exists() {
             std::fs::rename(&staged, &self.dest)
@@ -117,10 +118,16 @@ impl Staging {
                 );
             }
         }
-        let names_with_manifest: Vec<&str> = names.iter().map(String::as_str).chain([MANIFEST]).collect();
-        move_all(&names_with_manifest, &staged, &self.dest, |from, to| std::fs::rename(from, to))?;
+        let names_with_manifest: Vec<&str> =
+            names.iter().map(String::as_str).chain([MANIFEST]).collect();
+        move_all(&names_with_manifest, &staged, &self.dest, |from, to| {
+            std::fs::rename(from, to)
+        })?;
         // This command's files from its last run that it did not write now.
-        for (_, stale) in previous.iter().filter(|(p, n)| *p == self.producer && !names.contains(n)) {
+        for (_, stale) in previous
+            .iter()
+            .filter(|(p, n)| *p == self.producer && !names.contains(n))
+        {
             if !stale.contains(['/', '\\']) && stale != MANIFEST {
                 let _ = std::fs::remove_file(self.dest.join(stale));
             }
@@ -234,7 +241,10 @@ mod tests {
         let s = Staging::new(&dest, "test").unwrap();
         s.write_with("a.txt", |w| Ok(w.write_all(b"3")?)).unwrap();
         s.commit().unwrap();
-        assert_eq!(names(&dest), vec![".twindrive-files", "a.txt", "b.txt", "mine.txt"]);
+        assert_eq!(
+            names(&dest),
+            vec![".twindrive-files", "a.txt", "b.txt", "mine.txt"]
+        );
         assert_eq!(std::fs::read_to_string(dest.join("a.txt")).unwrap(), "3");
         assert_eq!(names(tmp.path()), vec!["out"]);
     }

@@ -1,5 +1,6 @@
 //! One file per subcommand.
 
+mod calibrate;
 mod demo;
 mod draw_map;
 mod simulate;
@@ -14,6 +15,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             seed,
             duration_s,
         } => simulate::run(&scenario, &out, seed, duration_s),
+        Command::Calibrate(a) => calibrate::run(&a),
         Command::Demo { out } => demo::run(&out),
         Command::DrawMap { dir } => draw_map::run(&dir),
     }

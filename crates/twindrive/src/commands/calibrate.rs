@@ -1,0 +1,528 @@
+//! `twindrive calibrate`: wheel diameters and wheelbase from encoders plus an
+//! absolute pose reference.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use serde::Serialize;
+use twindrive_estimation::batch::{self, BatchConfig, Identifiability};
+use twindrive_estimation::dead_reckoning::dead_reckon;
+use twindrive_estimation::{
+    FilterConfig, InnovationRecord, PoseSample, StateAndCovariance, WheelSample, clock, run_filter,
+    smooth,
+};
+use twindrive_kinematics::{DiffDriveParams, Pose};
+
+use crate::cli::{CalibrateArgs, Method};
+use crate::output::Staging;
+use crate::{figures, inputs, progress};
+
+/// How the clock offset between the two logs is chosen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Offset {
+    Given(f64),
+    Auto,
+}
+
+/// Everything one calibration needs, checked.
+#[derive(Debug, Clone)]
+pub struct Job {
+    pub wheels: Vec<WheelSample>,
+    pub poses: Vec<PoseSample>,
+    pub initial: [f64; 3],
+    pub offset: Offset,
+    /// Only poses in this interval of the pose clock are used.
+    pub start_s: Option<f64>,
+    pub end_s: Option<f64>,
+    pub method: Method,
+    pub filter: FilterConfig,
+    pub param_rel_std: f64,
+    pub batch_window_s: f64,
+    pub ticks_per_rev: Option<u32>,
+}
+
+/// `calib.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub left_diameter_m: f64,
+    pub right_diameter_m: f64,
+    pub wheelbase_m: f64,
+    pub left_diameter_std_m: f64,
+    pub right_diameter_std_m: f64,
+    pub wheelbase_std_m: f64,
+    pub method: Method,
+    pub initial: [f64; 3],
+    /// `t_pose = t_encoder + clock_offset_s`.
+    pub clock_offset_s: f64,
+    pub clock_offset_source: &'static str,
+    pub clock_offset_correlation: Option<f64>,
+    pub identifiability: Identifiability,
+    pub residuals: Residuals,
+    pub cross_check: CrossCheck,
+    pub data: DataSummary,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Residuals {
+    /// Mean normalised innovation squared of the filter's accepted poses
+    /// (≈ the measurement dimension when the noise model fits).
+    pub filter_mean_nis: f64,
+    pub filter_nis_inside_95_fraction: f64,
+    pub filter_accepted: u64,
+    pub filter_rejected: u64,
+    pub batch_whitened_rms: f64,
+    /// RMS of the batch end-of-window residuals [x (m), y (m), θ (rad)].
+    pub batch_residual_rms: [f64; 3],
+    pub batch_windows: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct CrossCheck {
+    pub ekf: [f64; 3],
+    pub ekf_std: [f64; 3],
+    pub batch: [f64; 3],
+    pub batch_std: [f64; 3],
+    pub batch_iterations: usize,
+    /// Largest |ekf / batch − 1| over the three parameters.
+    pub max_relative_difference: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct DataSummary {
+    pub encoder_samples: usize,
+    pub pose_samples: usize,
+    pub start_s: f64,
+    pub end_s: f64,
+    pub ticks_per_rev: Option<u32>,
+}
+
+/// What the figures and trajectories are drawn from.
+pub struct Artefacts {
+    /// (t, [dL, dR, b], [σ]) of the filter at its nodes: how it converged.
+    pub trace: Vec<(f64, [f64; 3], [f64; 3])>,
+    /// The reported parameters.
+    pub reported: [f64; 3],
+    pub innovations: Vec<InnovationRecord>,
+    pub reference: Vec<(f64, Pose)>,
+    pub dead_reckoning_initial: Vec<(f64, Pose)>,
+    pub dead_reckoning_calibrated: Vec<(f64, Pose)>,
+}
+
+fn params_of(s: &StateAndCovariance) -> ([f64; 3], [f64; 3]) {
+    (
+        [s.state[3], s.state[4], s.state[5]],
+        [3, 4, 5].map(|i| s.covariance[(i, i)].max(0.0).sqrt()),
+    )
+}
+
+/// Runs a calibration. `progress(done, total)` follows the filter.
+pub fn calibrate(
+    mut job: Job,
+    progress: impl FnMut(usize, usize),
+) -> anyhow::Result<(Report, Artefacts)> {
+    if let Some(i) = job
+        .initial
+        .iter()
+        .position(|v| !(v.is_finite() && *v > 0.0))
+    {
+        bail!(
+            "--initial: {} must be a finite number > 0 (metres), got {}",
+            ["the left diameter", "the right diameter", "the wheelbase"][i],
+            job.initial[i]
+        );
+    }
+    let (offset_s, source, correlation) = match job.offset {
+        Offset::Given(s) => (s, "given", None),
+        Offset::Auto => {
+            let span = |a: f64, b: f64| b - a;
+            let shorter = span(job.wheels[0].t_s, job.wheels.last().expect("non-empty").t_s).min(
+                span(job.poses[0].t_s, job.poses.last().expect("non-empty").t_s),
+            );
+            let found = clock::estimate_offset(
+                &job.wheels,
+                &job.poses,
+                job.initial,
+                (0.5 * shorter).min(30.0),
+            )
+            .context(
+                "--time-offset auto: the encoder and pose logs show no common motion to align",
+            )?;
+            tracing::info!(
+                offset_s = found.offset_s,
+                correlation = found.correlation,
+                "clock offset"
+            );
+            (found.offset_s, "auto", Some(found.correlation))
+        }
+    };
+    inputs::shift(&mut job.wheels, offset_s);
+
+    let (w0, w1) = (job.wheels[0].t_s, job.wheels.last().expect("non-empty").t_s);
+    let (p0, p1) = (job.poses[0].t_s, job.poses.last().expect("non-empty").t_s);
+    if w1.min(p1) - w0.max(p0) <= 1.0 {
+        bail!(
+            "the encoder log (t = {w0:.3} .. {w1:.3} s on the pose clock, offset {offset_s} s) and the pose log \
+             (t = {p0:.3} .. {p1:.3} s) do not overlap in time; pass --time-offset auto or the offset in seconds"
+        );
+    }
+    let start = job.start_s.unwrap_or(f64::NEG_INFINITY).max(w0);
+    let end = job.end_s.unwrap_or(f64::INFINITY).min(w1);
+    let poses: Vec<PoseSample> = job
+        .poses
+        .iter()
+        .copied()
+        .filter(|p| p.t_s >= start && p.t_s <= end)
+        .collect();
+    if poses.len() < 10 {
+        bail!(
+            "only {} pose samples fall in the encoder data between t = {start} and {end} s; need at least 10",
+            poses.len()
+        );
+    }
+
+    let keep_history = true;
+    let run = run_filter(
+        &job.wheels,
+        &poses,
+        job.initial,
+        job.param_rel_std,
+        job.filter,
+        keep_history,
+        progress,
+    )?;
+    let history = run.history.as_ref().expect("kept");
+    let nodes: Vec<StateAndCovariance> = match job.method {
+        Method::Smoother => smooth(&run)?,
+        _ => history.filtered.clone(),
+    };
+    let (ekf, ekf_std) = params_of(&StateAndCovariance {
+        state: run.estimate.state,
+        covariance: run.estimate.covariance,
+    });
+
+    let batch_cfg = BatchConfig {
+        window_s: job.batch_window_s,
+        noise: job.filter.noise,
+        ..BatchConfig::default()
+    };
+    let b = batch::fit(&job.wheels, &poses, job.initial, &batch_cfg)?;
+
+    let (params, std) = match job.method {
+        Method::Batch => (b.params, b.std),
+        _ => params_of(nodes.last().expect("one node at least")),
+    };
+    let max_relative_difference = (0..3)
+        .map(|i| (ekf[i] / b.params[i] - 1.0).abs())
+        .fold(0.0, f64::max);
+    let stats = run.stats;
+    let report = Report {
+        left_diameter_m: params[0],
+        right_diameter_m: params[1],
+        wheelbase_m: params[2],
+        left_diameter_std_m: std[0],
+        right_diameter_std_m: std[1],
+        wheelbase_std_m: std[2],
+        method: job.method,
+        initial: job.initial,
+        clock_offset_s: offset_s,
+        clock_offset_source: source,
+        clock_offset_correlation: correlation,
+        identifiability: b.identifiability.clone(),
+        residuals: Residuals {
+            filter_mean_nis: stats.mean_nis(),
+            filter_nis_inside_95_fraction: stats.nis_inside_95 as f64
+                / stats.accepted.max(1) as f64,
+            filter_accepted: stats.accepted,
+            filter_rejected: stats.rejected,
+            batch_whitened_rms: b.whitened_rms,
+            batch_residual_rms: b.residual_rms,
+            batch_windows: b.windows,
+        },
+        cross_check: CrossCheck {
+            ekf,
+            ekf_std,
+            batch: b.params,
+            batch_std: b.std,
+            batch_iterations: b.iterations,
+            max_relative_difference,
+        },
+        data: DataSummary {
+            encoder_samples: job
+                .wheels
+                .iter()
+                .filter(|w| w.t_s >= start && w.t_s <= end)
+                .count(),
+            pose_samples: poses.len(),
+            start_s: poses[0].t_s,
+            end_s: poses.last().expect("non-empty").t_s,
+            ticks_per_rev: job.ticks_per_rev,
+        },
+    };
+
+    let reference: Vec<(f64, Pose)> = poses
+        .iter()
+        .filter_map(|p| p.heading_rad.map(|h| (p.t_s, Pose::new(p.x_m, p.y_m, h))))
+        .collect();
+    let start_pose = reference.first().map(|r| r.1).unwrap_or_else(|| {
+        let s = &history.filtered[0].state;
+        Pose::new(s[0], s[1], s[2])
+    });
+    let (t_a, t_b) = (report.data.start_s, report.data.end_s);
+    let dr = |p: [f64; 3]| {
+        dead_reckon(
+            &job.wheels,
+            start_pose,
+            t_a,
+            t_b,
+            &DiffDriveParams::new(p[0], p[1], p[2]),
+        )
+    };
+    let trace = history
+        .t_s
+        .iter()
+        .zip(&history.filtered)
+        .map(|(t, s)| {
+            let (v, sd) = params_of(s);
+            (*t, v, sd)
+        })
+        .collect();
+    let artefacts = Artefacts {
+        trace,
+        reported: params,
+        innovations: history.innovations.clone(),
+        reference,
+        dead_reckoning_initial: dr(job.initial),
+        dead_reckoning_calibrated: dr(params),
+    };
+    Ok((report, artefacts))
+}
+
+/// Reads the inputs named on the command line into a [`Job`].
+fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
+    let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
+    for (name, s) in [
+        ("--left-sign", args.left_sign),
+        ("--right-sign", args.right_sign),
+    ] {
+        if s != 1 && s != -1 {
+            bail!("{name} must be 1 or -1, got {s}");
+        }
+    }
+    let (wheels, poses, default_initial, ticks_per_rev) =
+        match (&args.log_dir, &args.encoders, &args.poses) {
+            (Some(dir), None, None) => {
+                let log = twindrive_log::read_log_dir(dir)?;
+                let mut wheels = inputs::wheels_from_log(&log);
+                for w in &mut wheels {
+                    w.left_rad *= signs[0];
+                    w.right_rad *= signs[1];
+                }
+                let n = log.header.nominal;
+                let tpr = log.header.ticks_per_rev;
+                if let Some(t) = args.ticks_per_rev
+                    && t != tpr
+                {
+                    bail!("--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}");
+                }
+                (
+                    wheels,
+                    inputs::poses_from_log(&log),
+                    Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
+                    Some(tpr),
+                )
+            }
+            (None, Some(enc), Some(pose)) => {
+                let e = twindrive_log::calib_csv::read_encoder_csv(enc)?;
+                let p = twindrive_log::calib_csv::read_pose_csv(pose)?;
+                (
+                    inputs::wheels_from_csv(&e, enc, args.ticks_per_rev, signs)?,
+                    inputs::poses_from_csv(&p),
+                    None,
+                    args.ticks_per_rev,
+                )
+            }
+            _ => bail!(
+                "give either a simulator log directory, or both --encoders E.csv and --poses P.csv"
+            ),
+        };
+    if wheels.len() < 2 {
+        bail!(
+            "the encoder log has {} samples; need at least 2",
+            wheels.len()
+        );
+    }
+    if poses.is_empty() {
+        bail!("the pose log has no samples");
+    }
+    let initial = match (&args.initial, default_initial) {
+        (Some(text), _) => parse_initial(text)?,
+        (None, Some(i)) => i,
+        (None, None) => bail!("--initial DL,DR,B (metres) is needed for CSV inputs"),
+    };
+    let offset = match args.time_offset.trim() {
+        "auto" => Offset::Auto,
+        text => Offset::Given(
+            text.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .with_context(|| {
+                    format!("--time-offset: expected `auto` or seconds, got `{text}`")
+                })?,
+        ),
+    };
+    let mut filter = FilterConfig::default();
+    filter.noise.position_std_m = positive("--position-std-m", args.position_std_m)?;
+    filter.noise.heading_std_rad = positive("--heading-std-rad", args.heading_std_rad)?;
+    filter.noise.wheel_rad2_per_rad = positive("--wheel-noise", args.wheel_noise)?;
+    if let Some(rw) = args.param_random_walk {
+        let rw = positive("--param-random-walk", rw)?;
+        filter.noise.param_random_walk_m2_per_s = Some([rw; 3]);
+    }
+    Ok(Job {
+        wheels,
+        poses,
+        initial,
+        offset,
+        start_s: args.start_s,
+        end_s: args.end_s,
+        method: args.method,
+        filter,
+        param_rel_std: 0.1,
+        batch_window_s: positive("--batch-window-s", args.batch_window_s)?,
+        ticks_per_rev,
+    })
+}
+
+fn positive(name: &str, v: f64) -> anyhow::Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        bail!("{name} must be a finite number > 0, got {v}")
+    }
+}
+
+fn parse_initial(text: &str) -> anyhow::Result<[f64; 3]> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [l, r, b] = parts[..] else {
+        bail!("--initial: expected three numbers DL,DR,B in metres, got `{text}`");
+    };
+    let mut out = [0.0; 3];
+    for (i, (p, name)) in [l, r, b]
+        .iter()
+        .zip(["left diameter", "right diameter", "wheelbase"])
+        .enumerate()
+    {
+        out[i] = p
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .with_context(|| {
+                format!("--initial: the {name} must be a finite number > 0 (metres), got `{p}`")
+            })?;
+    }
+    Ok(out)
+}
+
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let job = resolve(args)?;
+    let total = job.wheels.len() + job.poses.len();
+    let bar = progress::bar(total as u64, "calibrating");
+    let (report, artefacts) = calibrate(job, |done, _| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    write_outputs(&report, &artefacts, &args.out)?;
+    tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "calibrated");
+    print_report(&report, &args.out)
+}
+
+/// Writes `out` (calib.json) and, beside it, `<stem>_*.svg/png` figures and
+/// `<stem>_*.tum` trajectories.
+pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let file_name = out
+        .file_name()
+        .context("--out needs a file name")?
+        .to_string_lossy()
+        .into_owned();
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "calib".into());
+    let dir = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let staging = Staging::new(&dir, &format!("calibrate:{stem}"))?;
+    staging.write_with(&file_name, |w| {
+        serde_json::to_writer_pretty(w, report).map_err(Into::into)
+    })?;
+    for (suffix, track) in [
+        ("reference", &art.reference),
+        ("dead_reckoning_initial", &art.dead_reckoning_initial),
+        ("dead_reckoning_calibrated", &art.dead_reckoning_calibrated),
+    ] {
+        staging.write_with(&format!("{stem}_{suffix}.tum"), |w| {
+            let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
+            twindrive_log::write_tum(track.iter().map(|(t, p)| (ns(*t), *p)), w).map_err(Into::into)
+        })?;
+    }
+    figures::calibration_figures(
+        &art.trace,
+        art.reported,
+        &art.innovations,
+        staging.dir(),
+        &stem,
+    )?;
+    staging.commit()?;
+    Ok(vec![out.to_path_buf()])
+}
+
+fn print_report(r: &Report, out: &Path) -> anyhow::Result<()> {
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "method {:?}, clock offset {:.3} s ({})",
+        r.method, r.clock_offset_s, r.clock_offset_source
+    )?;
+    for (name, v, s, init) in [
+        (
+            "left diameter ",
+            r.left_diameter_m,
+            r.left_diameter_std_m,
+            r.initial[0],
+        ),
+        (
+            "right diameter",
+            r.right_diameter_m,
+            r.right_diameter_std_m,
+            r.initial[1],
+        ),
+        (
+            "wheelbase     ",
+            r.wheelbase_m,
+            r.wheelbase_std_m,
+            r.initial[2],
+        ),
+    ] {
+        writeln!(
+            o,
+            "  {name} {v:.6} m ± {s:.6} (initial {init:.6}, {:+.3} %)",
+            100.0 * (v / init - 1.0)
+        )?;
+    }
+    writeln!(
+        o,
+        "  EKF vs batch: largest difference {:.3} %; mean NIS {:.2}; {} poses rejected",
+        100.0 * r.cross_check.max_relative_difference,
+        r.residuals.filter_mean_nis,
+        r.residuals.filter_rejected
+    )?;
+    writeln!(o, "  {}", r.identifiability.verdict)?;
+    writeln!(
+        o,
+        "wrote {} and its figures and trajectories beside it",
+        out.display()
+    )?;
+    Ok(())
+}

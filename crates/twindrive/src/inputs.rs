@@ -1,0 +1,134 @@
+//! Turning log files into estimator samples: simulator log directories and
+//! generic encoder/pose CSV files.
+
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use twindrive_estimation::{PoseSample, WheelSample};
+use twindrive_log::MissionLog;
+use twindrive_log::calib_csv::{EncoderCsv, PoseCsv, WheelColumns};
+
+/// Encoder ticks of a simulated log as cumulative wheel angles.
+pub fn wheels_from_log(log: &MissionLog) -> Vec<WheelSample> {
+    let rad_per_tick = std::f64::consts::TAU / f64::from(log.header.ticks_per_rev);
+    log.steps
+        .iter()
+        .filter_map(|s| {
+            s.encoder_ticks.map(|[l, r]| WheelSample {
+                t_s: s.t_s(),
+                left_rad: l as f64 * rad_per_tick,
+                right_rad: r as f64 * rad_per_tick,
+            })
+        })
+        .collect()
+}
+
+/// Tracker poses of a simulated log.
+pub fn poses_from_log(log: &MissionLog) -> Vec<PoseSample> {
+    log.steps
+        .iter()
+        .filter_map(|s| {
+            s.tracker.map(|p| PoseSample {
+                t_s: s.t_s(),
+                x_m: p.x_m,
+                y_m: p.y_m,
+                heading_rad: Some(p.heading_rad),
+            })
+        })
+        .collect()
+}
+
+/// Cumulative wheel angles from an encoder CSV. Ticks need `ticks_per_rev`;
+/// wheel speeds are integrated with the trapezoid rule. Signs flip counters
+/// that run backwards.
+pub fn wheels_from_csv(
+    enc: &EncoderCsv,
+    path: &Path,
+    ticks_per_rev: Option<u32>,
+    signs: [f64; 2],
+) -> anyhow::Result<Vec<WheelSample>> {
+    let n = enc.t_s.len();
+    let mut out = Vec::with_capacity(n);
+    match enc.columns {
+        WheelColumns::Ticks => {
+            let tpr = ticks_per_rev.with_context(|| {
+                format!(
+                    "{}: holds encoder ticks, so --ticks-per-rev is needed",
+                    path.display()
+                )
+            })?;
+            if tpr == 0 {
+                bail!("--ticks-per-rev must be > 0");
+            }
+            let k = std::f64::consts::TAU / f64::from(tpr);
+            for i in 0..n {
+                out.push(WheelSample {
+                    t_s: enc.t_s[i],
+                    left_rad: signs[0] * enc.left[i] * k,
+                    right_rad: signs[1] * enc.right[i] * k,
+                });
+            }
+        }
+        WheelColumns::RadPerSecond => {
+            let (mut l, mut r) = (0.0, 0.0);
+            for i in 0..n {
+                if i > 0 {
+                    let dt = enc.t_s[i] - enc.t_s[i - 1];
+                    l += 0.5 * dt * (enc.left[i] + enc.left[i - 1]);
+                    r += 0.5 * dt * (enc.right[i] + enc.right[i - 1]);
+                }
+                out.push(WheelSample {
+                    t_s: enc.t_s[i],
+                    left_rad: signs[0] * l,
+                    right_rad: signs[1] * r,
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
+pub fn poses_from_csv(p: &PoseCsv) -> Vec<PoseSample> {
+    (0..p.t_s.len())
+        .map(|i| PoseSample {
+            t_s: p.t_s[i],
+            x_m: p.x_m[i],
+            y_m: p.y_m[i],
+            heading_rad: (!p.theta_rad[i].is_nan()).then_some(p.theta_rad[i]),
+        })
+        .collect()
+}
+
+/// Shifts encoder times onto the pose clock.
+pub fn shift(wheels: &mut [WheelSample], offset_s: f64) {
+    for w in wheels {
+        w.t_s += offset_s;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wheel_speeds_integrate_and_signs_apply() {
+        let enc = EncoderCsv {
+            columns: WheelColumns::RadPerSecond,
+            t_s: vec![0.0, 1.0, 2.0],
+            left: vec![1.0, 1.0, 3.0],
+            right: vec![2.0, 2.0, 2.0],
+        };
+        let w = wheels_from_csv(&enc, Path::new("e.csv"), None, [1.0, -1.0]).unwrap();
+        assert_eq!((w[2].left_rad, w[2].right_rad), (3.0, -4.0));
+        let ticks = EncoderCsv {
+            columns: WheelColumns::Ticks,
+            ..enc
+        };
+        let err = wheels_from_csv(&ticks, Path::new("e.csv"), None, [1.0, 1.0])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("--ticks-per-rev is needed"));
+        let w = wheels_from_csv(&ticks, Path::new("e.csv"), Some(4), [-1.0, 1.0]).unwrap();
+        assert!((w[2].left_rad + 3.0 * std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+}
