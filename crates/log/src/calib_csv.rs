@@ -64,7 +64,7 @@ impl Table<'_> {
     }
 }
 
-fn field<'r>(record: &'r csv::ByteRecord, col: usize) -> &'r str {
+fn field(record: &csv::ByteRecord, col: usize) -> &str {
     std::str::from_utf8(record.get(col).unwrap_or(b""))
         .unwrap_or("\u{fffd}")
         .trim()
