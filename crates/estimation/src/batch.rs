@@ -71,6 +71,9 @@ pub struct Identifiability {
 
 /// Relative standard deviation above which a combination counts as not pinned.
 const POOR_RELATIVE_STD: f64 = 0.002;
+/// Condition numbers above this mean the drive's geometry leaves a
+/// direction unobserved, not merely noisy.
+const DEGENERATE_CONDITION: f64 = 1e3;
 
 impl Identifiability {
     /// From the information matrix `h` (per metre²) at `params`.
@@ -117,7 +120,7 @@ impl Identifiability {
                 combo.join(" "),
                 100.0 * weakest_std
             )
-        } else {
+        } else if condition_number > DEGENERATE_CONDITION {
             format!(
                 "WARNING: this drive cannot separate the parameters: the relative change {} is only known to {:.2} % \
                  (condition number {:.1e}). One constant curvature pins only two combinations of (dL, dR, b); \
@@ -125,6 +128,14 @@ impl Identifiability {
                 combo.join(" "),
                 100.0 * weakest_std,
                 condition_number
+            )
+        } else {
+            format!(
+                "WARNING: the parameters are separable (condition number {:.1e}) but the data pin {} only to {:.2} %: \
+                 the drive is short or the reference and wheels are noisy (slip); a longer drive would help",
+                condition_number,
+                combo.join(" "),
+                100.0 * weakest_std
             )
         };
         Self {

@@ -56,6 +56,11 @@ pub struct GateConfig {
     pub probability: f64,
     /// This many rejections in a row mean the filter has lost track.
     pub max_consecutive_rejections: usize,
+    /// When the filter has lost track, re-anchor the pose on the reference
+    /// (keeping the parameters) instead of failing: slip, or a robot picked
+    /// up and moved. A second loss with no accepted pose in between is
+    /// still an error.
+    pub reanchor: bool,
 }
 
 impl Default for GateConfig {
@@ -63,6 +68,7 @@ impl Default for GateConfig {
         Self {
             probability: 0.9999,
             max_consecutive_rejections: 240,
+            reanchor: true,
         }
     }
 }
@@ -96,6 +102,11 @@ pub enum UpdateOutcome {
         nis: f64,
         dof: usize,
     },
+    /// Too many rejections in a row: the pose was moved onto this measurement.
+    Reanchored {
+        nis: f64,
+        dof: usize,
+    },
 }
 
 /// Running innovation statistics.
@@ -107,6 +118,8 @@ pub struct FilterStats {
     pub nis_sum: f64,
     /// Accepted updates whose NIS lies inside the two-sided 95 % chi-square interval.
     pub nis_inside_95: u64,
+    /// Times the pose was re-anchored on the reference after losing track.
+    pub reanchors: u64,
 }
 
 impl FilterStats {
@@ -136,6 +149,8 @@ pub struct AugmentedEkf {
     nis_95: [(f64, f64); 2],
     stats: FilterStats,
     consecutive_rejections: usize,
+    /// True after a re-anchor until the next accepted pose.
+    reanchored_since_accept: bool,
 }
 
 impl AugmentedEkf {
@@ -149,6 +164,7 @@ impl AugmentedEkf {
             nis_95: dofs.map(|d| (chi2_quantile(d, 0.025), chi2_quantile(d, 0.975))),
             stats: FilterStats::default(),
             consecutive_rejections: 0,
+            reanchored_since_accept: false,
         }
     }
 
@@ -241,15 +257,20 @@ impl AugmentedEkf {
             self.stats.rejected += 1;
             self.consecutive_rejections += 1;
             if self.consecutive_rejections > self.gate.max_consecutive_rejections {
-                return Err(FilterError::Diverged {
-                    t_s,
-                    rejections: self.consecutive_rejections,
-                    nis,
-                });
+                if !self.gate.reanchor || self.reanchored_since_accept {
+                    return Err(FilterError::Diverged {
+                        t_s,
+                        rejections: self.consecutive_rejections,
+                        nis,
+                    });
+                }
+                self.reanchor(&nu, &r);
+                return Ok(UpdateOutcome::Reanchored { nis, dof: M });
             }
             return Ok(UpdateOutcome::Rejected { nis, dof: M });
         }
         self.consecutive_rejections = 0;
+        self.reanchored_since_accept = false;
         // K = P Hᵀ S⁻¹ = P[:, 0..M] S⁻¹.
         let pht: SMatrix<f64, 6, M> = p.fixed_view::<6, M>(0, 0).into_owned();
         let k: SMatrix<f64, 6, M> = chol.solve(&pht.transpose()).transpose();
@@ -264,6 +285,27 @@ impl AugmentedEkf {
             self.stats.nis_inside_95 += 1;
         }
         Ok(UpdateOutcome::Accepted { nis, dof: M })
+    }
+}
+
+impl AugmentedEkf {
+    /// Moves the pose onto the reference (innovation `nu`, noise `r`),
+    /// keeps the parameters and forgets the pose-parameter correlation.
+    fn reanchor<const M: usize>(&mut self, nu: &SMatrix<f64, M, 1>, r: &SMatrix<f64, M, M>) {
+        let p = &mut self.est.covariance;
+        for i in 0..M {
+            self.est.state[i] += nu[i];
+            for j in 0..6 {
+                if i != j {
+                    p[(i, j)] = 0.0;
+                    p[(j, i)] = 0.0;
+                }
+            }
+            p[(i, i)] = r[(i, i)];
+        }
+        self.consecutive_rejections = 0;
+        self.reanchored_since_accept = true;
+        self.stats.reanchors += 1;
     }
 }
 
@@ -430,6 +472,7 @@ mod tests {
         let gate = GateConfig {
             probability: 0.9999,
             max_consecutive_rejections: 5,
+            reanchor: false,
         };
         let mut ekf = AugmentedEkf::new(init, NoiseModel::default(), gate);
         for _ in 0..5 {
@@ -448,6 +491,45 @@ mod tests {
             Err(FilterError::Diverged { rejections: 6, .. })
         ));
         assert_eq!(ekf.stats().rejected, 6);
+    }
+
+    #[test]
+    fn a_moved_robot_is_reanchored_once_and_a_second_loss_is_an_error() {
+        let init = StateAndCovariance {
+            state: StateVec::new(0.0, 0.0, 0.0, 0.1, 0.1, 0.3),
+            covariance: Mat6::identity() * 1e-6,
+        };
+        let gate = GateConfig {
+            probability: 0.9999,
+            max_consecutive_rejections: 5,
+            reanchor: true,
+        };
+        let mut ekf = AugmentedEkf::new(init, NoiseModel::default(), gate);
+        for _ in 0..5 {
+            assert!(matches!(
+                ekf.update_pose(0.0, 3.0, 0.0, 0.0).unwrap(),
+                UpdateOutcome::Rejected { .. }
+            ));
+        }
+        assert!(matches!(
+            ekf.update_pose(0.0, 3.0, 0.0, 0.0).unwrap(),
+            UpdateOutcome::Reanchored { .. }
+        ));
+        let s = ekf.estimate().state;
+        assert_eq!((s[0], s[1], s[2]), (3.0, 0.0, 0.0));
+        assert_eq!((s[3], s[4], s[5]), (0.1, 0.1, 0.3), "parameters kept");
+        assert_eq!(ekf.stats().reanchors, 1);
+        // Lost again before any pose was accepted: now it is an error.
+        for _ in 0..5 {
+            assert!(matches!(
+                ekf.update_pose(0.0, -3.0, 0.0, 0.0).unwrap(),
+                UpdateOutcome::Rejected { .. }
+            ));
+        }
+        assert!(matches!(
+            ekf.update_pose(0.0, -3.0, 0.0, 0.0),
+            Err(FilterError::Diverged { .. })
+        ));
     }
 
     #[test]

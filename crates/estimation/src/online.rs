@@ -281,7 +281,9 @@ impl OnlineCalibrator {
             ];
             let (nis, accepted) = match outcome {
                 UpdateOutcome::Accepted { nis, .. } => (nis, true),
-                UpdateOutcome::Rejected { nis, .. } => (nis, false),
+                UpdateOutcome::Rejected { nis, .. } | UpdateOutcome::Reanchored { nis, .. } => {
+                    (nis, false)
+                }
             };
             h.innovations.push(InnovationRecord {
                 t_s: pose.t_s,

@@ -72,6 +72,9 @@ pub struct Residuals {
     pub filter_nis_inside_95_fraction: f64,
     pub filter_accepted: u64,
     pub filter_rejected: u64,
+    /// Times the filter lost track (slip, a moved robot) and re-anchored its
+    /// pose on the reference.
+    pub filter_reanchors: u64,
     pub batch_whitened_rms: f64,
     /// RMS of the batch end-of-window residuals [x (m), y (m), θ (rad)].
     pub batch_residual_rms: [f64; 3],
@@ -236,6 +239,7 @@ pub fn calibrate(
                 / stats.accepted.max(1) as f64,
             filter_accepted: stats.accepted,
             filter_rejected: stats.rejected,
+            filter_reanchors: stats.reanchors,
             batch_whitened_rms: b.whitened_rms,
             batch_residual_rms: b.residual_rms,
             batch_windows: b.windows,
@@ -518,6 +522,13 @@ fn print_report(r: &Report, out: &Path) -> anyhow::Result<()> {
         r.residuals.filter_mean_nis,
         r.residuals.filter_rejected
     )?;
+    if r.residuals.filter_reanchors > 0 {
+        writeln!(
+            o,
+            "  WARNING: the filter lost track {} time(s) and re-anchored its pose on the reference (slip, or the robot was moved)",
+            r.residuals.filter_reanchors
+        )?;
+    }
     writeln!(o, "  {}", r.identifiability.verdict)?;
     writeln!(
         o,
