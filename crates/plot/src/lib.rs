@@ -132,8 +132,29 @@ fn bounds<'a>(points: impl Iterator<Item = &'a (f64, f64)>) -> Option<((f64, f64
     b
 }
 
+/// Drops points closer than `min_step` to the last kept one (dense paths
+/// render badly); always keeps the last point.
+pub fn decimate(points: &[(f64, f64)], min_step: f64) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for &p in points {
+        if out
+            .last()
+            .is_none_or(|q| (p.0 - q.0).hypot(p.1 - q.1) >= min_step)
+        {
+            out.push(p);
+        }
+    }
+    if let Some(&last) = points.last()
+        && out.last() != Some(&last)
+    {
+        out.push(last);
+    }
+    out
+}
+
 impl WorldFigure<'_> {
-    /// Writes `<base>.svg` and `<base>.png`.
+    /// Writes `<base>.svg` and `<base>.png`. Paths are thinned to about four
+    /// pixels between points.
     pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
         let all = self
             .walls
@@ -152,13 +173,25 @@ impl WorldFigure<'_> {
         let plot_w = 900.0;
         let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(200.0, 1400.0);
         let size = (width, plot_h as u32 + 130);
+        let step = (x1 - x0).max(y1 - y0) / 250.0;
+        let thinned: Vec<Vec<(f64, f64)>> = self
+            .paths
+            .iter()
+            .map(|s| decimate(s.points, step))
+            .collect();
+        let paths: Vec<Series> = self
+            .paths
+            .iter()
+            .zip(&thinned)
+            .map(|(s, pts)| Series { points: pts, ..*s })
+            .collect();
         let spec = ChartSpec {
             title: self.title,
             x_label: "x [m]",
             y_label: "y [m]",
             range: (x0, x1, y0, y1),
             walls: self.walls,
-            series: self.paths,
+            series: &paths,
             markers: self.markers,
             bands: &[],
             marker_radius: 5,

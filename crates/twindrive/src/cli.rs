@@ -48,8 +48,10 @@ pub enum Command {
     Calibrate(CalibrateArgs),
     /// Run the paper's case study end to end into ./twindrive-out/.
     ///
-    /// Currently: the built-in wall-following mission on the twin, with its
-    /// log, summary and figures in twindrive-out/wall_following/.
+    /// The built-in calibration drive on the twin (calibration_drive/), its
+    /// calibration (calibration/calib.json), the wall-following mission
+    /// (wall_following/) and the paper's Table 1 and Section 6
+    /// (evidence/evidence.md with figures).
     Demo {
         /// Output directory.
         #[arg(long, default_value = "twindrive-out")]

@@ -15,28 +15,6 @@ fn stride(len: usize) -> usize {
     len.div_ceil(MAX_POINTS).max(1)
 }
 
-/// Drops points closer than `min_step_m` to the last kept one (dense paths
-/// render as dotted lines otherwise); always keeps the last point.
-pub fn decimate(points: impl Iterator<Item = (f64, f64)>, min_step_m: f64) -> Vec<(f64, f64)> {
-    let mut out: Vec<(f64, f64)> = Vec::new();
-    let mut last = None;
-    for p in points {
-        last = Some(p);
-        if out
-            .last()
-            .is_none_or(|q| (p.0 - q.0).hypot(p.1 - q.1) >= min_step_m)
-        {
-            out.push(p);
-        }
-    }
-    if let Some(p) = last
-        && out.last() != Some(&p)
-    {
-        out.push(p);
-    }
-    out
-}
-
 pub fn walls(world: &World) -> Vec<[(f64, f64); 2]> {
     world
         .segments()
@@ -47,16 +25,10 @@ pub fn walls(world: &World) -> Vec<[(f64, f64); 2]> {
 
 pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::Result<()> {
     let steps = &log.steps;
-    // About 4 px between kept points at the figure's scale.
-    let extent = world
-        .bounds()
-        .map_or(1.0, |b| (b.maxs - b.mins).max_element());
-    let path = decimate(
-        steps
-            .iter()
-            .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m)),
-        extent / 250.0,
-    );
+    let path: Vec<(f64, f64)> = steps
+        .iter()
+        .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m))
+        .collect();
     let bump_points: Vec<(f64, f64)> = steps
         .windows(2)
         .filter(|w| w[1].bump && !w[0].bump)

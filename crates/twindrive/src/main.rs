@@ -3,6 +3,7 @@
 
 mod cli;
 mod commands;
+mod evidence;
 mod figures;
 mod inputs;
 mod output;

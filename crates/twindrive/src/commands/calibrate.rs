@@ -443,7 +443,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
 
 /// Writes `out` (calib.json) and, beside it, `<stem>_*.svg/png` figures and
 /// `<stem>_*.tum` trajectories.
-pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
+pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Result<()> {
     let file_name = out
         .file_name()
         .context("--out needs a file name")?
@@ -478,8 +478,7 @@ pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Re
         staging.dir(),
         &stem,
     )?;
-    staging.commit()?;
-    Ok(vec![out.to_path_buf()])
+    staging.commit()
 }
 
 fn print_report(r: &Report, out: &Path) -> anyhow::Result<()> {

@@ -23,7 +23,7 @@ pub fn run(
             .set_duration_s(d)
             .map_err(|m| anyhow::anyhow!("--duration-s {m}"))?;
     }
-    let summary = simulate_into(scenario, out)?;
+    let (summary, _) = simulate_into(scenario, out)?;
     print_summary(&summary, out)
 }
 
@@ -31,7 +31,10 @@ pub fn run(
 const LOG_BUDGET_BYTES: u64 = 4 << 30;
 
 /// Simulates `scenario` and writes every artefact into `out`, atomically per file.
-pub fn simulate_into(scenario: Scenario, out: &Path) -> anyhow::Result<MissionSummary> {
+pub fn simulate_into(
+    scenario: Scenario,
+    out: &Path,
+) -> anyhow::Result<(MissionSummary, twindrive_log::MissionLog)> {
     let needed = scenario.log_size_bytes();
     if needed > LOG_BUDGET_BYTES {
         bail!(
@@ -71,7 +74,7 @@ pub fn simulate_into(scenario: Scenario, out: &Path) -> anyhow::Result<MissionSu
     figures::mission_figures(&log, &world, staging.dir()).context("drawing figures")?;
     staging.commit()?;
     tracing::info!(dir = %out.display(), elapsed_s = started.elapsed().as_secs_f64(), "wrote results");
-    Ok(summary)
+    Ok((summary, log))
 }
 
 pub fn print_summary(s: &MissionSummary, out: &Path) -> anyhow::Result<()> {
