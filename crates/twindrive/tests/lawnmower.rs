@@ -18,7 +18,7 @@ use twindrive_kinematics::DiffDriveParams;
 const POOR: [f64; 3] = [0.205, 0.225, 0.34];
 const NOMINAL: [f64; 3] = [0.215, 0.215, 0.365];
 /// SOURCE.md: t_optitrack = t_unix − 1520174117.0764 − 24.73 s.
-const SOURCE_OFFSET_S: f64 = -1_520_174_117.0764 - 24.73;
+const SOURCE_OFFSET_S: f64 = -1_520_174_117.076_4 - 24.73;
 const FILTER_ARGS: [&str; 6] = [
     "--wheel-noise",
     "0.01",
