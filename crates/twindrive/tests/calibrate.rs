@@ -1,0 +1,353 @@
+//! `twindrive calibrate` end to end: simulator logs, generic CSVs with an
+//! unknown clock offset, the degenerate-drive warning and bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const TRUTH: [f64; 3] = [0.0652, 0.0665, 0.2678];
+const SIM_NOISE: [&str; 6] = [
+    "--position-std-m",
+    "0.001",
+    "--heading-std-rad",
+    "0.002",
+    "--wheel-noise",
+    "1e-6",
+];
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn twindrive(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twindrive"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn simulate(scenario: &Path, out: &Path, duration: &str) {
+    let o = twindrive(&[
+        "simulate",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--duration-s",
+        duration,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}
+
+fn calibrate(args: &[&str]) -> (Output, Option<serde_json::Value>, PathBuf) {
+    let out = args
+        .iter()
+        .position(|a| *a == "--out")
+        .map(|i| PathBuf::from(args[i + 1]))
+        .unwrap();
+    let mut all = vec!["calibrate"];
+    all.extend_from_slice(args);
+    let o = twindrive(&all);
+    let json = std::fs::read(&out)
+        .ok()
+        .map(|b| serde_json::from_slice(&b).unwrap());
+    (o, json, out)
+}
+
+fn params(v: &serde_json::Value) -> [f64; 3] {
+    ["left_diameter_m", "right_diameter_m", "wheelbase_m"].map(|k| v[k].as_f64().unwrap())
+}
+
+#[test]
+fn a_simulated_log_directory_is_calibrated() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = tmp.path().join("sim");
+    simulate(
+        &repo().join("scenarios/calibration_drive.toml"),
+        &sim,
+        "130",
+    );
+    let out = tmp.path().join("res/calib.json");
+    let mut args = vec![sim.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(&SIM_NOISE);
+    let (o, json, _) = calibrate(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let j = json.unwrap();
+    let p = params(&j);
+    for i in 0..3 {
+        assert!((p[i] / TRUTH[i] - 1.0).abs() < 1e-3, "{p:?}");
+    }
+    assert_eq!(j["method"], "smoother");
+    assert_eq!(j["identifiability"]["well_determined"], true);
+    assert!(
+        j["cross_check"]["max_relative_difference"]
+            .as_f64()
+            .unwrap()
+            < 1e-3
+    );
+    assert!(j["wheelbase_std_m"].as_f64().unwrap() > 0.0);
+    let dir = tmp.path().join("res");
+    for f in [
+        "calib_left_diameter.svg",
+        "calib_right_diameter.png",
+        "calib_wheelbase.svg",
+        "calib_innovations.png",
+        "calib_reference.tum",
+        "calib_dead_reckoning_initial.tum",
+        "calib_dead_reckoning_calibrated.tum",
+    ] {
+        assert!(dir.join(f).is_file(), "missing {f}");
+    }
+    // The calibrated dead reckoning ends nearer the reference than the initial one.
+    let last = |f: &str| -> (f64, f64) {
+        let t = std::fs::read_to_string(dir.join(f)).unwrap();
+        let v: Vec<f64> = t
+            .lines()
+            .last()
+            .unwrap()
+            .split(' ')
+            .map(|x| x.parse().unwrap())
+            .collect();
+        (v[1], v[2])
+    };
+    let (r, i, c) = (
+        last("calib_reference.tum"),
+        last("calib_dead_reckoning_initial.tum"),
+        last("calib_dead_reckoning_calibrated.tum"),
+    );
+    let d = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).hypot(a.1 - b.1);
+    assert!(
+        d(c, r) * 10.0 < d(i, r),
+        "calibrated {} vs initial {}",
+        d(c, r),
+        d(i, r)
+    );
+}
+
+/// Writes the log's encoders (ticks, or wheel speeds) and tracker poses as
+/// generic CSVs, the encoder clock shifted by `shift` seconds.
+fn export_csv(sim: &Path, dir: &Path, shift: f64, speeds: bool) -> (PathBuf, PathBuf) {
+    let log = twindrive_log::read_log_dir(sim).unwrap();
+    let mut enc = String::from(if speeds {
+        "t,left_rad_s,right_rad_s\n"
+    } else {
+        "t,left_ticks,right_ticks\n"
+    });
+    let mut pose = String::from("t,x,y,theta\n");
+    for s in &log.steps {
+        if speeds {
+            enc.push_str(&format!(
+                "{},{},{}\n",
+                s.t_s() - shift,
+                s.wheel_rad_s[0],
+                -s.wheel_rad_s[1]
+            ));
+        } else if let Some([l, r]) = s.encoder_ticks {
+            enc.push_str(&format!("{},{l},{}\n", s.t_s() - shift, -r));
+        }
+        if let Some(p) = s.tracker {
+            pose.push_str(&format!(
+                "{},{},{},{}\n",
+                s.t_s(),
+                p.x_m,
+                p.y_m,
+                p.heading_rad
+            ));
+        }
+    }
+    let (e, p) = (dir.join("enc.csv"), dir.join("pose.csv"));
+    std::fs::write(&e, enc).unwrap();
+    std::fs::write(&p, pose).unwrap();
+    (e, p)
+}
+
+#[test]
+fn generic_csvs_with_an_unknown_clock_offset_and_a_backwards_counter() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = tmp.path().join("sim");
+    simulate(
+        &repo().join("scenarios/calibration_drive.toml"),
+        &sim,
+        "130",
+    );
+    for speeds in [false, true] {
+        let (e, p) = export_csv(&sim, tmp.path(), 1234.5, speeds);
+        let out = tmp.path().join("calib.json");
+        let mut args = vec![
+            "--encoders",
+            e.to_str().unwrap(),
+            "--poses",
+            p.to_str().unwrap(),
+            "--initial",
+            "0.066,0.066,0.26",
+            "--right-sign",
+            "-1",
+            "--time-offset",
+            "auto",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if !speeds {
+            args.extend_from_slice(&["--ticks-per-rev", "512"]);
+        }
+        args.extend_from_slice(&SIM_NOISE);
+        let (o, json, _) = calibrate(&args);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let j = json.unwrap();
+        assert!(
+            (j["clock_offset_s"].as_f64().unwrap() - 1234.5).abs() < 0.02,
+            "{}",
+            j["clock_offset_s"]
+        );
+        assert_eq!(j["clock_offset_source"], "auto");
+        let p = params(&j);
+        for i in 0..3 {
+            assert!(
+                (p[i] / TRUTH[i] - 1.0).abs() < 2e-3,
+                "speeds {speeds}: {p:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_single_circle_gets_the_warning() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text_in = std::fs::read_to_string(repo().join("scenarios/calibration_drive.toml")).unwrap();
+    let start = text_in.find("segments = [").unwrap();
+    let one = format!(
+        "{}segments = [{{ duration_s = 60.0, left_rad_s = 6.0, right_rad_s = 4.0 }}]\n",
+        &text_in[..start]
+    );
+    let scenario = tmp.path().join("circle.toml");
+    std::fs::write(&scenario, one).unwrap();
+    let sim = tmp.path().join("sim");
+    simulate(&scenario, &sim, "60");
+    let out = tmp.path().join("calib.json");
+    let mut args = vec![sim.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(&SIM_NOISE);
+    let (o, json, _) = calibrate(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    assert!(
+        stdout.contains("WARNING: this drive cannot separate the parameters"),
+        "{stdout}"
+    );
+    assert_eq!(json.unwrap()["identifiability"]["well_determined"], false);
+}
+
+/// Runs calibrate on hand-written CSVs and checks the clean failure.
+fn rejected(enc: &str, pose: &str, extra: &[&str], expect: &[&str]) {
+    let tmp = tempfile::tempdir().unwrap();
+    let (e, p) = (tmp.path().join("enc.csv"), tmp.path().join("pose.csv"));
+    std::fs::write(&e, enc).unwrap();
+    std::fs::write(&p, pose).unwrap();
+    let out = tmp.path().join("calib.json");
+    let mut args = vec![
+        "--encoders",
+        e.to_str().unwrap(),
+        "--poses",
+        p.to_str().unwrap(),
+        "--ticks-per-rev",
+        "512",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    if !extra.contains(&"--initial") {
+        args.extend_from_slice(&["--initial", "0.066,0.066,0.26"]);
+    }
+    let (o, json, _) = calibrate(&args);
+    let stderr = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    for x in expect {
+        assert!(stderr.contains(x), "expected `{x}` in {stderr}");
+    }
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(json.is_none(), "an output file was written");
+    let left: Vec<String> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left.len(), 2, "{left:?}");
+}
+
+fn good_encoders() -> String {
+    let mut s = String::from("t,left_ticks,right_ticks\n");
+    for k in 0..500 {
+        s.push_str(&format!("{},{},{}\n", k as f64 * 0.02, k * 3, k * 4));
+    }
+    s
+}
+
+fn good_poses() -> String {
+    let mut s = String::from("t,x,y,theta\n");
+    for k in 0..500 {
+        s.push_str(&format!("{},{},0,0\n", k as f64 * 0.02, k as f64 * 0.001));
+    }
+    s
+}
+
+#[test]
+fn bad_inputs_fail_cleanly() {
+    let (enc, pose) = (good_encoders(), good_poses());
+    rejected(
+        &enc.replace("\n0.04,6,8\n", "\n0.02,6,8\n"),
+        &pose,
+        &[],
+        &["enc.csv, line 4, column `t`: duplicate timestamp 0.02 (also on line 3)"],
+    );
+    rejected(
+        &enc.replace("\n0.04,6,8\n", "\n0.01,6,8\n"),
+        &pose,
+        &[],
+        &["enc.csv, line 4, column `t`: time 0.01 goes back"],
+    );
+    rejected(
+        &enc,
+        &pose.replace("\n0.04,0.002,0,0\n", "\n0.04,NaN,0,0\n"),
+        &[],
+        &["pose.csv, line 4, column `x`: expected a finite number, found `NaN`"],
+    );
+    rejected(
+        &enc.replace("\n0.04,6,8\n", "\n0.04,six,8\n"),
+        &pose,
+        &[],
+        &["enc.csv, line 4, column `left_ticks`: expected an integer tick count, found `six`"],
+    );
+    rejected(
+        &enc.replace("right_ticks", "rite_ticks"),
+        &pose,
+        &[],
+        &["enc.csv, line 1: missing column `right_ticks`"],
+    );
+    rejected("", &pose, &[], &["enc.csv: is empty"]);
+    rejected(&enc, "", &[], &["pose.csv: is empty"]);
+    rejected(
+        &enc,
+        &pose,
+        &["--time-offset", "1000"],
+        &["do not overlap in time", "--time-offset auto"],
+    );
+    rejected(
+        &enc,
+        &pose,
+        &["--initial", "0.066,-0.066,0.26"],
+        &["--initial: the right diameter must be a finite number > 0"],
+    );
+    rejected(
+        &enc,
+        &pose,
+        &["--initial", "0.066,0.066"],
+        &["--initial: expected three numbers DL,DR,B"],
+    );
+    rejected(
+        &enc,
+        &pose,
+        &["--left-sign", "2"],
+        &["--left-sign must be 1 or -1"],
+    );
+}
