@@ -254,8 +254,14 @@ fn normal_equations(
         let Some((r, j, c)) = window_terms(w, wheels, params, &cfg.noise) else {
             continue;
         };
-        let Some(chol) = c.cholesky() else { continue };
-        let c_inv_r = chol.solve(&r);
+        // 3x3: closed-form inverse after a positive-definiteness check.
+        let Some(c_inv) = c
+            .try_inverse()
+            .filter(|_| crate::ekf::is_positive_definite(&c))
+        else {
+            continue;
+        };
+        let c_inv_r = c_inv * r;
         let m2 = r.dot(&c_inv_r);
         let m = m2.sqrt();
         // Huber IRLS weight.
@@ -264,7 +270,7 @@ fn normal_equations(
         } else {
             cfg.huber_k / m
         };
-        let c_inv_j = chol.solve(&j);
+        let c_inv_j = c_inv * j;
         h += weight * j.transpose() * c_inv_j;
         g += weight * j.transpose() * c_inv_r;
         cost += if m <= cfg.huber_k {
@@ -324,13 +330,16 @@ pub fn fit(
         }
         let (h2, g2, cost2, _, _, _) = normal_equations(&ws, wheels, candidate, cfg);
         if cost2 <= cost {
-            let rel = (0..3)
-                .map(|i| (step[i] / params[i]).abs())
-                .fold(0.0, f64::max);
+            // Converged once the step is tiny against the parameters'
+            // own uncertainty (or the cost stops moving).
+            let tiny = h2
+                .try_inverse()
+                .is_some_and(|c| (0..3).all(|i| step[i].abs() < 1e-3 * c[(i, i)].max(0.0).sqrt()));
+            let flat = cost - cost2 <= 1e-12 * cost.abs().max(1.0);
             params = candidate;
             (h, g, cost) = (h2, g2, cost2);
             lambda = (lambda * 0.3).max(1e-9);
-            if rel < 1e-10 {
+            if tiny || flat {
                 break;
             }
         } else {

@@ -12,7 +12,9 @@
 
 use nalgebra::{Matrix2, Matrix3, SMatrix, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
-use twindrive_kinematics::{Mat6, Mat6x2, StateVec, step_augmented, step_jacobians, wrap_angle};
+#[cfg(test)]
+use twindrive_kinematics::step_jacobians;
+use twindrive_kinematics::{Mat6, Mat6x2, StateVec, step_with_jacobians, wrap_angle};
 
 /// The estimate: mean and covariance (the filter's contract).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -184,8 +186,8 @@ impl AugmentedEkf {
     /// lasting `dt_s`. Returns the state Jacobian `F` of the step.
     #[inline]
     pub fn predict(&mut self, left_rad: f64, right_rad: f64, dt_s: f64) -> Mat6 {
-        let (f, g) = step_jacobians(&self.est.state, left_rad, right_rad);
-        self.est.state = step_augmented(&self.est.state, left_rad, right_rad);
+        let (next, f, g) = step_with_jacobians(&self.est.state, left_rad, right_rad);
+        self.est.state = next;
         let q_left = self.noise.wheel_rad2_per_rad * left_rad.abs() + self.noise.wheel_floor_rad2;
         let q_right = self.noise.wheel_rad2_per_rad * right_rad.abs() + self.noise.wheel_floor_rad2;
         let p = &mut self.est.covariance;
@@ -246,12 +248,17 @@ impl AugmentedEkf {
         let p = &self.est.covariance;
         // H selects the first M state components.
         let s_mat: SMatrix<f64, M, M> = p.fixed_view::<M, M>(0, 0) + r;
-        let chol = s_mat.cholesky().ok_or(FilterError::NotPositiveDefinite {
-            t_s,
-            what: "innovation covariance",
-        })?;
-        let s_inv_nu = chol.solve(&nu);
-        let nis = nu.dot(&s_inv_nu);
+        // M is 2 or 3: a closed-form inverse beats a general factorisation.
+        let s_inv = match s_mat.try_inverse() {
+            Some(inv) if is_positive_definite(&s_mat) => inv,
+            _ => {
+                return Err(FilterError::NotPositiveDefinite {
+                    t_s,
+                    what: "innovation covariance",
+                });
+            }
+        };
+        let nis = nu.dot(&(s_inv * nu));
         let k_dof = M - 2;
         if nis > self.gate_chi2[k_dof] {
             self.stats.rejected += 1;
@@ -273,10 +280,14 @@ impl AugmentedEkf {
         self.reanchored_since_accept = false;
         // K = P Hᵀ S⁻¹ = P[:, 0..M] S⁻¹.
         let pht: SMatrix<f64, 6, M> = p.fixed_view::<6, M>(0, 0).into_owned();
-        let k: SMatrix<f64, 6, M> = chol.solve(&pht.transpose()).transpose();
+        let k: SMatrix<f64, 6, M> = pht * s_inv;
         self.est.state += k * nu;
         self.est.covariance = joseph(p, &k, &r);
-        check_covariance(&self.est.covariance, t_s)?;
+        check_covariance(
+            &self.est.covariance,
+            t_s,
+            self.stats.accepted % FULL_CHECK_EVERY == 0,
+        )?;
 
         self.stats.accepted += 1;
         self.stats.nis_sum += nis;
@@ -309,24 +320,39 @@ impl AugmentedEkf {
     }
 }
 
-/// `F P Fᵀ` for `F = [[A, B], [0, I]]` (3x3 blocks), evaluated by blocks.
+/// `F P Fᵀ` for `F = [[A, B], [0, I]]` (3x3 blocks), evaluated by blocks;
+/// only the changed blocks are computed, the pose block as a lower triangle
+/// mirrored (the result is exactly symmetric).
 #[inline]
 pub(crate) fn propagate(f: &Mat6, p: &Mat6) -> Mat6 {
-    let a: Matrix3<f64> = f.fixed_view::<3, 3>(0, 0).into_owned();
-    let b: Matrix3<f64> = f.fixed_view::<3, 3>(0, 3).into_owned();
-    let ppp: Matrix3<f64> = p.fixed_view::<3, 3>(0, 0).into_owned();
-    let ppq: Matrix3<f64> = p.fixed_view::<3, 3>(0, 3).into_owned();
-    let pqq: Matrix3<f64> = p.fixed_view::<3, 3>(3, 3).into_owned();
-    // Top row of F P: [A Ppp + B Pqp, A Ppq + B Pqq].
-    let top_left = a * ppp + b * ppq.transpose();
-    let top_right = a * ppq + b * pqq;
-    let new_pp = top_left * a.transpose() + top_right * b.transpose();
+    // Top block row of F P: T = [A Ppp + B Pqp, A Ppq + B Pqq] (3x6).
+    let mut t = [[0.0f64; 6]; 3];
+    for (i, row) in t.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            let mut acc = 0.0;
+            for k in 0..6 {
+                acc += f[(i, k)] * p[(k, j)];
+            }
+            *v = acc;
+        }
+    }
     let mut out = *p;
-    let sym = 0.5 * (new_pp + new_pp.transpose());
-    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&sym);
-    out.fixed_view_mut::<3, 3>(0, 3).copy_from(&top_right);
-    out.fixed_view_mut::<3, 3>(3, 0)
-        .copy_from(&top_right.transpose());
+    // New pose block: T Fᵀ restricted to the pose rows (lower triangle).
+    for i in 0..3 {
+        for j in 0..=i {
+            let mut acc = 0.0;
+            for k in 0..6 {
+                acc += t[i][k] * f[(j, k)];
+            }
+            out[(i, j)] = acc;
+            out[(j, i)] = acc;
+        }
+        // Pose-parameter block: T[:, 3..6] (the parameter block of F is I).
+        for j in 3..6 {
+            out[(i, j)] = t[i][j];
+            out[(j, i)] = t[i][j];
+        }
+    }
     out
 }
 
@@ -344,35 +370,101 @@ fn add_input_noise(p: &mut Mat6, g: &Mat6x2, q_left: f64, q_right: f64) {
     }
 }
 
-/// Joseph form `(I − K H) P (I − K H)ᵀ + K R Kᵀ` with `H = [I_M 0]`.
+/// Joseph form `(I − K H) P (I − K H)ᵀ + K R Kᵀ` with `H = [I_M 0]`,
+/// evaluated as that product with the structure of `A = I − K H` (it differs
+/// from I only in its first M columns), lower triangle mirrored.
 #[inline]
 fn joseph<const M: usize>(p: &Mat6, k: &SMatrix<f64, 6, M>, r: &SMatrix<f64, M, M>) -> Mat6 {
-    // A = I − K H differs from I only in its first M columns, so
     // A P = P − K P[0..M, :].
-    let top: SMatrix<f64, M, 6> = p.fixed_view::<M, 6>(0, 0).into_owned();
-    let ap: Mat6 = p - k * top;
-    // (A P) Aᵀ = AP − (AP)[:, 0..M] Kᵀ.
-    let ap_left: SMatrix<f64, 6, M> = ap.fixed_view::<6, M>(0, 0).into_owned();
-    let mut out = ap - ap_left * k.transpose() + k * r * k.transpose();
-    // Remove the rounding asymmetry.
-    out = 0.5 * (out + out.transpose());
+    let mut ap = [[0.0f64; 6]; 6];
+    for (i, row) in ap.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            let mut acc = p[(i, j)];
+            for m in 0..M {
+                acc -= k[(i, m)] * p[(m, j)];
+            }
+            *v = acc;
+        }
+    }
+    // K R (R is diagonal for our measurements, but take it whole).
+    let kr = k * r;
+    let mut out = Mat6::zeros();
+    for i in 0..6 {
+        for j in 0..=i {
+            // (A P Aᵀ)_ij = (AP)_ij − Σ_m (AP)_im K_jm;  + (K R Kᵀ)_ij.
+            let mut acc = ap[i][j];
+            for m in 0..M {
+                acc += kr[(i, m)] * k[(j, m)] - ap[i][m] * k[(j, m)];
+            }
+            out[(i, j)] = acc;
+            out[(j, i)] = acc;
+        }
+    }
     out
 }
 
-fn check_covariance(p: &Mat6, t_s: f64) -> Result<(), FilterError> {
+/// The full positive-definiteness test runs on every this many accepted
+/// updates (and the first); the cheap diagonal test runs on all of them.
+const FULL_CHECK_EVERY: u64 = 16;
+
+fn check_covariance(p: &Mat6, t_s: f64, full: bool) -> Result<(), FilterError> {
+    // NaN and infinities spread into the diagonal within a step.
+    if !(0..6).all(|i| p[(i, i)] > 0.0 && p[(i, i)].is_finite()) {
+        if p.iter().any(|v| !v.is_finite()) {
+            return Err(FilterError::NonFinite {
+                t_s,
+                what: "covariance",
+            });
+        }
+        return Err(FilterError::NotPositiveDefinite {
+            t_s,
+            what: "state covariance",
+        });
+    }
+    if !full {
+        return Ok(());
+    }
     if p.iter().any(|v| !v.is_finite()) {
         return Err(FilterError::NonFinite {
             t_s,
             what: "covariance",
         });
     }
-    if p.cholesky().is_none() {
+    if !is_positive_definite(p) {
         return Err(FilterError::NotPositiveDefinite {
             t_s,
             what: "state covariance",
         });
     }
     Ok(())
+}
+
+/// Symmetric positive-definiteness by an in-place LDLᵀ factorisation that
+/// stops at the first non-positive pivot (the matrix is assumed symmetric;
+/// only its lower triangle is read).
+#[inline]
+pub(crate) fn is_positive_definite<const N: usize>(a: &SMatrix<f64, N, N>) -> bool {
+    let mut l = [[0.0f64; N]; N];
+    let mut d = [0.0f64; N];
+    for j in 0..N {
+        let mut dj = a[(j, j)];
+        for k in 0..j {
+            dj -= l[j][k] * l[j][k] * d[k];
+        }
+        // Written to also reject NaN.
+        if !(dj > 0.0) {
+            return false;
+        }
+        d[j] = dj;
+        for i in j + 1..N {
+            let mut v = a[(i, j)];
+            for k in 0..j {
+                v -= l[i][k] * l[j][k] * d[k];
+            }
+            l[i][j] = v / dj;
+        }
+    }
+    true
 }
 
 /// The normalised estimation error squared of `est` against the truth, over
@@ -444,6 +536,20 @@ mod tests {
             let a = Mat6::identity() - k * dense_h::<3>();
             let dense_joseph = a * p * a.transpose() + k * r * k.transpose();
             assert!((joseph(&p, &k, &r) - dense_joseph).abs().max() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn positive_definiteness_test_agrees_with_cholesky() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for k in 0..500 {
+            let mut m = random_spd(&mut rng);
+            if k % 2 == 0 {
+                // Push one eigenvalue below zero.
+                let v = nalgebra::SVector::<f64, 6>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+                m -= v * v.transpose() * rng.random_range(0.0..50.0);
+            }
+            assert_eq!(is_positive_definite(&m), m.cholesky().is_some(), "case {k}");
         }
     }
 

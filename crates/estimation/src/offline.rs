@@ -57,6 +57,7 @@ pub fn run_filter(
         init.covariance[(2, 2)] = 0.3f64.powi(2);
     }
     let mut cal = OnlineCalibrator::new(init, first.t_s, config, keep_history);
+    cal.reserve(poses.len());
     // Feed both streams in time order, from the first pose on (earlier
     // encoder samples only anchor the wheel angles).
     let (mut i, mut j) = (0, 1);

@@ -155,6 +155,17 @@ impl OnlineCalibrator {
     }
 
     /// The kept history (if asked for in [`OnlineCalibrator::new`]).
+    /// Reserves room in the history for `nodes` more fused poses.
+    pub fn reserve(&mut self, nodes: usize) {
+        if let Some(h) = &mut self.history {
+            h.t_s.reserve(nodes);
+            h.filtered.reserve(nodes);
+            h.predicted.reserve(nodes);
+            h.transition.reserve(nodes);
+            h.innovations.reserve(nodes);
+        }
+    }
+
     pub fn into_history(self) -> Option<FilterHistory> {
         self.history
     }

@@ -63,11 +63,36 @@ pub fn step_augmented(state: &StateVec, left_rad: f64, right_rad: f64) -> StateV
     next
 }
 
+/// [`step_augmented`] and [`step_jacobians`] in one go (the trigonometry once).
+pub fn step_with_jacobians(
+    state: &StateVec,
+    left_rad: f64,
+    right_rad: f64,
+) -> (StateVec, Mat6, Mat6x2) {
+    let t = terms(state, left_rad, right_rad);
+    let mut next = *state;
+    next[0] += t.chord * t.cos_mid;
+    next[1] += t.chord * t.sin_mid;
+    next[2] += 2.0 * t.half_turn;
+    let (f, g) = jacobians_from_terms(state, left_rad, right_rad, &t);
+    (next, f, g)
+}
+
 /// Jacobians of [`step_augmented`]: `F = ∂f/∂state` (6x6) and
 /// `G = ∂f/∂[left_rad, right_rad]` (6x2), the latter for mapping wheel-travel
 /// noise into the state.
 pub fn step_jacobians(state: &StateVec, left_rad: f64, right_rad: f64) -> (Mat6, Mat6x2) {
     let t = terms(state, left_rad, right_rad);
+    jacobians_from_terms(state, left_rad, right_rad, &t)
+}
+
+#[inline]
+fn jacobians_from_terms(
+    state: &StateVec,
+    left_rad: f64,
+    right_rad: f64,
+    t: &StepTerms,
+) -> (Mat6, Mat6x2) {
     let (dl, dr, b) = (state[3], state[4], state[5]);
 
     // Column of partials of (x', y', θ') for a variable with the given
@@ -190,6 +215,18 @@ mod tests {
             let info = format!("seed {seed}, case {case}, state {state:?}, l {l}, r {r}");
             assert_close("F", fa.as_slice(), fn_.as_slice(), &info);
             assert_close("G", ga.as_slice(), gn.as_slice(), &info);
+        }
+    }
+
+    #[test]
+    fn combined_step_equals_the_separate_ones() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        for _ in 0..100 {
+            let s = random_state(&mut rng);
+            let (l, r) = (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let (next, f, g) = step_with_jacobians(&s, l, r);
+            assert_eq!(next, step_augmented(&s, l, r));
+            assert_eq!((f, g), step_jacobians(&s, l, r));
         }
     }
 

@@ -16,7 +16,9 @@ pub use arc::{
     wheel_travel_m,
 };
 pub use inverse::{body_velocity, wheel_speeds};
-pub use jacobian::{AugmentedState, Mat6, Mat6x2, StateVec, step_augmented, step_jacobians};
+pub use jacobian::{
+    AugmentedState, Mat6, Mat6x2, StateVec, step_augmented, step_jacobians, step_with_jacobians,
+};
 pub use params::{DiffDriveParams, EncoderSpec, ParamError};
 
 use serde::{Deserialize, Serialize};

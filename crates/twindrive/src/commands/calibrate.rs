@@ -185,6 +185,7 @@ pub fn calibrate(
         );
     }
 
+    let stage = Instant::now();
     let keep_history = true;
     let run = run_filter(
         &job.wheels,
@@ -200,6 +201,11 @@ pub fn calibrate(
         Method::Smoother => smooth(&run)?,
         _ => history.filtered.clone(),
     };
+    tracing::info!(
+        elapsed_s = stage.elapsed().as_secs_f64(),
+        "filter (and smoother)"
+    );
+    let stage = Instant::now();
     let (ekf, ekf_std) = params_of(&StateAndCovariance {
         state: run.estimate.state,
         covariance: run.estimate.covariance,
@@ -210,8 +216,21 @@ pub fn calibrate(
         noise: job.filter.noise,
         ..BatchConfig::default()
     };
-    let b = batch::fit(&job.wheels, &poses, job.initial, &batch_cfg)?;
+    // The batch fit converges to its own optimum from any nearby start; it
+    // starts from the filter's estimate unless it is the reported method
+    // (then from the initial guess, like the filter).
+    let batch_start = if job.method == Method::Batch {
+        job.initial
+    } else {
+        ekf
+    };
+    let b = batch::fit(&job.wheels, &poses, batch_start, &batch_cfg)?;
 
+    tracing::info!(
+        elapsed_s = stage.elapsed().as_secs_f64(),
+        iterations = b.iterations,
+        "batch"
+    );
     let (params, std) = match job.method {
         Method::Batch => (b.params, b.std),
         _ => params_of(nodes.last().expect("one node at least")),
@@ -432,11 +451,14 @@ fn parse_initial(text: &str) -> anyhow::Result<[f64; 3]> {
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let started = Instant::now();
     let job = resolve(args)?;
+    tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "read inputs");
     let total = job.wheels.len() + job.poses.len();
     let bar = progress::bar(total as u64, "calibrating");
     let (report, artefacts) = calibrate(job, |done, _| bar.set_position(done as u64))?;
     bar.finish_and_clear();
+    let stage = Instant::now();
     write_outputs(&report, &artefacts, &args.out)?;
+    tracing::info!(elapsed_s = stage.elapsed().as_secs_f64(), "wrote outputs");
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "calibrated");
     print_report(&report, &args.out)
 }
