@@ -451,8 +451,8 @@ pub(crate) fn is_positive_definite<const N: usize>(a: &SMatrix<f64, N, N>) -> bo
         for k in 0..j {
             dj -= l[j][k] * l[j][k] * d[k];
         }
-        // Written to also reject NaN.
-        if !(dj > 0.0) {
+        // Also rejects NaN.
+        if dj.is_nan() || dj <= 0.0 {
             return false;
         }
         d[j] = dj;
