@@ -250,7 +250,7 @@ impl AugmentedEkf {
         let s_mat: SMatrix<f64, M, M> = p.fixed_view::<M, M>(0, 0) + r;
         // M is 2 or 3: a closed-form inverse beats a general factorisation.
         let s_inv = match s_mat.try_inverse() {
-            Some(inv) if is_positive_definite(&s_mat) => inv,
+            Some(inv) if leading_minors_positive(&s_mat) => inv,
             _ => {
                 return Err(FilterError::NotPositiveDefinite {
                     t_s,
@@ -437,6 +437,23 @@ fn check_covariance(p: &Mat6, t_s: f64, full: bool) -> Result<(), FilterError> {
         });
     }
     Ok(())
+}
+
+/// Sylvester's criterion for the 2x2 and 3x3 innovation covariances (no
+/// divisions; larger sizes fall back to [`is_positive_definite`]).
+#[inline]
+fn leading_minors_positive<const N: usize>(s: &SMatrix<f64, N, N>) -> bool {
+    let minor2 = || s[(0, 0)] * s[(1, 1)] - s[(0, 1)] * s[(1, 0)];
+    match N {
+        2 => s[(0, 0)] > 0.0 && minor2() > 0.0,
+        3 => {
+            let det = s[(0, 0)] * (s[(1, 1)] * s[(2, 2)] - s[(1, 2)] * s[(2, 1)])
+                - s[(0, 1)] * (s[(1, 0)] * s[(2, 2)] - s[(1, 2)] * s[(2, 0)])
+                + s[(0, 2)] * (s[(1, 0)] * s[(2, 1)] - s[(1, 1)] * s[(2, 0)]);
+            s[(0, 0)] > 0.0 && minor2() > 0.0 && det > 0.0
+        }
+        _ => is_positive_definite(s),
+    }
 }
 
 /// Symmetric positive-definiteness by an in-place LDLᵀ factorisation that
