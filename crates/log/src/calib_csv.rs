@@ -112,15 +112,14 @@ fn open<'a>(
             format!("is empty: expected a header {expected} and data rows"),
         ));
     }
-    let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .flexible(false)
-        .from_reader(file);
+    // Cells are trimmed where they are read; trimming whole records in the
+    // reader costs more.
+    let mut reader = csv::ReaderBuilder::new().flexible(false).from_reader(file);
     let names = reader
         .headers()
         .map_err(|e| LogError::format(path, format!("cannot read the header: {e}")))?
         .iter()
-        .map(str::to_owned)
+        .map(|n| n.trim().to_owned())
         .collect();
     Ok((reader, Table { path, names }))
 }

@@ -185,52 +185,25 @@ pub fn calibrate(
         );
     }
 
+    // The filter and the independent batch fit run side by side (two cores),
+    // both from the initial guess.
     let stage = Instant::now();
-    let keep_history = true;
-    let run = run_filter(
-        &job.wheels,
-        &poses,
-        job.initial,
-        job.param_rel_std,
-        job.filter,
-        keep_history,
-        progress,
-    )?;
+    let batch_cfg = BatchConfig { window_s: job.batch_window_s, noise: job.filter.noise, ..BatchConfig::default() };
+    let (run, b) = std::thread::scope(|scope| {
+        let batch = scope.spawn(|| batch::fit(&job.wheels, &poses, job.initial, &batch_cfg));
+        let run = run_filter(&job.wheels, &poses, job.initial, job.param_rel_std, job.filter, true, progress);
+        (run, batch.join())
+    });
+    let run = run?;
+    let b = b.map_err(|_| anyhow::anyhow!("the batch fit panicked"))??;
     let history = run.history.as_ref().expect("kept");
     let nodes: Vec<StateAndCovariance> = match job.method {
         Method::Smoother => smooth(&run)?,
         _ => history.filtered.clone(),
     };
-    tracing::info!(
-        elapsed_s = stage.elapsed().as_secs_f64(),
-        "filter (and smoother)"
-    );
-    let stage = Instant::now();
-    let (ekf, ekf_std) = params_of(&StateAndCovariance {
-        state: run.estimate.state,
-        covariance: run.estimate.covariance,
-    });
+    tracing::info!(elapsed_s = stage.elapsed().as_secs_f64(), batch_iterations = b.iterations, "filter, smoother and batch");
+    let (ekf, ekf_std) = params_of(&StateAndCovariance { state: run.estimate.state, covariance: run.estimate.covariance });
 
-    let batch_cfg = BatchConfig {
-        window_s: job.batch_window_s,
-        noise: job.filter.noise,
-        ..BatchConfig::default()
-    };
-    // The batch fit converges to its own optimum from any nearby start; it
-    // starts from the filter's estimate unless it is the reported method
-    // (then from the initial guess, like the filter).
-    let batch_start = if job.method == Method::Batch {
-        job.initial
-    } else {
-        ekf
-    };
-    let b = batch::fit(&job.wheels, &poses, batch_start, &batch_cfg)?;
-
-    tracing::info!(
-        elapsed_s = stage.elapsed().as_secs_f64(),
-        iterations = b.iterations,
-        "batch"
-    );
     let (params, std) = match job.method {
         Method::Batch => (b.params, b.std),
         _ => params_of(nodes.last().expect("one node at least")),
