@@ -89,6 +89,9 @@ fn a_simulated_log_directory_is_calibrated() {
             < 1e-3
     );
     assert!(j["wheelbase_std_m"].as_f64().unwrap() > 0.0);
+    // The log carries the true pose, so pose NEES is reported, near 3.
+    let nees = j["residuals"]["pose_nees_mean"].as_f64().unwrap();
+    assert!((1.0..6.0).contains(&nees), "pose NEES {nees}");
     let dir = tmp.path().join("res");
     for f in [
         "calib_left_diameter.svg",

@@ -41,6 +41,8 @@ pub struct Job {
     pub param_rel_std: f64,
     pub batch_window_s: f64,
     pub ticks_per_rev: Option<u32>,
+    /// The true pose track, when the log has one (simulations).
+    pub truth: Option<Vec<(f64, Pose)>>,
 }
 
 /// `calib.json`.
@@ -79,6 +81,11 @@ pub struct Residuals {
     /// RMS of the batch end-of-window residuals [x (m), y (m), θ (rad)].
     pub batch_residual_rms: [f64; 3],
     pub batch_windows: usize,
+    /// Simulated logs only (they carry the true pose): mean normalised
+    /// estimation error squared of the pose at the filter's nodes (3 for a
+    /// consistent filter) and the fraction inside the 95 % chi-square interval.
+    pub pose_nees_mean: Option<f64>,
+    pub pose_nees_inside_95_fraction: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -188,10 +195,22 @@ pub fn calibrate(
     // The filter and the independent batch fit run side by side (two cores),
     // both from the initial guess.
     let stage = Instant::now();
-    let batch_cfg = BatchConfig { window_s: job.batch_window_s, noise: job.filter.noise, ..BatchConfig::default() };
+    let batch_cfg = BatchConfig {
+        window_s: job.batch_window_s,
+        noise: job.filter.noise,
+        ..BatchConfig::default()
+    };
     let (run, b) = std::thread::scope(|scope| {
         let batch = scope.spawn(|| batch::fit(&job.wheels, &poses, job.initial, &batch_cfg));
-        let run = run_filter(&job.wheels, &poses, job.initial, job.param_rel_std, job.filter, true, progress);
+        let run = run_filter(
+            &job.wheels,
+            &poses,
+            job.initial,
+            job.param_rel_std,
+            job.filter,
+            true,
+            progress,
+        );
         (run, batch.join())
     });
     let run = run?;
@@ -201,8 +220,15 @@ pub fn calibrate(
         Method::Smoother => smooth(&run)?,
         _ => history.filtered.clone(),
     };
-    tracing::info!(elapsed_s = stage.elapsed().as_secs_f64(), batch_iterations = b.iterations, "filter, smoother and batch");
-    let (ekf, ekf_std) = params_of(&StateAndCovariance { state: run.estimate.state, covariance: run.estimate.covariance });
+    tracing::info!(
+        elapsed_s = stage.elapsed().as_secs_f64(),
+        batch_iterations = b.iterations,
+        "filter, smoother and batch"
+    );
+    let (ekf, ekf_std) = params_of(&StateAndCovariance {
+        state: run.estimate.state,
+        covariance: run.estimate.covariance,
+    });
 
     let (params, std) = match job.method {
         Method::Batch => (b.params, b.std),
@@ -211,6 +237,35 @@ pub fn calibrate(
     let max_relative_difference = (0..3)
         .map(|i| (ekf[i] / b.params[i] - 1.0).abs())
         .fold(0.0, f64::max);
+    let nees: Option<(f64, f64)> = job.truth.as_ref().map(|truth| {
+        let (lo, hi) = (
+            twindrive_estimation::chi2_quantile(3, 0.025),
+            twindrive_estimation::chi2_quantile(3, 0.975),
+        );
+        let values: Vec<f64> = history
+            .t_s
+            .iter()
+            .zip(&nodes)
+            .skip(1)
+            .filter_map(|(t, s)| {
+                let g = twindrive_estimation::dead_reckoning::pose_at(truth, *t)?;
+                let truth_state = twindrive_estimation::StateVec::new(
+                    g.x_m,
+                    g.y_m,
+                    g.heading_rad,
+                    s.state[3],
+                    s.state[4],
+                    s.state[5],
+                );
+                Some(twindrive_estimation::nees(s, &truth_state, &[0, 1, 2]))
+            })
+            .collect();
+        let n = values.len().max(1) as f64;
+        (
+            values.iter().sum::<f64>() / n,
+            values.iter().filter(|v| (lo..=hi).contains(*v)).count() as f64 / n,
+        )
+    });
     let stats = run.stats;
     let report = Report {
         left_diameter_m: params[0],
@@ -235,6 +290,8 @@ pub fn calibrate(
             batch_whitened_rms: b.whitened_rms,
             batch_residual_rms: b.residual_rms,
             batch_windows: b.windows,
+            pose_nees_mean: nees.map(|n| n.0),
+            pose_nees_inside_95_fraction: nees.map(|n| n.1),
         },
         cross_check: CrossCheck {
             ekf,
@@ -306,7 +363,7 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
             bail!("{name} must be 1 or -1, got {s}");
         }
     }
-    let (wheels, poses, default_initial, ticks_per_rev) =
+    let (wheels, poses, default_initial, ticks_per_rev, truth) =
         match (&args.log_dir, &args.encoders, &args.poses) {
             (Some(dir), None, None) => {
                 let log = twindrive_log::read_log_dir(dir)?;
@@ -322,21 +379,34 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
                 {
                     bail!("--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}");
                 }
+                let truth: Vec<(f64, Pose)> = log
+                    .steps
+                    .iter()
+                    .map(|s| (s.t_s(), s.ground_truth))
+                    .collect();
                 (
                     wheels,
                     inputs::poses_from_log(&log),
                     Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
                     Some(tpr),
+                    Some(truth),
                 )
             }
             (None, Some(enc), Some(pose)) => {
-                let e = twindrive_log::calib_csv::read_encoder_csv(enc)?;
-                let p = twindrive_log::calib_csv::read_pose_csv(pose)?;
+                // The two files are read side by side.
+                let (e, p) = std::thread::scope(|scope| {
+                    let e = scope.spawn(|| twindrive_log::calib_csv::read_encoder_csv(enc));
+                    let p = twindrive_log::calib_csv::read_pose_csv(pose);
+                    (e.join(), p)
+                });
+                let e = e.map_err(|_| anyhow::anyhow!("reading the encoder log panicked"))??;
+                let p = p?;
                 (
                     inputs::wheels_from_csv(&e, enc, args.ticks_per_rev, signs)?,
                     inputs::poses_from_csv(&p),
                     None,
                     args.ticks_per_rev,
+                    None,
                 )
             }
             _ => bail!(
@@ -388,6 +458,7 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
         param_rel_std: 0.1,
         batch_window_s: positive("--batch-window-s", args.batch_window_s)?,
         ticks_per_rev,
+        truth,
     })
 }
 
@@ -456,23 +527,34 @@ pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Re
     staging.write_with(&file_name, |w| {
         serde_json::to_writer_pretty(w, report).map_err(Into::into)
     })?;
-    for (suffix, track) in [
-        ("reference", &art.reference),
-        ("dead_reckoning_initial", &art.dead_reckoning_initial),
-        ("dead_reckoning_calibrated", &art.dead_reckoning_calibrated),
-    ] {
-        staging.write_with(&format!("{stem}_{suffix}.tum"), |w| {
-            let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
-            twindrive_log::write_tum(track.iter().map(|(t, p)| (ns(*t), *p)), w).map_err(Into::into)
-        })?;
-    }
-    figures::calibration_figures(
-        &art.trace,
-        art.reported,
-        &art.innovations,
-        staging.dir(),
-        &stem,
-    )?;
+    // Trajectories on one core, figures on the other.
+    let tracks = || -> anyhow::Result<()> {
+        for (suffix, track) in [
+            ("reference", &art.reference),
+            ("dead_reckoning_initial", &art.dead_reckoning_initial),
+            ("dead_reckoning_calibrated", &art.dead_reckoning_calibrated),
+        ] {
+            staging.write_with(&format!("{stem}_{suffix}.tum"), |w| {
+                let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
+                twindrive_log::write_tum(track.iter().map(|(t, p)| (ns(*t), *p)), w)
+                    .map_err(Into::into)
+            })?;
+        }
+        Ok(())
+    };
+    let (tracks_done, figures_done) = std::thread::scope(|scope| {
+        let handle = scope.spawn(tracks);
+        let figs = figures::calibration_figures(
+            &art.trace,
+            art.reported,
+            &art.innovations,
+            staging.dir(),
+            &stem,
+        );
+        (handle.join(), figs)
+    });
+    tracks_done.map_err(|_| anyhow::anyhow!("writing the trajectories panicked"))??;
+    figures_done?;
     staging.commit()
 }
 

@@ -55,6 +55,13 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
         param_rel_std: 0.1,
         batch_window_s: 1.0,
         ticks_per_rev: Some(cal_log.header.ticks_per_rev),
+        truth: Some(
+            cal_log
+                .steps
+                .iter()
+                .map(|s| (s.t_s(), s.ground_truth))
+                .collect(),
+        ),
     };
     let bar = progress::bar((job.wheels.len() + job.poses.len()) as u64, "calibrating");
     let (report, artefacts) = calibrate::calibrate(job, |d, _| bar.set_position(d as u64))?;

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# End-to-end `twindrive calibrate` on a one-hour log (encoders at 50 Hz,
+# tracker at 120 Hz, generic CSVs), CSV parsing and all outputs included.
+# Usage: bench/calibrate_one_hour.sh   (from any directory)
+set -euo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$ROOT"
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+
+cargo build --release -q -p twindrive
+cargo run --release -q -p twindrive-estimation --example one_hour_log -- "$WORK/log" >&2
+runs=()
+for i in 1 2 3; do
+    start=$EPOCHREALTIME
+    ./target/release/twindrive calibrate --encoders "$WORK/log/encoders.csv" --poses "$WORK/log/poses.csv" \
+        --ticks-per-rev 512 --initial 0.066,0.066,0.26 --position-std-m 0.001 --heading-std-rad 0.002 \
+        --wheel-noise 1e-6 --out "$WORK/out/calib.json" > /dev/null
+    end=$EPOCHREALTIME
+    runs+=("$(awk -v a="$start" -v b="$end" 'BEGIN { printf "%.3f", b - a }')")
+done
+printf 'calibrate_one_hour_s %s\n' "${runs[@]}"
