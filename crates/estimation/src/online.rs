@@ -104,7 +104,8 @@ pub struct OnlineCalibrator {
     /// The latest encoder sample before the start time, to interpolate the
     /// wheel angles at the start.
     before_start: Option<WheelSample>,
-    pending: Vec<PoseSample>,
+    /// Poses waiting for the encoder sample at or after their time, in time order.
+    pending: std::collections::VecDeque<PoseSample>,
     last_pose_t_s: f64,
     history: Option<FilterHistory>,
     /// Product of step Jacobians since the last node, and the prediction
@@ -134,7 +135,7 @@ impl OnlineCalibrator {
             t_s: t0_s,
             last_wheels: None,
             before_start: None,
-            pending: Vec::new(),
+            pending: std::collections::VecDeque::new(),
             last_pose_t_s: f64::NEG_INFINITY,
             history,
             transition: Mat6::identity(),
@@ -211,13 +212,11 @@ impl OnlineCalibrator {
             });
         }
         let mut at = prev; // wheel angles at the filter's current time
-        let pending = std::mem::take(&mut self.pending);
-        let mut keep = Vec::new();
-        for pose in pending {
+        while let Some(pose) = self.pending.front().copied() {
             if pose.t_s > w.t_s {
-                keep.push(pose);
-                continue;
+                break;
             }
+            self.pending.pop_front();
             let frac = (pose.t_s - prev.t_s) / (w.t_s - prev.t_s);
             let mid = WheelSample {
                 t_s: pose.t_s,
@@ -228,7 +227,6 @@ impl OnlineCalibrator {
             at = mid;
             self.fuse(&pose)?;
         }
-        self.pending = keep;
         self.predict_between(&at, &w);
         self.last_wheels = Some(w);
         Ok(())
@@ -253,7 +251,7 @@ impl OnlineCalibrator {
             }),
             Some(w) if pose.t_s == w.t_s => self.fuse(&pose),
             _ => {
-                self.pending.push(pose);
+                self.pending.push_back(pose);
                 Ok(())
             }
         }
@@ -270,7 +268,9 @@ impl OnlineCalibrator {
             dt,
         );
         if self.history.is_some() {
-            self.transition = f * self.transition;
+            // F = [[A, B], [0, I]]: only the pose rows of the product change.
+            let top = f.fixed_view::<3, 6>(0, 0) * self.transition;
+            self.transition.fixed_view_mut::<3, 6>(0, 0).copy_from(&top);
         }
         self.t_s = to.t_s;
     }

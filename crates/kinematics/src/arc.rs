@@ -30,6 +30,17 @@ pub fn sinc_derivative(a: f64) -> f64 {
     }
 }
 
+/// `(sinc(a), sinc'(a))` with one sine and cosine.
+#[inline]
+pub fn sinc_and_derivative(a: f64) -> (f64, f64) {
+    if a.abs() < SERIES_LIMIT {
+        (sinc(a), sinc_derivative(a))
+    } else {
+        let (s, c) = a.sin_cos();
+        (s / a, (a * c - s) / (a * a))
+    }
+}
+
 /// Ground travel of a wheel for an encoder increment (paper eq. 2, one wheel).
 #[inline]
 pub fn wheel_travel_m(delta_ticks: f64, diameter_m: f64, ticks_per_rev: f64) -> f64 {
@@ -99,6 +110,10 @@ mod tests {
             assert!((sinc_derivative(a) - direct).abs() < 1e-9);
         }
         assert_eq!(sinc(0.0), 1.0);
+        for a in [0.0, 5e-4, -5e-4, 0.3, -2.0] {
+            let (s, d) = sinc_and_derivative(a);
+            assert!((s - sinc(a)).abs() < 1e-16 && (d - sinc_derivative(a)).abs() < 1e-16);
+        }
         assert_eq!(sinc_derivative(0.0), 0.0);
     }
 

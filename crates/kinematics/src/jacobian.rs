@@ -3,7 +3,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::arc::{sinc, sinc_derivative};
+use crate::arc::sinc_and_derivative;
 
 pub type StateVec = SVector<f64, 6>;
 pub type Mat6 = SMatrix<f64, 6, 6>;
@@ -39,14 +39,14 @@ fn terms(state: &StateVec, left_rad: f64, right_rad: f64) -> StepTerms {
     let right_m = 0.5 * dr * right_rad;
     let ds = 0.5 * (left_m + right_m);
     let half_turn = 0.5 * (right_m - left_m) / b;
-    let sinc_half = sinc(half_turn);
+    let (sinc_half, sinc_half_derivative) = sinc_and_derivative(half_turn);
     let (sin_mid, cos_mid) = (theta + half_turn).sin_cos();
     StepTerms {
         ds,
         half_turn,
         chord: ds * sinc_half,
         sinc_half,
-        sinc_half_derivative: sinc_derivative(half_turn),
+        sinc_half_derivative,
         cos_mid,
         sin_mid,
     }
