@@ -14,7 +14,11 @@ pub fn rts_smooth(history: &FilterHistory) -> Option<Vec<StateAndCovariance>> {
         let pred = &history.predicted[k + 1];
         let f = &history.transition[k + 1];
         // C = P_f Fᵀ P_pred⁻¹, via Cᵀ = P_pred⁻¹ F P_f (P_f symmetric).
-        let c = solve_spd6(&pred.covariance, &(f * filt.covariance))?.transpose();
+        // F = [[A, B], [0, I]]: only the pose rows of F P_f differ from P_f.
+        let mut fp = filt.covariance;
+        let top = f.fixed_view::<3, 6>(0, 0) * filt.covariance;
+        fp.fixed_view_mut::<3, 6>(0, 0).copy_from(&top);
+        let c = solve_spd6(&pred.covariance, &fp)?.transpose();
         let next = out[k + 1];
         let state = filt.state + c * (next.state - pred.state);
         let mut cov = filt.covariance + c * (next.covariance - pred.covariance) * c.transpose();

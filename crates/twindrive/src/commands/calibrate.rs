@@ -216,9 +216,13 @@ pub fn calibrate(
     let run = run?;
     let b = b.map_err(|_| anyhow::anyhow!("the batch fit panicked"))??;
     let history = run.history.as_ref().expect("kept");
-    let nodes: Vec<StateAndCovariance> = match job.method {
-        Method::Smoother => smooth(&run)?,
-        _ => history.filtered.clone(),
+    let smoothed;
+    let nodes: &[StateAndCovariance] = match job.method {
+        Method::Smoother => {
+            smoothed = smooth(&run)?;
+            &smoothed
+        }
+        _ => &history.filtered,
     };
     tracing::info!(
         elapsed_s = stage.elapsed().as_secs_f64(),
@@ -245,7 +249,7 @@ pub fn calibrate(
         let values: Vec<f64> = history
             .t_s
             .iter()
-            .zip(&nodes)
+            .zip(nodes)
             .skip(1)
             .filter_map(|(t, s)| {
                 let g = twindrive_estimation::dead_reckoning::pose_at(truth, *t)?;
