@@ -2,43 +2,22 @@
 //! `cargo bench -p twindrive-estimation --bench ekf`
 
 use std::hint::black_box;
-use std::path::Path;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+
+#[path = "../tests/common.rs"]
+mod common;
 use twindrive_estimation::{
     AugmentedEkf, FilterConfig, GateConfig, PoseSample, StateAndCovariance, WheelSample,
     initial_estimate, run_filter,
 };
 
 fn calibration_drive() -> (Vec<WheelSample>, Vec<PoseSample>) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/calibration_drive.toml");
-    let sc = twindrive_sim::Scenario::load(&path).expect("fixture");
-    let rad = std::f64::consts::TAU / f64::from(sc.robot.encoder.ticks_per_rev);
-    let log = twindrive_sim::Simulator::new(sc).run(|_, _| {});
-    let wheels = log
-        .steps
-        .iter()
-        .filter_map(|s| {
-            s.encoder_ticks.map(|[l, r]| WheelSample {
-                t_s: s.t_s(),
-                left_rad: l as f64 * rad,
-                right_rad: r as f64 * rad,
-            })
-        })
-        .collect();
-    let poses = log
-        .steps
-        .iter()
-        .filter_map(|s| {
-            s.tracker.map(|p| PoseSample {
-                t_s: s.t_s(),
-                x_m: p.x_m,
-                y_m: p.y_m,
-                heading_rad: Some(p.heading_rad),
-            })
-        })
-        .collect();
-    (wheels, poses)
+    common::samples(&common::simulate(
+        common::scenario("calibration_drive.toml"),
+        None,
+        None,
+    ))
 }
 
 fn config() -> FilterConfig {

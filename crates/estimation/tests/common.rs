@@ -29,28 +29,21 @@ pub fn simulate(mut sc: Scenario, seed: Option<u64>, duration_s: Option<f64>) ->
 
 /// Encoder and tracker samples of a simulated log.
 pub fn samples(log: &MissionLog) -> (Vec<WheelSample>, Vec<PoseSample>) {
-    let rad_per_tick = std::f64::consts::TAU / f64::from(log.header.ticks_per_rev);
     let wheels = log
-        .steps
-        .iter()
-        .filter_map(|s| {
-            s.encoder_ticks.map(|[l, r]| WheelSample {
-                t_s: s.t_s(),
-                left_rad: l as f64 * rad_per_tick,
-                right_rad: r as f64 * rad_per_tick,
-            })
+        .wheel_angles()
+        .map(|(t_s, left_rad, right_rad)| WheelSample {
+            t_s,
+            left_rad,
+            right_rad,
         })
         .collect();
     let poses = log
-        .steps
-        .iter()
-        .filter_map(|s| {
-            s.tracker.map(|p| PoseSample {
-                t_s: s.t_s(),
-                x_m: p.x_m,
-                y_m: p.y_m,
-                heading_rad: Some(p.heading_rad),
-            })
+        .tracker_poses()
+        .map(|(t_s, p)| PoseSample {
+            t_s,
+            x_m: p.x_m,
+            y_m: p.y_m,
+            heading_rad: Some(p.heading_rad),
         })
         .collect();
     (wheels, poses)

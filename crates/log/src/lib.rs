@@ -194,6 +194,23 @@ impl MissionLog {
             .position(|s| s.name == name)
     }
 
+    /// Cumulative wheel rotation `(t_s, left_rad, right_rad)` at every
+    /// encoder sample (counts times 2π / ticks_per_rev).
+    pub fn wheel_angles(&self) -> impl Iterator<Item = (f64, f64, f64)> + '_ {
+        let rad_per_tick = std::f64::consts::TAU / f64::from(self.header.ticks_per_rev);
+        self.steps.iter().filter_map(move |s| {
+            s.encoder_ticks
+                .map(|[l, r]| (s.t_s(), l as f64 * rad_per_tick, r as f64 * rad_per_tick))
+        })
+    }
+
+    /// `(t_s, pose)` of every tracker sample.
+    pub fn tracker_poses(&self) -> impl Iterator<Item = (f64, Pose)> + '_ {
+        self.steps
+            .iter()
+            .filter_map(|s| s.tracker.map(|p| (s.t_s(), p)))
+    }
+
     /// Ground-truth path length in metres.
     pub fn ground_truth_distance_m(&self) -> f64 {
         self.steps

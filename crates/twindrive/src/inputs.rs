@@ -10,30 +10,23 @@ use twindrive_log::calib_csv::{EncoderCsv, PoseCsv, WheelColumns};
 
 /// Encoder ticks of a simulated log as cumulative wheel angles.
 pub fn wheels_from_log(log: &MissionLog) -> Vec<WheelSample> {
-    let rad_per_tick = std::f64::consts::TAU / f64::from(log.header.ticks_per_rev);
-    log.steps
-        .iter()
-        .filter_map(|s| {
-            s.encoder_ticks.map(|[l, r]| WheelSample {
-                t_s: s.t_s(),
-                left_rad: l as f64 * rad_per_tick,
-                right_rad: r as f64 * rad_per_tick,
-            })
+    log.wheel_angles()
+        .map(|(t_s, left_rad, right_rad)| WheelSample {
+            t_s,
+            left_rad,
+            right_rad,
         })
         .collect()
 }
 
 /// Tracker poses of a simulated log.
 pub fn poses_from_log(log: &MissionLog) -> Vec<PoseSample> {
-    log.steps
-        .iter()
-        .filter_map(|s| {
-            s.tracker.map(|p| PoseSample {
-                t_s: s.t_s(),
-                x_m: p.x_m,
-                y_m: p.y_m,
-                heading_rad: Some(p.heading_rad),
-            })
+    log.tracker_poses()
+        .map(|(t_s, p)| PoseSample {
+            t_s,
+            x_m: p.x_m,
+            y_m: p.y_m,
+            heading_rad: Some(p.heading_rad),
         })
         .collect()
 }
