@@ -8,8 +8,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 #[path = "../tests/common.rs"]
 mod common;
 use twindrive_estimation::{
-    AugmentedEkf, FilterConfig, GateConfig, PoseSample, StateAndCovariance, WheelSample,
-    initial_estimate, run_filter,
+    AugmentedEkf, FilterConfig, GateConfig, PoseSample, StateAndCovariance, WheelSample, run_filter,
 };
 
 fn calibration_drive() -> (Vec<WheelSample>, Vec<PoseSample>) {
@@ -89,7 +88,6 @@ fn benches(c: &mut Criterion) {
         })
     });
     group.finish();
-    let _ = initial_estimate;
 }
 
 criterion_group!(ekf, benches);
