@@ -29,7 +29,7 @@ pub use ekf::{
 pub use offline::{FilterRun, run_filter, smooth};
 pub use online::{
     CalibrationError, Estimate, FilterConfig, FilterHistory, InnovationRecord, OnlineCalibrator,
-    PoseSample, WheelSample, initial_estimate,
+    PoseSample, TransitionTop, WheelSample, initial_estimate,
 };
 pub use smoother::rts_smooth;
 pub use twindrive_kinematics::{AugmentedState, Mat6, StateVec};

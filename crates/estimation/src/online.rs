@@ -81,6 +81,10 @@ pub struct InnovationRecord {
     pub accepted: bool,
 }
 
+/// The pose rows of a transition Jacobian `[[A, B], [0, I]]`; the parameter
+/// rows are always `[0, I]`.
+pub type TransitionTop = nalgebra::SMatrix<f64, 3, 6>;
+
 /// Filter nodes kept for the Rauch-Tung-Striebel smoother: one per fused
 /// pose, with the prediction that led to it.
 #[derive(Debug, Clone, Default)]
@@ -90,8 +94,8 @@ pub struct FilterHistory {
     pub filtered: Vec<StateAndCovariance>,
     /// Prediction into each node from the previous one (unused for node 0).
     pub predicted: Vec<StateAndCovariance>,
-    /// Jacobian of the whole transition from the previous node.
-    pub transition: Vec<Mat6>,
+    /// Pose rows of the Jacobian of the whole transition from the previous node.
+    pub transition: Vec<TransitionTop>,
     pub innovations: Vec<InnovationRecord>,
 }
 
@@ -127,7 +131,8 @@ impl OnlineCalibrator {
             h.t_s.push(t0_s);
             h.filtered.push(initial);
             h.predicted.push(initial);
-            h.transition.push(Mat6::identity());
+            h.transition
+                .push(Mat6::identity().fixed_view::<3, 6>(0, 0).into_owned());
             h
         });
         Self {
@@ -306,7 +311,8 @@ impl OnlineCalibrator {
                 h.t_s.push(pose.t_s);
                 h.predicted.push(before);
                 h.filtered.push(*self.ekf.estimate());
-                h.transition.push(self.transition);
+                h.transition
+                    .push(self.transition.fixed_view::<3, 6>(0, 0).into_owned());
                 self.transition = Mat6::identity();
             }
         }

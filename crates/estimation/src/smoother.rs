@@ -8,27 +8,31 @@ use twindrive_kinematics::Mat6;
 /// covariance cannot be inverted.
 pub fn rts_smooth(history: &FilterHistory) -> Option<Vec<StateAndCovariance>> {
     let n = history.filtered.len();
-    let mut out = history.filtered.clone();
+    // Built backwards from the last node (whose smoothed estimate is the
+    // filtered one), then reversed: no copy of the whole filtered history.
+    let mut rev: Vec<StateAndCovariance> = Vec::with_capacity(n);
+    rev.extend(history.filtered.last().copied());
     for k in (0..n.saturating_sub(1)).rev() {
         let filt = &history.filtered[k];
         let pred = &history.predicted[k + 1];
-        let f = &history.transition[k + 1];
+        let f_top = &history.transition[k + 1];
         // C = P_f Fᵀ P_pred⁻¹, via Cᵀ = P_pred⁻¹ F P_f (P_f symmetric).
         // F = [[A, B], [0, I]]: only the pose rows of F P_f differ from P_f.
         let mut fp = filt.covariance;
-        let top = f.fixed_view::<3, 6>(0, 0) * filt.covariance;
+        let top = f_top * filt.covariance;
         fp.fixed_view_mut::<3, 6>(0, 0).copy_from(&top);
         let c = solve_spd6(&pred.covariance, &fp)?.transpose();
-        let next = out[k + 1];
+        let next = *rev.last().expect("the last node is pushed first");
         let state = filt.state + c * (next.state - pred.state);
         let mut cov = filt.covariance + c * (next.covariance - pred.covariance) * c.transpose();
         cov = 0.5 * (cov + cov.transpose());
-        out[k] = StateAndCovariance {
+        rev.push(StateAndCovariance {
             state,
             covariance: cov,
-        };
+        });
     }
-    Some(out)
+    rev.reverse();
+    Some(rev)
 }
 
 /// Solves `A X = B` for symmetric positive-definite 6x6 `A` by a Cholesky
