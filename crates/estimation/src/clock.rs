@@ -49,23 +49,17 @@ fn central_rate(samples: &[f64], dt: f64) -> Vec<f64> {
 /// Heading-rate (or, without headings, speed) signal of the poses.
 fn pose_rate(poses: &[PoseSample], t0: f64, dt: f64, n: usize, use_heading: bool) -> Vec<f64> {
     // Unwrapped heading or cumulative distance, then interpolated on the grid.
-    let mut value = Vec::with_capacity(poses.len());
+    let heading = |p: &PoseSample| p.heading_rad.unwrap_or(0.0);
+    let mut value: Vec<(f64, f64)> = Vec::with_capacity(poses.len());
     let mut acc = 0.0;
     for (i, p) in poses.iter().enumerate() {
-        if use_heading {
-            let h = p.heading_rad.unwrap_or(0.0);
-            acc = if i == 0 {
-                h
-            } else {
-                acc + twindrive_kinematics::wrap_angle(h - value_last(&value, h))
-            };
-            value.push((p.t_s, acc, h));
-        } else {
-            if i > 0 {
-                acc += (p.x_m - poses[i - 1].x_m).hypot(p.y_m - poses[i - 1].y_m);
-            }
-            value.push((p.t_s, acc, 0.0));
-        }
+        acc = match (i.checked_sub(1).map(|j| &poses[j]), use_heading) {
+            (None, true) => heading(p),
+            (None, false) => 0.0,
+            (Some(q), true) => acc + twindrive_kinematics::wrap_angle(heading(p) - heading(q)),
+            (Some(q), false) => acc + (p.x_m - q.x_m).hypot(p.y_m - q.y_m),
+        };
+        value.push((p.t_s, acc));
     }
     let at = |t: f64| -> f64 {
         let k = value.partition_point(|v| v.0 <= t);
@@ -81,10 +75,6 @@ fn pose_rate(poses: &[PoseSample], t0: f64, dt: f64, n: usize, use_heading: bool
     };
     let samples: Vec<f64> = (0..=n).map(|k| at(t0 + k as f64 * dt)).collect();
     central_rate(&samples, dt)
-}
-
-fn value_last(v: &[(f64, f64, f64)], default: f64) -> f64 {
-    v.last().map_or(default, |x| x.2)
 }
 
 /// Pearson correlation of `a[i]` with `b[i + lag]` over the finite overlap.

@@ -586,8 +586,9 @@ mod tests {
         assert!(th > 3.1 && th < 3.1 + 0.0832, "{th}");
     }
 
-    #[test]
-    fn outliers_are_gated_and_divergence_is_an_error() {
+    /// A filter sure it is at the origin (gate: 5 rejections in a row),
+    /// after five poses 3 m away were rejected.
+    fn certain_filter_after_five_rejections(reanchor: bool) -> AugmentedEkf {
         let init = StateAndCovariance {
             state: StateVec::new(0.0, 0.0, 0.0, 0.1, 0.1, 0.3),
             covariance: Mat6::identity() * 1e-6,
@@ -595,7 +596,7 @@ mod tests {
         let gate = GateConfig {
             probability: 0.9999,
             max_consecutive_rejections: 5,
-            reanchor: false,
+            reanchor,
         };
         let mut ekf = AugmentedEkf::new(init, NoiseModel::default(), gate);
         for _ in 0..5 {
@@ -604,6 +605,12 @@ mod tests {
                 UpdateOutcome::Rejected { .. }
             ));
         }
+        ekf
+    }
+
+    #[test]
+    fn outliers_are_gated_and_divergence_is_an_error() {
+        let mut ekf = certain_filter_after_five_rejections(false);
         assert_eq!(
             ekf.estimate().state[0],
             0.0,
@@ -618,22 +625,7 @@ mod tests {
 
     #[test]
     fn a_moved_robot_is_reanchored_once_and_a_second_loss_is_an_error() {
-        let init = StateAndCovariance {
-            state: StateVec::new(0.0, 0.0, 0.0, 0.1, 0.1, 0.3),
-            covariance: Mat6::identity() * 1e-6,
-        };
-        let gate = GateConfig {
-            probability: 0.9999,
-            max_consecutive_rejections: 5,
-            reanchor: true,
-        };
-        let mut ekf = AugmentedEkf::new(init, NoiseModel::default(), gate);
-        for _ in 0..5 {
-            assert!(matches!(
-                ekf.update_pose(0.0, 3.0, 0.0, 0.0).unwrap(),
-                UpdateOutcome::Rejected { .. }
-            ));
-        }
+        let mut ekf = certain_filter_after_five_rejections(true);
         assert!(matches!(
             ekf.update_pose(0.0, 3.0, 0.0, 0.0).unwrap(),
             UpdateOutcome::Reanchored { .. }

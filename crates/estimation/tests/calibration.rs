@@ -5,8 +5,8 @@ mod common;
 
 use twindrive_estimation::batch::{self, BatchConfig};
 use twindrive_estimation::{
-    FilterConfig, OnlineCalibrator, PoseSample, StateAndCovariance, StateVec, WheelSample, clock,
-    initial_estimate, nees, run_filter, smooth,
+    FilterConfig, FilterRun, OnlineCalibrator, PoseSample, StateAndCovariance, StateVec,
+    WheelSample, clock, initial_estimate, nees, run_filter, smooth,
 };
 use twindrive_log::MissionLog;
 
@@ -18,6 +18,25 @@ fn sim_config() -> FilterConfig {
     cfg.noise.wheel_rad2_per_rad = 1e-6;
     cfg.noise.wheel_floor_rad2 = 1e-9;
     cfg
+}
+
+/// The filter from the nominal guess with 10 % parameter uncertainty.
+fn filter(
+    wheels: &[WheelSample],
+    poses: &[PoseSample],
+    cfg: FilterConfig,
+    history: bool,
+) -> FilterRun {
+    run_filter(wheels, poses, common::NOMINAL, 0.1, cfg, history, |_, _| {}).unwrap()
+}
+
+/// The batch fit from the nominal guess with the twin's noise.
+fn batch_fit(wheels: &[WheelSample], poses: &[PoseSample]) -> batch::BatchResult {
+    let cfg = BatchConfig {
+        noise: sim_config().noise,
+        ..BatchConfig::default()
+    };
+    batch::fit(wheels, poses, common::NOMINAL, &cfg).unwrap()
 }
 
 fn rel_err(est: f64, truth: f64) -> f64 {
@@ -46,27 +65,9 @@ fn truth_at(log: &MissionLog, t_s: f64) -> StateVec {
 fn all_methods_recover_the_parameters_within_a_tenth_of_a_percent() {
     let log = calibration_log();
     let (wheels, poses) = common::samples(&log);
-    let run = run_filter(
-        &wheels,
-        &poses,
-        common::NOMINAL,
-        0.1,
-        sim_config(),
-        true,
-        |_, _| {},
-    )
-    .unwrap();
+    let run = filter(&wheels, &poses, sim_config(), true);
     let smoothed = smooth(&run).unwrap();
-    let b = batch::fit(
-        &wheels,
-        &poses,
-        common::NOMINAL,
-        &BatchConfig {
-            noise: sim_config().noise,
-            ..BatchConfig::default()
-        },
-    )
-    .unwrap();
+    let b = batch_fit(&wheels, &poses);
     for i in 0..3 {
         let ekf = run.estimate.state[3 + i];
         let smo = smoothed[0].state[3 + i];
@@ -119,7 +120,7 @@ fn covariance_is_consistent_nees_inside_chi_square_bounds() {
         let mut cfg = sim_config();
         cfg.noise.wheel_rad2_per_rad = 1e-5;
         cfg.noise.wheel_floor_rad2 = 1e-10;
-        let run = run_filter(&wheels, &poses, common::NOMINAL, 0.1, cfg, false, |_, _| {}).unwrap();
+        let run = filter(&wheels, &poses, cfg, false);
         let est = StateAndCovariance {
             state: run.estimate.state,
             covariance: run.estimate.covariance,
@@ -161,7 +162,7 @@ fn online_and_offline_give_the_same_estimate() {
     let log = common::simulate(common::scenario("calibration_drive.toml"), None, Some(40.0));
     let (wheels, poses) = common::samples(&log);
     let cfg = sim_config();
-    let offline = run_filter(&wheels, &poses, common::NOMINAL, 0.1, cfg, false, |_, _| {}).unwrap();
+    let offline = filter(&wheels, &poses, cfg, false);
 
     let first = *poses.iter().find(|p| p.t_s >= wheels[0].t_s).unwrap();
     let init = initial_estimate(&first, common::NOMINAL, &cfg.noise, 0.1);
@@ -191,16 +192,7 @@ fn a_pose_between_encoder_samples_is_fused_at_its_own_time() {
     // pose at the next encoder sample instead is clearly worse.
     let log = calibration_log();
     let (wheels, poses) = common::samples(&log);
-    let exact = run_filter(
-        &wheels,
-        &poses,
-        common::NOMINAL,
-        0.1,
-        sim_config(),
-        false,
-        |_, _| {},
-    )
-    .unwrap();
+    let exact = filter(&wheels, &poses, sim_config(), false);
     let snapped: Vec<PoseSample> = poses
         .iter()
         .map(|p| {
@@ -215,16 +207,7 @@ fn a_pose_between_encoder_samples_is_fused_at_its_own_time() {
         .collect();
     let mut dedup = snapped.clone();
     dedup.dedup_by(|a, b| a.t_s == b.t_s);
-    let late = run_filter(
-        &wheels,
-        &dedup,
-        common::NOMINAL,
-        0.1,
-        sim_config(),
-        false,
-        |_, _| {},
-    )
-    .unwrap();
+    let late = filter(&wheels, &dedup, sim_config(), false);
     let err = |s: &StateVec| {
         (0..3)
             .map(|i| rel_err(s[3 + i], common::TRUTH[i]))
@@ -243,16 +226,7 @@ fn a_pose_between_encoder_samples_is_fused_at_its_own_time() {
 fn smoother_is_at_least_as_good_as_the_filter() {
     let log = common::simulate(common::scenario("calibration_drive.toml"), None, Some(60.0));
     let (wheels, poses) = common::samples(&log);
-    let run = run_filter(
-        &wheels,
-        &poses,
-        common::NOMINAL,
-        0.1,
-        sim_config(),
-        true,
-        |_, _| {},
-    )
-    .unwrap();
+    let run = filter(&wheels, &poses, sim_config(), true);
     let history = run.history.as_ref().unwrap();
     let smoothed = smooth(&run).unwrap();
     let (mut filt_sq, mut smooth_sq) = (0.0, 0.0);
@@ -296,16 +270,7 @@ fn a_single_circle_cannot_separate_the_parameters() {
     spec.segments[0].duration_s = 60.0;
     let log = common::simulate(sc, None, Some(60.0));
     let (wheels, poses) = common::samples(&log);
-    let b = batch::fit(
-        &wheels,
-        &poses,
-        common::NOMINAL,
-        &BatchConfig {
-            noise: sim_config().noise,
-            ..BatchConfig::default()
-        },
-    )
-    .unwrap();
+    let b = batch_fit(&wheels, &poses);
     let id = &b.identifiability;
     assert!(!id.well_determined, "{id:?}");
     assert!(
@@ -325,16 +290,7 @@ fn an_outlier_burst_is_rejected() {
     for p in &mut poses[start..start + 40] {
         p.x_m += 0.4;
     }
-    let run = run_filter(
-        &wheels,
-        &poses,
-        common::NOMINAL,
-        0.1,
-        sim_config(),
-        true,
-        |_, _| {},
-    )
-    .unwrap();
+    let run = filter(&wheels, &poses, sim_config(), true);
     assert!(run.stats.rejected >= 40, "{} rejected", run.stats.rejected);
     let glitch: Vec<_> = run
         .history
