@@ -57,8 +57,8 @@ fn benches(c: &mut Criterion) {
         let mut ekf = AugmentedEkf::new(steady, config().noise, config().gate);
         let mut k = 0;
         b.iter(|| {
-            let (l, r, p) = rows[k % rows.len()];
-            k += 1;
+            let (l, r, p) = rows[k];
+            k = if k + 1 == rows.len() { 0 } else { k + 1 };
             ekf.predict(l, r, 0.008);
             // Re-anchor the pose on the sample so the cycle stays consistent.
             black_box(

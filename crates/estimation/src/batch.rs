@@ -10,8 +10,9 @@
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
-use twindrive_kinematics::{StateVec, step_augmented, step_jacobians, wrap_angle};
+use twindrive_kinematics::{StateVec, step_with_jacobian, wrap_angle};
 
+use crate::covariance::Transition;
 use crate::dead_reckoning::wheel_angles_at;
 use crate::ekf::NoiseModel;
 use crate::online::{CalibrationError, PoseSample, WheelSample};
@@ -199,9 +200,12 @@ fn window_terms(
     );
     let mut at = wheel_angles_at(wheels, w.start.t_s)?;
     let end = wheel_angles_at(wheels, w.end.t_s)?;
-    let mut jac = Matrix3::zeros(); // d pose / d params
-    let mut pose_prop = Matrix3::identity(); // d pose_end / d pose_start
-    let mut odo_cov = Matrix3::zeros();
+    // Step Jacobians are [[A, B], [0, I]] with A = [[1, 0, a], [0, 1, b],
+    // [0, 0, 1]] (see `Transition`): the chain's d pose / d params follows
+    // J ← A J + B, d pose_end / d pose_start keeps A's form (the couplings
+    // add up), and the odometry covariance follows C ← A C Aᵀ + G q Gᵀ.
+    let mut jac = Transition::IDENTITY;
+    let mut odo_cov = [[0.0f64; 3]; 3];
     let first = wheels.partition_point(|s| s.t_s <= w.start.t_s);
     let inner = wheels[first..]
         .iter()
@@ -210,19 +214,31 @@ fn window_terms(
     for next in inner.chain(std::iter::once(end)) {
         let (l, r) = (next.0 - at.0, next.1 - at.1);
         at = next;
-        let (f, g) = step_jacobians(&state, l, r);
-        state = step_augmented(&state, l, r);
-        let a: Matrix3<f64> = f.fixed_view::<3, 3>(0, 0).into_owned();
-        let b: Matrix3<f64> = f.fixed_view::<3, 3>(0, 3).into_owned();
-        jac = a * jac + b;
-        pose_prop = a * pose_prop;
+        let (stepped, step) = step_with_jacobian(&state, l, r);
+        state = stepped;
+        jac = jac.then(&Transition::from_step(&step));
+        let (a, b) = (step.heading_to_x, step.heading_to_y);
+        // A C Aᵀ: rows/columns 0 and 1 pick up a, b times row/column 2.
+        let c = odo_cov;
+        let c02 = c[0][2] + a * c[2][2];
+        let c12 = c[1][2] + b * c[2][2];
+        let c00 = c[0][0] + a * (c[0][2] + c02);
+        let c11 = c[1][1] + b * (c[1][2] + c12);
+        let c01 = c[0][1] + a * c[1][2] + b * c02;
         let q = [
             noise.wheel_rad2_per_rad * l.abs() + noise.wheel_floor_rad2,
             noise.wheel_rad2_per_rad * r.abs() + noise.wheel_floor_rad2,
         ];
-        let g3 = g.fixed_view::<3, 2>(0, 0);
-        odo_cov = a * odo_cov * a.transpose()
-            + g3 * nalgebra::Matrix2::new(q[0], 0.0, 0.0, q[1]) * g3.transpose();
+        let g = &step.wheels;
+        let gqg = |i: usize, j: usize| g[i][0] * q[0] * g[j][0] + g[i][1] * q[1] * g[j][1];
+        odo_cov = [
+            [c00 + gqg(0, 0), c01 + gqg(0, 1), c02 + gqg(0, 2)],
+            [0.0, c11 + gqg(1, 1), c12 + gqg(1, 2)],
+            [0.0, 0.0, c[2][2] + gqg(2, 2)],
+        ];
+        odo_cov[1][0] = odo_cov[0][1];
+        odo_cov[2][0] = odo_cov[0][2];
+        odo_cov[2][1] = odo_cov[1][2];
     }
     let residual = Vector3::new(
         w.end.x_m - state[0],
@@ -234,18 +250,34 @@ fn window_terms(
         noise.position_std_m.powi(2),
         noise.heading_std_rad.powi(2),
     ));
-    let cov = pose_prop * r * pose_prop.transpose() + odo_cov + r;
+    let mut pose_prop = Matrix3::identity();
+    pose_prop[(0, 2)] = jac.heading_to_x;
+    pose_prop[(1, 2)] = jac.heading_to_y;
+    let cov = pose_prop * r * pose_prop.transpose() + Matrix3::from(odo_cov) + r;
+    let jac = Matrix3::from(jac.params).transpose();
     // The residual decreases as the prediction grows: ∂r/∂params = −J.
     Some((residual, -jac, cov))
 }
 
-/// Normal equations at `params`: (information, gradient, cost, whitened rms, raw rms, windows used).
+/// The normal equations of the windows at some parameters.
+struct NormalEquations {
+    /// Information Jᵀ W C⁻¹ J.
+    h: Matrix3<f64>,
+    /// Gradient Jᵀ W C⁻¹ r.
+    g: Vector3<f64>,
+    /// Huber cost.
+    cost: f64,
+    whitened_rms: f64,
+    raw_rms: [f64; 3],
+    windows: usize,
+}
+
 fn normal_equations(
     ws: &[Window],
     wheels: &[WheelSample],
     params: [f64; 3],
     cfg: &BatchConfig,
-) -> (Matrix3<f64>, Vector3<f64>, f64, f64, [f64; 3], usize) {
+) -> NormalEquations {
     let mut h = Matrix3::zeros();
     let mut g = Vector3::zeros();
     let (mut cost, mut sq, mut n) = (0.0, 0.0, 0usize);
@@ -285,9 +317,21 @@ fn normal_equations(
         n += 1;
     }
     let nf = n.max(1) as f64;
-    let rms = (sq / (3.0 * nf)).sqrt();
-    (h, g, cost, rms, raw.map(|v| (v / nf).sqrt()), n)
+    NormalEquations {
+        h,
+        g,
+        cost,
+        whitened_rms: (sq / (3.0 * nf)).sqrt(),
+        raw_rms: raw.map(|v| (v / nf).sqrt()),
+        windows: n,
+    }
 }
+
+/// Cost changes below this (whitened χ² units) are round-off and the
+/// reweighting's wobble: a step that changes the cost less has converged.
+/// Half a quadratic form of 1e-4 is a parameter change of about 1 % of a
+/// standard deviation.
+const COST_TOLERANCE: f64 = 1e-4;
 
 /// Fits (dL, dR, b) by Levenberg-Marquardt from `initial`.
 pub fn fit(
@@ -306,16 +350,16 @@ pub fn fit(
     }
     let mut params = initial;
     let mut lambda = 1e-3;
-    let (mut h, mut g, mut cost, _, _, _) = normal_equations(&ws, wheels, params, cfg);
+    let mut at = normal_equations(&ws, wheels, params, cfg);
     let mut iterations = 0;
     while iterations < cfg.max_iterations {
         iterations += 1;
-        let mut damped = h;
+        let mut damped = at.h;
         for i in 0..3 {
             damped[(i, i)] *= 1.0 + lambda;
         }
         // Gauss-Newton on r(p) with ∂r/∂p = J: step = −(JᵀJ)⁻¹ Jᵀ r.
-        let Some(step) = damped.cholesky().map(|c| -c.solve(&g)) else {
+        let Some(step) = damped.cholesky().map(|c| -c.solve(&at.g)) else {
             lambda *= 10.0;
             continue;
         };
@@ -328,20 +372,24 @@ pub fn fit(
             lambda *= 10.0;
             continue;
         }
-        let (h2, g2, cost2, _, _, _) = normal_equations(&ws, wheels, candidate, cfg);
-        if cost2 <= cost {
+        let next = normal_equations(&ws, wheels, candidate, cfg);
+        let flat = (at.cost - next.cost).abs() <= COST_TOLERANCE;
+        if next.cost <= at.cost {
             // Converged once the step is tiny against the parameters'
-            // own uncertainty (or the cost stops moving).
-            let tiny = h2
+            // own uncertainty, or the cost stops moving.
+            let tiny = next
+                .h
                 .try_inverse()
-                .is_some_and(|c| (0..3).all(|i| step[i].abs() < 1e-3 * c[(i, i)].max(0.0).sqrt()));
-            let flat = cost - cost2 <= 1e-12 * cost.abs().max(1.0);
+                .is_some_and(|c| (0..3).all(|i| step[i].abs() < 1e-2 * c[(i, i)].max(0.0).sqrt()));
             params = candidate;
-            (h, g, cost) = (h2, g2, cost2);
+            at = next;
             lambda = (lambda * 0.3).max(1e-9);
             if tiny || flat {
                 break;
             }
+        } else if flat {
+            // Uphill only by round-off: already at the minimum.
+            break;
         } else {
             lambda *= 10.0;
             if lambda > 1e12 {
@@ -349,8 +397,7 @@ pub fn fit(
             }
         }
     }
-    let (h, _, _, whitened_rms, residual_rms, used) = normal_equations(&ws, wheels, params, cfg);
-    let std = match h.try_inverse() {
+    let std = match at.h.try_inverse() {
         Some(c) => [0, 1, 2].map(|i| c[(i, i)].max(0.0).sqrt()),
         None => [f64::INFINITY; 3],
     };
@@ -358,10 +405,10 @@ pub fn fit(
         params,
         std,
         iterations,
-        windows: used,
-        whitened_rms,
-        residual_rms,
-        identifiability: Identifiability::from_information(&h, params),
+        windows: at.windows,
+        whitened_rms: at.whitened_rms,
+        residual_rms: at.raw_rms,
+        identifiability: Identifiability::from_information(&at.h, params),
     })
 }
 
@@ -374,6 +421,6 @@ pub fn identifiability(
     cfg: &BatchConfig,
 ) -> Option<Identifiability> {
     let ws = windows(poses, wheels, cfg.window_s);
-    let (h, _, _, _, _, n) = normal_equations(&ws, wheels, params, cfg);
-    (n >= 3).then(|| Identifiability::from_information(&h, params))
+    let at = normal_equations(&ws, wheels, params, cfg);
+    (at.windows >= 3).then(|| Identifiability::from_information(&at.h, params))
 }

@@ -10,11 +10,13 @@
 //! the textbook ones evaluated block by block (tests compare them with the
 //! dense formulas).
 
-use nalgebra::{Matrix2, Matrix3, SMatrix, Vector2, Vector3};
+use nalgebra::SMatrix;
 use serde::{Deserialize, Serialize};
-#[cfg(test)]
-use twindrive_kinematics::step_jacobians;
-use twindrive_kinematics::{Mat6, Mat6x2, StateVec, step_with_jacobians, wrap_angle};
+use twindrive_kinematics::{Mat6, StateVec, step_with_jacobian, wrap_angle};
+
+use crate::covariance::{
+    Col, Lanes, Transition, add_wheel_noise, gain, joseph_update, propagate, symmetric_inverse,
+};
 
 /// The estimate: mean and covariance (the filter's contract).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -183,16 +185,17 @@ impl AugmentedEkf {
     }
 
     /// Propagates through one encoder increment (wheel rotations in radians)
-    /// lasting `dt_s`. Returns the state Jacobian `F` of the step.
+    /// lasting `dt_s`. Returns the state Jacobian of the step.
     #[inline]
-    pub fn predict(&mut self, left_rad: f64, right_rad: f64, dt_s: f64) -> Mat6 {
-        let (next, f, g) = step_with_jacobians(&self.est.state, left_rad, right_rad);
+    pub fn predict(&mut self, left_rad: f64, right_rad: f64, dt_s: f64) -> Transition {
+        let (next, jac) = step_with_jacobian(&self.est.state, left_rad, right_rad);
         self.est.state = next;
         let q_left = self.noise.wheel_rad2_per_rad * left_rad.abs() + self.noise.wheel_floor_rad2;
         let q_right = self.noise.wheel_rad2_per_rad * right_rad.abs() + self.noise.wheel_floor_rad2;
+        let f = Transition::from_step(&jac);
         let p = &mut self.est.covariance;
-        *p = propagate(&f, p);
-        add_input_noise(p, &g, q_left, q_right);
+        propagate(p, &f);
+        add_wheel_noise(p, &jac.wheels, [q_left, q_right]);
         if let Some(walk) = self.noise.param_random_walk_m2_per_s {
             for (i, w) in walk.iter().enumerate() {
                 p[(3 + i, 3 + i)] += w * dt_s;
@@ -211,12 +214,13 @@ impl AugmentedEkf {
         heading_rad: f64,
     ) -> Result<UpdateOutcome, FilterError> {
         let s = &self.est.state;
-        let nu = Vector3::new(x_m - s[0], y_m - s[1], wrap_angle(heading_rad - s[2]));
-        let r = Matrix3::from_diagonal(&Vector3::new(
-            self.noise.position_std_m.powi(2),
-            self.noise.position_std_m.powi(2),
-            self.noise.heading_std_rad.powi(2),
-        ));
+        let nu = [x_m - s[0], y_m - s[1], wrap_angle(heading_rad - s[2])];
+        let pos_var = self.noise.position_std_m * self.noise.position_std_m;
+        let r = [
+            pos_var,
+            pos_var,
+            self.noise.heading_std_rad * self.noise.heading_std_rad,
+        ];
         self.update::<3>(t_s, nu, r)
     }
 
@@ -228,16 +232,19 @@ impl AugmentedEkf {
         y_m: f64,
     ) -> Result<UpdateOutcome, FilterError> {
         let s = &self.est.state;
-        let nu = Vector2::new(x_m - s[0], y_m - s[1]);
-        let r = Matrix2::from_diagonal_element(self.noise.position_std_m.powi(2));
-        self.update::<2>(t_s, nu, r)
+        let nu = [x_m - s[0], y_m - s[1]];
+        let pos_var = self.noise.position_std_m * self.noise.position_std_m;
+        self.update::<2>(t_s, nu, [pos_var; 2])
     }
 
+    /// Innovation `nu` of the first `M` state components, measurement noise
+    /// `diag(r)`.
+    #[inline]
     fn update<const M: usize>(
         &mut self,
         t_s: f64,
-        nu: SMatrix<f64, M, 1>,
-        r: SMatrix<f64, M, M>,
+        nu: [f64; M],
+        r: [f64; M],
     ) -> Result<UpdateOutcome, FilterError> {
         if nu.iter().any(|v| !v.is_finite()) {
             return Err(FilterError::NonFinite {
@@ -246,19 +253,26 @@ impl AugmentedEkf {
             });
         }
         let p = &self.est.covariance;
-        // H selects the first M state components.
-        let s_mat: SMatrix<f64, M, M> = p.fixed_view::<M, M>(0, 0) + r;
-        // M is 2 or 3: a closed-form inverse beats a general factorisation.
-        let s_inv = match s_mat.try_inverse() {
-            Some(inv) if leading_minors_positive(&s_mat) => inv,
-            _ => {
-                return Err(FilterError::NotPositiveDefinite {
-                    t_s,
-                    what: "innovation covariance",
-                });
+        // S = H P Hᵀ + R with H = [I_M 0].
+        let mut s_mat = [[0.0f64; 3]; 3];
+        for (i, row) in s_mat.iter_mut().enumerate().take(M) {
+            for (j, v) in row.iter_mut().enumerate().take(M) {
+                *v = p[(i, j)];
             }
+            row[i] += r[i];
+        }
+        let Some(s_inv) = symmetric_inverse(&s_mat, M) else {
+            return Err(FilterError::NotPositiveDefinite {
+                t_s,
+                what: "innovation covariance",
+            });
         };
-        let nis = nu.dot(&(s_inv * nu));
+        let mut nis = 0.0;
+        for i in 0..M {
+            for j in 0..M {
+                nis += nu[i] * s_inv[i][j] * nu[j];
+            }
+        }
         let k_dof = M - 2;
         if nis > self.gate_chi2[k_dof] {
             self.stats.rejected += 1;
@@ -278,11 +292,13 @@ impl AugmentedEkf {
         }
         self.consecutive_rejections = 0;
         self.reanchored_since_accept = false;
-        // K = P Hᵀ S⁻¹ = P[:, 0..M] S⁻¹.
-        let pht: SMatrix<f64, 6, M> = p.fixed_view::<6, M>(0, 0).into_owned();
-        let k: SMatrix<f64, 6, M> = pht * s_inv;
-        self.est.state += k * nu;
-        self.est.covariance = joseph(p, &k, &r);
+        let k: [Col; M] = gain::<M>(p, &s_inv);
+        let mut state = Lanes::load(&self.est.state.into());
+        for (km, v) in k.iter().zip(&nu) {
+            state.axpy(*v, &Lanes::load(km));
+        }
+        self.est.state = state.to_col().into();
+        joseph_update(&mut self.est.covariance, &k, &r);
         check_covariance(
             &self.est.covariance,
             t_s,
@@ -302,7 +318,7 @@ impl AugmentedEkf {
 impl AugmentedEkf {
     /// Moves the pose onto the reference (innovation `nu`, noise `r`),
     /// keeps the parameters and forgets the pose-parameter correlation.
-    fn reanchor<const M: usize>(&mut self, nu: &SMatrix<f64, M, 1>, r: &SMatrix<f64, M, M>) {
+    fn reanchor<const M: usize>(&mut self, nu: &[f64; M], r: &[f64; M]) {
         let p = &mut self.est.covariance;
         for i in 0..M {
             self.est.state[i] += nu[i];
@@ -312,95 +328,12 @@ impl AugmentedEkf {
                     p[(j, i)] = 0.0;
                 }
             }
-            p[(i, i)] = r[(i, i)];
+            p[(i, i)] = r[i];
         }
         self.consecutive_rejections = 0;
         self.reanchored_since_accept = true;
         self.stats.reanchors += 1;
     }
-}
-
-/// `F P Fᵀ` for `F = [[A, B], [0, I]]` (3x3 blocks), evaluated by blocks;
-/// only the changed blocks are computed, the pose block as a lower triangle
-/// mirrored (the result is exactly symmetric).
-#[inline]
-pub(crate) fn propagate(f: &Mat6, p: &Mat6) -> Mat6 {
-    // Top block row of F P: T = [A Ppp + B Pqp, A Ppq + B Pqq] (3x6).
-    let mut t = [[0.0f64; 6]; 3];
-    for (i, row) in t.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            let mut acc = 0.0;
-            for k in 0..6 {
-                acc += f[(i, k)] * p[(k, j)];
-            }
-            *v = acc;
-        }
-    }
-    let mut out = *p;
-    // New pose block: T Fᵀ restricted to the pose rows (lower triangle).
-    for i in 0..3 {
-        for j in 0..=i {
-            let mut acc = 0.0;
-            for k in 0..6 {
-                acc += t[i][k] * f[(j, k)];
-            }
-            out[(i, j)] = acc;
-            out[(j, i)] = acc;
-        }
-        // Pose-parameter block: T[:, 3..6] (the parameter block of F is I).
-        for j in 3..6 {
-            out[(i, j)] = t[i][j];
-            out[(j, i)] = t[i][j];
-        }
-    }
-    out
-}
-
-/// `P += G diag(q) Gᵀ`; only the pose rows of `G` are non-zero.
-#[inline]
-fn add_input_noise(p: &mut Mat6, g: &Mat6x2, q_left: f64, q_right: f64) {
-    for i in 0..3 {
-        for j in 0..=i {
-            let v = g[(i, 0)] * q_left * g[(j, 0)] + g[(i, 1)] * q_right * g[(j, 1)];
-            p[(i, j)] += v;
-            if i != j {
-                p[(j, i)] += v;
-            }
-        }
-    }
-}
-
-/// Joseph form `(I − K H) P (I − K H)ᵀ + K R Kᵀ` with `H = [I_M 0]`,
-/// evaluated as that product with the structure of `A = I − K H` (it differs
-/// from I only in its first M columns), lower triangle mirrored.
-#[inline]
-fn joseph<const M: usize>(p: &Mat6, k: &SMatrix<f64, 6, M>, r: &SMatrix<f64, M, M>) -> Mat6 {
-    // A P = P − K P[0..M, :].
-    let mut ap = [[0.0f64; 6]; 6];
-    for (i, row) in ap.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            let mut acc = p[(i, j)];
-            for m in 0..M {
-                acc -= k[(i, m)] * p[(m, j)];
-            }
-            *v = acc;
-        }
-    }
-    // K R (R is diagonal for our measurements, but take it whole).
-    let kr = k * r;
-    let mut out = Mat6::zeros();
-    for i in 0..6 {
-        for j in 0..=i {
-            // (A P Aᵀ)_ij = (AP)_ij − Σ_m (AP)_im K_jm;  + (K R Kᵀ)_ij.
-            let mut acc = ap[i][j];
-            for m in 0..M {
-                acc += kr[(i, m)] * k[(j, m)] - ap[i][m] * k[(j, m)];
-            }
-            out[(i, j)] = acc;
-            out[(j, i)] = acc;
-        }
-    }
-    out
 }
 
 /// The full positive-definiteness test runs on every this many accepted
@@ -437,23 +370,6 @@ fn check_covariance(p: &Mat6, t_s: f64, full: bool) -> Result<(), FilterError> {
         });
     }
     Ok(())
-}
-
-/// Sylvester's criterion for the 2x2 and 3x3 innovation covariances (no
-/// divisions; larger sizes fall back to [`is_positive_definite`]).
-#[inline]
-fn leading_minors_positive<const N: usize>(s: &SMatrix<f64, N, N>) -> bool {
-    let minor2 = || s[(0, 0)] * s[(1, 1)] - s[(0, 1)] * s[(1, 0)];
-    match N {
-        2 => s[(0, 0)] > 0.0 && minor2() > 0.0,
-        3 => {
-            let det = s[(0, 0)] * (s[(1, 1)] * s[(2, 2)] - s[(1, 2)] * s[(2, 1)])
-                - s[(0, 1)] * (s[(1, 0)] * s[(2, 2)] - s[(1, 2)] * s[(2, 0)])
-                + s[(0, 2)] * (s[(1, 0)] * s[(2, 1)] - s[(1, 1)] * s[(2, 0)]);
-            s[(0, 0)] > 0.0 && minor2() > 0.0 && det > 0.0
-        }
-        _ => is_positive_definite(s),
-    }
 }
 
 /// Symmetric positive-definiteness by an in-place LDLᵀ factorisation that
@@ -506,54 +422,15 @@ pub fn nees(est: &StateAndCovariance, truth: &StateVec, indices: &[usize]) -> f6
     }
 }
 
-/// The dense measurement matrix `[I_M 0]`, for reference formulas in tests.
-#[cfg(test)]
-fn dense_h<const M: usize>() -> SMatrix<f64, M, 6> {
-    let mut h = SMatrix::<f64, M, 6>::zeros();
-    for i in 0..M {
-        h[(i, i)] = 1.0;
-    }
-    h
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    type Mat6x3 = SMatrix<f64, 6, 3>;
-
     fn random_spd(rng: &mut ChaCha8Rng) -> Mat6 {
         let m = Mat6::from_fn(|_, _| rng.random_range(-1.0..1.0));
         m * m.transpose() + Mat6::identity() * 0.1
-    }
-
-    #[test]
-    fn block_products_match_dense_formulas() {
-        let mut rng = ChaCha8Rng::seed_from_u64(1);
-        for _ in 0..200 {
-            let p = random_spd(&mut rng);
-            let state = StateVec::new(0.3, -1.0, 2.0, 0.065, 0.066, 0.27);
-            let (f, g) = step_jacobians(
-                &state,
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            );
-            let dense = f * p * f.transpose();
-            assert!((propagate(&f, &p) - dense).abs().max() < 1e-12);
-
-            let mut with_noise = p;
-            add_input_noise(&mut with_noise, &g, 0.3, 0.7);
-            let q = nalgebra::Matrix2::new(0.3, 0.0, 0.0, 0.7);
-            assert!((with_noise - (p + g * q * g.transpose())).abs().max() < 1e-12);
-
-            let k = Mat6x3::from_fn(|_, _| rng.random_range(-1.0..1.0));
-            let r = Matrix3::from_diagonal(&Vector3::new(0.1, 0.2, 0.3));
-            let a = Mat6::identity() - k * dense_h::<3>();
-            let dense_joseph = a * p * a.transpose() + k * r * k.transpose();
-            assert!((joseph(&p, &k, &r) - dense_joseph).abs().max() < 1e-12);
-        }
     }
 
     #[test]

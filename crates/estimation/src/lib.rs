@@ -14,6 +14,7 @@
 
 pub mod batch;
 pub mod clock;
+mod covariance;
 pub mod dead_reckoning;
 mod ekf;
 pub mod ellipse_fit;
@@ -22,6 +23,7 @@ mod offline;
 mod online;
 mod smoother;
 
+pub use covariance::{PackedCovariance, PackedEstimate, Transition};
 pub use ekf::{
     AugmentedEkf, FilterError, FilterStats, GateConfig, NoiseModel, StateAndCovariance,
     UpdateOutcome, chi2_quantile, nees,
@@ -29,7 +31,7 @@ pub use ekf::{
 pub use offline::{FilterRun, run_filter, smooth};
 pub use online::{
     CalibrationError, Estimate, FilterConfig, FilterHistory, InnovationRecord, OnlineCalibrator,
-    PoseSample, TransitionTop, WheelSample, initial_estimate,
+    PoseSample, WheelSample, initial_estimate,
 };
 pub use smoother::rts_smooth;
 pub use twindrive_kinematics::{AugmentedState, Mat6, StateVec};

@@ -1,6 +1,7 @@
 //! The offline runner: the online filter over a whole log, plus the smoother.
 
-use crate::ekf::{FilterStats, StateAndCovariance};
+use crate::covariance::PackedEstimate;
+use crate::ekf::FilterStats;
 use crate::online::{
     CalibrationError, Estimate, FilterConfig, FilterHistory, OnlineCalibrator, PoseSample,
     WheelSample, initial_estimate,
@@ -96,13 +97,13 @@ pub fn run_filter(
 }
 
 /// Smoothed node estimates of a run kept with history.
-pub fn smooth(run: &FilterRun) -> Result<Vec<StateAndCovariance>, CalibrationError> {
+pub fn smooth(run: &FilterRun) -> Result<Vec<PackedEstimate>, CalibrationError> {
     let history = run.history.as_ref().ok_or_else(|| {
         CalibrationError::Input("the filter run kept no history to smooth".into())
     })?;
     rts_smooth(history).ok_or_else(|| {
         CalibrationError::Input(
-            "a predicted covariance could not be inverted while smoothing".into(),
+            "a predicted covariance was not positive-definite while smoothing".into(),
         )
     })
 }

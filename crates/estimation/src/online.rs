@@ -11,6 +11,7 @@ use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 use twindrive_kinematics::{Mat6, StateVec};
 
+use crate::covariance::{PackedEstimate, Transition};
 use crate::ekf::{
     AugmentedEkf, FilterError, FilterStats, GateConfig, NoiseModel, StateAndCovariance,
     UpdateOutcome,
@@ -81,21 +82,17 @@ pub struct InnovationRecord {
     pub accepted: bool,
 }
 
-/// The pose rows of a transition Jacobian `[[A, B], [0, I]]`; the parameter
-/// rows are always `[0, I]`.
-pub type TransitionTop = nalgebra::SMatrix<f64, 3, 6>;
-
 /// Filter nodes kept for the Rauch-Tung-Striebel smoother: one per fused
 /// pose, with the prediction that led to it.
 #[derive(Debug, Clone, Default)]
 pub struct FilterHistory {
     pub t_s: Vec<f64>,
     /// Filtered estimate at each node.
-    pub filtered: Vec<StateAndCovariance>,
+    pub filtered: Vec<PackedEstimate>,
     /// Prediction into each node from the previous one (unused for node 0).
-    pub predicted: Vec<StateAndCovariance>,
-    /// Pose rows of the Jacobian of the whole transition from the previous node.
-    pub transition: Vec<TransitionTop>,
+    pub predicted: Vec<PackedEstimate>,
+    /// Jacobian of the whole transition from the previous node.
+    pub transition: Vec<Transition>,
     pub innovations: Vec<InnovationRecord>,
 }
 
@@ -112,9 +109,8 @@ pub struct OnlineCalibrator {
     pending: std::collections::VecDeque<PoseSample>,
     last_pose_t_s: f64,
     history: Option<FilterHistory>,
-    /// Product of step Jacobians since the last node, and the prediction
-    /// state there, for the history.
-    transition: Mat6,
+    /// Product of step Jacobians since the last node, for the history.
+    transition: Transition,
 }
 
 impl OnlineCalibrator {
@@ -128,11 +124,11 @@ impl OnlineCalibrator {
     ) -> Self {
         let history = keep_history.then(|| {
             let mut h = FilterHistory::default();
+            let packed = PackedEstimate::pack(&initial);
             h.t_s.push(t0_s);
-            h.filtered.push(initial);
-            h.predicted.push(initial);
-            h.transition
-                .push(Mat6::identity().fixed_view::<3, 6>(0, 0).into_owned());
+            h.filtered.push(packed);
+            h.predicted.push(packed);
+            h.transition.push(Transition::IDENTITY);
             h
         });
         Self {
@@ -143,7 +139,7 @@ impl OnlineCalibrator {
             pending: std::collections::VecDeque::new(),
             last_pose_t_s: f64::NEG_INFINITY,
             history,
-            transition: Mat6::identity(),
+            transition: Transition::IDENTITY,
         }
     }
 
@@ -273,21 +269,20 @@ impl OnlineCalibrator {
             dt,
         );
         if self.history.is_some() {
-            // F = [[A, B], [0, I]]: only the pose rows of the product change.
-            let top = f.fixed_view::<3, 6>(0, 0) * self.transition;
-            self.transition.fixed_view_mut::<3, 6>(0, 0).copy_from(&top);
+            self.transition = self.transition.then(&f);
         }
         self.t_s = to.t_s;
     }
 
     fn fuse(&mut self, pose: &PoseSample) -> Result<(), CalibrationError> {
-        let before = *self.ekf.estimate();
+        // The prediction into this node, for the history.
+        let before = self.history.as_ref().map(|_| *self.ekf.estimate());
         let outcome = match pose.heading_rad {
             Some(h) => self.ekf.update_pose(pose.t_s, pose.x_m, pose.y_m, h)?,
             None => self.ekf.update_position(pose.t_s, pose.x_m, pose.y_m)?,
         };
         self.t_s = pose.t_s;
-        if let Some(h) = &mut self.history {
+        if let (Some(h), Some(before)) = (&mut self.history, before) {
             let s = &before.state;
             let innovation = [
                 pose.x_m - s[0],
@@ -309,11 +304,10 @@ impl OnlineCalibrator {
             });
             if accepted {
                 h.t_s.push(pose.t_s);
-                h.predicted.push(before);
-                h.filtered.push(*self.ekf.estimate());
-                h.transition
-                    .push(self.transition.fixed_view::<3, 6>(0, 0).into_owned());
-                self.transition = Mat6::identity();
+                h.predicted.push(PackedEstimate::pack(&before));
+                h.filtered.push(PackedEstimate::pack(self.ekf.estimate()));
+                h.transition.push(self.transition);
+                self.transition = Transition::IDENTITY;
             }
         }
         Ok(())

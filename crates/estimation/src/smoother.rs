@@ -1,45 +1,80 @@
 //! Rauch-Tung-Striebel smoothing of a filter history (offline use).
+//!
+//! Each backward step works on matrix columns (see [`crate::covariance`]):
+//! the gain `C = P_f Fᵀ P_pred⁻¹` comes from a Cholesky factorisation of the
+//! predicted covariance and two triangular solves from the right.
 
-use crate::ekf::StateAndCovariance;
+use crate::covariance::{
+    Col, Lanes, PackedCovariance, PackedEstimate, load_all, mirror_lower, pose_columns_of_p_ft,
+};
 use crate::online::FilterHistory;
 use twindrive_kinematics::Mat6;
 
 /// Smoothed estimates at every node of `history`, or `None` if a predicted
-/// covariance cannot be inverted.
-pub fn rts_smooth(history: &FilterHistory) -> Option<Vec<StateAndCovariance>> {
+/// covariance is not positive-definite.
+pub fn rts_smooth(history: &FilterHistory) -> Option<Vec<PackedEstimate>> {
     let n = history.filtered.len();
+    let Some(last) = history.filtered.last() else {
+        return Some(Vec::new());
+    };
     // Built backwards from the last node (whose smoothed estimate is the
-    // filtered one), then reversed: no copy of the whole filtered history.
-    let mut rev: Vec<StateAndCovariance> = Vec::with_capacity(n);
-    rev.extend(history.filtered.last().copied());
-    for k in (0..n.saturating_sub(1)).rev() {
+    // filtered one), then reversed.
+    let mut rev: Vec<PackedEstimate> = Vec::with_capacity(n);
+    rev.push(*last);
+    let mut next_state: Col = last.state.into();
+    let mut next_cov = last.covariance.unpack().data.0;
+    for k in (0..n - 1).rev() {
         let filt = &history.filtered[k];
         let pred = &history.predicted[k + 1];
-        let f_top = &history.transition[k + 1];
-        // C = P_f Fᵀ P_pred⁻¹, via Cᵀ = P_pred⁻¹ F P_f (P_f symmetric).
-        // F = [[A, B], [0, I]]: only the pose rows of F P_f differ from P_f.
-        let mut fp = filt.covariance;
-        let top = f_top * filt.covariance;
-        fp.fixed_view_mut::<3, 6>(0, 0).copy_from(&top);
-        let c = solve_spd6(&pred.covariance, &fp)?.transpose();
-        let next = *rev.last().expect("the last node is pushed first");
-        let state = filt.state + c * (next.state - pred.state);
-        let mut cov = filt.covariance + c * (next.covariance - pred.covariance) * c.transpose();
-        cov = 0.5 * (cov + cov.transpose());
-        rev.push(StateAndCovariance {
-            state,
-            covariance: cov,
+        let pf_cols = filt.covariance.unpack().data.0;
+        let pf = load_all(&pf_cols);
+        let pp = pred.covariance.unpack();
+        // W = P_f Fᵀ: its parameter columns are those of P_f.
+        let w_pose = pose_columns_of_p_ft(&pf, &history.transition[k + 1]);
+        let w = [w_pose[0], w_pose[1], w_pose[2], pf[3], pf[4], pf[5]];
+        let c = right_solve_spd(&pp, w)?;
+        let c_cols = c.map(Lanes::to_col);
+
+        // x_s = x_f + C (x_s,next − x_pred).
+        let mut state = Lanes::load(&filt.state.into());
+        for (j, cj) in c.iter().enumerate() {
+            state.axpy(next_state[j] - pred.state[j], cj);
+        }
+        // P_s = P_f + C (P_s,next − P_pred) Cᵀ, via E = C (P_s,next − P_pred).
+        let pp = pp.data.0;
+        let mut e = [Lanes::ZERO; 6];
+        for (j, ej) in e.iter_mut().enumerate() {
+            for (kk, ck) in c.iter().enumerate() {
+                ej.axpy(next_cov[j][kk] - pp[j][kk], ck);
+            }
+        }
+        let mut cov = pf_cols;
+        for (j, covj) in cov.iter_mut().enumerate() {
+            let mut col = pf[j];
+            for (ek, ck) in e.iter().zip(&c_cols) {
+                col.axpy(ck[j], ek);
+            }
+            col.store(covj);
+        }
+        mirror_lower(&mut cov);
+
+        next_state = state.to_col();
+        next_cov = cov;
+        rev.push(PackedEstimate {
+            state: next_state.into(),
+            covariance: PackedCovariance::pack(&Mat6::from_data(nalgebra::ArrayStorage(cov))),
         });
     }
     rev.reverse();
     Some(rev)
 }
 
-/// Solves `A X = B` for symmetric positive-definite 6x6 `A` by a Cholesky
-/// factorisation on plain arrays (much faster than the general routine at
-/// this size); `None` if `A` is not positive-definite.
-fn solve_spd6(a: &Mat6, b: &Mat6) -> Option<Mat6> {
+/// Solves `X A = B` for symmetric positive-definite `A` (`B` and `X` as
+/// columns) through `A = L Lᵀ`; `None` if `A` is not positive-definite.
+fn right_solve_spd(a: &Mat6, b: [Lanes; 6]) -> Option<[Lanes; 6]> {
+    // Cholesky, keeping the reciprocals of the diagonal.
     let mut l = [[0.0f64; 6]; 6];
+    let mut inv_diag = [0.0f64; 6];
     for j in 0..6 {
         let d = a[(j, j)] - l[j][..j].iter().map(|v| v * v).sum::<f64>();
         if d.is_nan() || d <= 0.0 {
@@ -47,6 +82,7 @@ fn solve_spd6(a: &Mat6, b: &Mat6) -> Option<Mat6> {
         }
         let d = d.sqrt();
         l[j][j] = d;
+        inv_diag[j] = 1.0 / d;
         for i in j + 1..6 {
             let v = a[(i, j)]
                 - l[i][..j]
@@ -54,29 +90,29 @@ fn solve_spd6(a: &Mat6, b: &Mat6) -> Option<Mat6> {
                     .zip(&l[j][..j])
                     .map(|(p, q)| p * q)
                     .sum::<f64>();
-            l[i][j] = v / d;
+            l[i][j] = v * inv_diag[j];
         }
     }
-    let mut x = Mat6::zeros();
-    for c in 0..6 {
-        // L y = b, then Lᵀ x = y.
-        let mut y = [0.0f64; 6];
-        for i in 0..6 {
-            let mut v = b[(i, c)];
-            for k in 0..i {
-                v -= l[i][k] * y[k];
-            }
-            y[i] = v / l[i][i];
+    // Z Lᵀ = B: Z[:, j] = (B[:, j] − Σ_{k<j} Z[:, k] L[j][k]) / L[j][j].
+    let mut z = b;
+    for j in 0..6 {
+        let (done, rest) = z.split_at_mut(j);
+        let zj = &mut rest[0];
+        for (k, zk) in done.iter().enumerate() {
+            zj.axpy(-l[j][k], zk);
         }
-        for i in (0..6).rev() {
-            let mut v = y[i];
-            for k in i + 1..6 {
-                v -= l[k][i] * x[(k, c)];
-            }
-            x[(i, c)] = v / l[i][i];
-        }
+        zj.scale(inv_diag[j]);
     }
-    Some(x)
+    // X L = Z: X[:, j] = (Z[:, j] − Σ_{k>j} X[:, k] L[k][j]) / L[j][j].
+    for j in (0..6).rev() {
+        let (head, done) = z.split_at_mut(j + 1);
+        let xj = &mut head[j];
+        for (k, xk) in done.iter().enumerate() {
+            xj.axpy(-l[j + 1 + k][j], xk);
+        }
+        xj.scale(inv_diag[j]);
+    }
+    Some(z)
 }
 
 #[cfg(test)]
@@ -84,14 +120,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn spd_solve_matches_the_general_one() {
+    fn right_spd_solve_matches_the_general_one() {
         let m = Mat6::from_fn(|i, j| ((i * 7 + j * 3) % 11) as f64 / 11.0 - 0.4);
         let a = m * m.transpose() + Mat6::identity() * 0.2;
+        let a = (a + a.transpose()) * 0.5;
         let b = Mat6::from_fn(|i, j| (i as f64 - j as f64) * 0.3 + 1.0);
-        let x = solve_spd6(&a, &b).unwrap();
-        assert!((a * x - b).abs().max() < 1e-10);
+        let solved = right_solve_spd(&a, load_all(&b.data.0)).unwrap();
+        let x = Mat6::from_data(nalgebra::ArrayStorage(solved.map(Lanes::to_col)));
+        assert!((x * a - b).abs().max() < 1e-10);
         let mut not_pd = a;
         not_pd[(2, 2)] = -1.0;
-        assert!(solve_spd6(&not_pd, &b).is_none());
+        assert!(right_solve_spd(&not_pd, load_all(&b.data.0)).is_none());
     }
 }

@@ -11,8 +11,10 @@ const SERIES_LIMIT: f64 = 1e-3;
 #[inline]
 pub fn sinc(a: f64) -> f64 {
     if a.abs() < SERIES_LIMIT {
+        // Multiplications by the reciprocals: divisions are slow, and the
+        // correction terms are far below 1 ulp of the result either way.
         let a2 = a * a;
-        1.0 - a2 / 6.0 * (1.0 - a2 / 20.0)
+        1.0 - a2 * (1.0 / 6.0) * (1.0 - a2 * (1.0 / 20.0))
     } else {
         a.sin() / a
     }
@@ -23,7 +25,7 @@ pub fn sinc(a: f64) -> f64 {
 pub fn sinc_derivative(a: f64) -> f64 {
     if a.abs() < SERIES_LIMIT {
         let a2 = a * a;
-        -a / 3.0 * (1.0 - a2 / 10.0 * (1.0 - a2 / 28.0))
+        -a * (1.0 / 3.0) * (1.0 - a2 * (1.0 / 10.0) * (1.0 - a2 * (1.0 / 28.0)))
     } else {
         let (s, c) = a.sin_cos();
         (a * c - s) / (a * a)

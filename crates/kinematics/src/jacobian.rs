@@ -63,19 +63,74 @@ pub fn step_augmented(state: &StateVec, left_rad: f64, right_rad: f64) -> StateV
     next
 }
 
-/// [`step_augmented`] and [`step_jacobians`] in one go (the trigonometry once).
-pub fn step_with_jacobians(
+/// The Jacobians of one arc step, by blocks (rows x, y, θ).
+///
+/// With respect to the state, `∂f/∂[x, y, θ, dL, dR, b] = [[A, B], [0, I]]`
+/// with `A = [[1, 0, heading_to_x], [0, 1, heading_to_y], [0, 0, 1]]` and
+/// `B = params`. With respect to the wheel rotations only the pose rows are
+/// non-zero: `wheels`. Filters use the blocks directly; the dense matrices
+/// are there for reference and tests.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepJacobian {
+    /// ∂x'/∂θ.
+    pub heading_to_x: f64,
+    /// ∂y'/∂θ.
+    pub heading_to_y: f64,
+    /// ∂(x', y', θ')/∂(dL, dR, b).
+    pub params: [[f64; 3]; 3],
+    /// ∂(x', y', θ')/∂(left_rad, right_rad).
+    pub wheels: [[f64; 2]; 3],
+}
+
+impl StepJacobian {
+    /// The dense 6x6 state Jacobian.
+    pub fn state_matrix(&self) -> Mat6 {
+        let mut f = Mat6::identity();
+        f[(0, 2)] = self.heading_to_x;
+        f[(1, 2)] = self.heading_to_y;
+        for (i, row) in self.params.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                f[(i, 3 + j)] = *v;
+            }
+        }
+        f
+    }
+
+    /// The dense 6x2 wheel-rotation Jacobian.
+    pub fn wheel_matrix(&self) -> Mat6x2 {
+        let mut g = Mat6x2::zeros();
+        for (i, row) in self.wheels.iter().enumerate() {
+            g[(i, 0)] = row[0];
+            g[(i, 1)] = row[1];
+        }
+        g
+    }
+}
+
+/// [`step_augmented`] and its Jacobians by blocks in one go (the
+/// trigonometry once).
+#[inline]
+pub fn step_with_jacobian(
     state: &StateVec,
     left_rad: f64,
     right_rad: f64,
-) -> (StateVec, Mat6, Mat6x2) {
+) -> (StateVec, StepJacobian) {
     let t = terms(state, left_rad, right_rad);
     let mut next = *state;
     next[0] += t.chord * t.cos_mid;
     next[1] += t.chord * t.sin_mid;
     next[2] += 2.0 * t.half_turn;
-    let (f, g) = jacobians_from_terms(state, left_rad, right_rad, &t);
-    (next, f, g)
+    (next, jacobian_from_terms(state, left_rad, right_rad, &t))
+}
+
+/// [`step_augmented`] and [`step_jacobians`] in one go.
+pub fn step_with_jacobians(
+    state: &StateVec,
+    left_rad: f64,
+    right_rad: f64,
+) -> (StateVec, Mat6, Mat6x2) {
+    let (next, j) = step_with_jacobian(state, left_rad, right_rad);
+    (next, j.state_matrix(), j.wheel_matrix())
 }
 
 /// Jacobians of [`step_augmented`]: `F = ∂f/∂state` (6x6) and
@@ -83,20 +138,22 @@ pub fn step_with_jacobians(
 /// noise into the state.
 pub fn step_jacobians(state: &StateVec, left_rad: f64, right_rad: f64) -> (Mat6, Mat6x2) {
     let t = terms(state, left_rad, right_rad);
-    jacobians_from_terms(state, left_rad, right_rad, &t)
+    let j = jacobian_from_terms(state, left_rad, right_rad, &t);
+    (j.state_matrix(), j.wheel_matrix())
 }
 
 #[inline]
-fn jacobians_from_terms(
+fn jacobian_from_terms(
     state: &StateVec,
     left_rad: f64,
     right_rad: f64,
     t: &StepTerms,
-) -> (Mat6, Mat6x2) {
-    let (dl, dr, b) = (state[3], state[4], state[5]);
+) -> StepJacobian {
+    let (dl, dr) = (state[3], state[4]);
+    let inv_b = 1.0 / state[5];
 
-    // Column of partials of (x', y', θ') for a variable with the given
-    // partials of ds and of the half turn α.
+    // Partials of (x', y', θ') for a variable with the given partials of ds
+    // and of the half turn α.
     let column = |dds: f64, dalpha: f64| -> [f64; 3] {
         let dchord = dds * t.sinc_half + t.ds * t.sinc_half_derivative * dalpha;
         [
@@ -105,32 +162,21 @@ fn jacobians_from_terms(
             2.0 * dalpha,
         ]
     };
-
-    let mut f = Mat6::identity();
-    f[(0, 2)] = -t.chord * t.sin_mid;
-    f[(1, 2)] = t.chord * t.cos_mid;
-    let param_columns = [
-        column(0.25 * left_rad, -0.25 * left_rad / b),
-        column(0.25 * right_rad, 0.25 * right_rad / b),
-        column(0.0, -t.half_turn / b),
+    let p = [
+        column(0.25 * left_rad, -0.25 * left_rad * inv_b),
+        column(0.25 * right_rad, 0.25 * right_rad * inv_b),
+        column(0.0, -t.half_turn * inv_b),
     ];
-    for (j, col) in param_columns.iter().enumerate() {
-        for (i, v) in col.iter().enumerate() {
-            f[(i, 3 + j)] = *v;
-        }
-    }
-
-    let mut g = Mat6x2::zeros();
-    let input_columns = [
-        column(0.25 * dl, -0.25 * dl / b),
-        column(0.25 * dr, 0.25 * dr / b),
+    let w = [
+        column(0.25 * dl, -0.25 * dl * inv_b),
+        column(0.25 * dr, 0.25 * dr * inv_b),
     ];
-    for (j, col) in input_columns.iter().enumerate() {
-        for (i, v) in col.iter().enumerate() {
-            g[(i, j)] = *v;
-        }
+    StepJacobian {
+        heading_to_x: -t.chord * t.sin_mid,
+        heading_to_y: t.chord * t.cos_mid,
+        params: std::array::from_fn(|i| [p[0][i], p[1][i], p[2][i]]),
+        wheels: std::array::from_fn(|i| [w[0][i], w[1][i]]),
     }
-    (f, g)
 }
 
 #[cfg(test)]
@@ -227,6 +273,9 @@ mod tests {
             let (next, f, g) = step_with_jacobians(&s, l, r);
             assert_eq!(next, step_augmented(&s, l, r));
             assert_eq!((f, g), step_jacobians(&s, l, r));
+            let (next_blocks, j) = step_with_jacobian(&s, l, r);
+            assert_eq!(next_blocks, next);
+            assert_eq!((j.state_matrix(), j.wheel_matrix()), (f, g));
         }
     }
 

@@ -15,7 +15,7 @@ mod tum;
 pub use csv_io::{read_csv, read_csv_from, write_csv};
 pub use error::LogError;
 pub use mcap_io::{read_mcap, write_mcap};
-pub use time::{format_seconds, ns_from_seconds, seconds_from_ns};
+pub use time::{format_seconds, ns_from_seconds, push_seconds, seconds_from_ns};
 pub use tum::{read_tum, write_tum};
 
 use serde::{Deserialize, Serialize};

@@ -14,12 +14,27 @@ pub fn ns_from_seconds(t_s: f64) -> Option<u64> {
 
 /// Exact decimal seconds ("12.34", "0.000000001", "3").
 pub fn format_seconds(t_ns: u64) -> String {
+    let mut out = Vec::with_capacity(24);
+    push_seconds(&mut out, t_ns);
+    String::from_utf8(out).expect("digits and a point are ASCII")
+}
+
+/// Appends [`format_seconds`]'s text to `out` without allocating.
+pub fn push_seconds(out: &mut Vec<u8>, t_ns: u64) {
     let (sec, nsec) = (t_ns / 1_000_000_000, t_ns % 1_000_000_000);
+    out.extend_from_slice(itoa::Buffer::new().format(sec).as_bytes());
     if nsec == 0 {
-        return sec.to_string();
+        return;
     }
-    let frac = format!("{nsec:09}");
-    format!("{sec}.{}", frac.trim_end_matches('0'))
+    let mut digits = [b'0'; 9];
+    let mut rest = nsec;
+    for d in digits.iter_mut().rev() {
+        *d = b'0' + (rest % 10) as u8;
+        rest /= 10;
+    }
+    let len = 9 - digits.iter().rev().take_while(|&&d| d == b'0').count();
+    out.push(b'.');
+    out.extend_from_slice(&digits[..len]);
 }
 
 #[cfg(test)]

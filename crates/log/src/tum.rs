@@ -5,24 +5,34 @@ use std::path::Path;
 
 use twindrive_kinematics::Pose;
 
-use crate::{LogError, format_seconds, ns_from_seconds};
+use crate::{LogError, ns_from_seconds, push_seconds};
 
 /// Writes planar poses as TUM lines (z = 0, rotation about +z).
+/// Bytes gathered before each write.
+const BLOCK_BYTES: usize = 1 << 16;
+
 pub fn write_tum<W: Write>(
     poses: impl IntoIterator<Item = (u64, Pose)>,
     mut out: W,
 ) -> std::io::Result<()> {
-    // ryu: shortest round-trip decimals, several times faster than `{}`.
+    // ryu: shortest round-trip decimals, several times faster than `{}`;
+    // lines are built in one reused buffer and written in blocks.
     let mut buf = ryu::Buffer::new();
+    let mut block: Vec<u8> = Vec::with_capacity(BLOCK_BYTES + 256);
     for (t_ns, p) in poses {
         let (qz, qw) = (0.5 * p.heading_rad).sin_cos();
-        out.write_all(format_seconds(t_ns).as_bytes())?;
+        push_seconds(&mut block, t_ns);
         for (sep, v) in [(" ", p.x_m), (" ", p.y_m), (" 0 0 0 ", qz), (" ", qw)] {
-            out.write_all(sep.as_bytes())?;
-            out.write_all(buf.format(v).as_bytes())?;
+            block.extend_from_slice(sep.as_bytes());
+            block.extend_from_slice(buf.format(v).as_bytes());
         }
-        out.write_all(b"\n")?;
+        block.push(b'\n');
+        if block.len() >= BLOCK_BYTES {
+            out.write_all(&block)?;
+            block.clear();
+        }
     }
+    out.write_all(&block)?;
     out.flush()
 }
 

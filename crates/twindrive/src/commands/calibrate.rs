@@ -10,8 +10,8 @@ use serde::Serialize;
 use twindrive_estimation::batch::{self, BatchConfig, Identifiability};
 use twindrive_estimation::dead_reckoning::dead_reckon;
 use twindrive_estimation::{
-    FilterConfig, InnovationRecord, PoseSample, StateAndCovariance, WheelSample, clock, run_filter,
-    smooth,
+    FilterConfig, FilterHistory, PackedEstimate, PoseSample, StateAndCovariance, WheelSample,
+    clock, run_filter, smooth,
 };
 use twindrive_kinematics::{DiffDriveParams, Pose};
 
@@ -110,20 +110,57 @@ pub struct DataSummary {
 
 /// What the figures and trajectories are drawn from.
 pub struct Artefacts {
-    /// (t, [dL, dR, b], [σ]) of the filter at its nodes: how it converged.
-    pub trace: Vec<(f64, [f64; 3], [f64; 3])>,
     /// The reported parameters.
     pub reported: [f64; 3],
-    pub innovations: Vec<InnovationRecord>,
-    pub reference: Vec<(f64, Pose)>,
-    pub dead_reckoning_initial: Vec<(f64, Pose)>,
-    pub dead_reckoning_calibrated: Vec<(f64, Pose)>,
+    pub initial: [f64; 3],
+    /// The filter's nodes (how it converged) and innovations.
+    pub history: FilterHistory,
+    /// The reference poses used.
+    pub poses: Vec<PoseSample>,
+    /// The encoder samples on the pose clock.
+    pub wheels: Vec<WheelSample>,
+    /// Where dead reckoning starts, and the time span it covers.
+    pub start_pose: Pose,
+    pub span_s: (f64, f64),
 }
 
-fn params_of(s: &StateAndCovariance) -> ([f64; 3], [f64; 3]) {
+impl Artefacts {
+    /// (t, [dL, dR, b], [σ]) of the filter at its nodes.
+    pub fn trace(&self) -> Vec<(f64, [f64; 3], [f64; 3])> {
+        let h = &self.history;
+        h.t_s
+            .iter()
+            .zip(&h.filtered)
+            .map(|(t, s)| {
+                let (v, sd) = params_of(s);
+                (*t, v, sd)
+            })
+            .collect()
+    }
+
+    /// The reference poses that carry a heading, as a track.
+    pub fn reference(&self) -> impl Iterator<Item = (f64, Pose)> + '_ {
+        self.poses
+            .iter()
+            .filter_map(|p| p.heading_rad.map(|h| (p.t_s, Pose::new(p.x_m, p.y_m, h))))
+    }
+
+    /// Dead reckoning over the span with parameters [dL, dR, b].
+    pub fn dead_reckoning(&self, p: [f64; 3]) -> Vec<(f64, Pose)> {
+        dead_reckon(
+            &self.wheels,
+            self.start_pose,
+            self.span_s.0,
+            self.span_s.1,
+            &DiffDriveParams::new(p[0], p[1], p[2]),
+        )
+    }
+}
+
+fn params_of(s: &PackedEstimate) -> ([f64; 3], [f64; 3]) {
     (
         [s.state[3], s.state[4], s.state[5]],
-        [3, 4, 5].map(|i| s.covariance[(i, i)].max(0.0).sqrt()),
+        [3, 4, 5].map(|i| s.std(i)),
     )
 }
 
@@ -201,7 +238,11 @@ pub fn calibrate(
         ..BatchConfig::default()
     };
     let (run, b) = std::thread::scope(|scope| {
-        let batch = scope.spawn(|| batch::fit(&job.wheels, &poses, job.initial, &batch_cfg));
+        let batch = scope.spawn(|| {
+            let fit = batch::fit(&job.wheels, &poses, job.initial, &batch_cfg);
+            tracing::info!(elapsed_s = stage.elapsed().as_secs_f64(), "batch fit");
+            fit
+        });
         let run = run_filter(
             &job.wheels,
             &poses,
@@ -211,13 +252,14 @@ pub fn calibrate(
             true,
             progress,
         );
+        tracing::info!(elapsed_s = stage.elapsed().as_secs_f64(), "filter");
         (run, batch.join())
     });
     let run = run?;
     let b = b.map_err(|_| anyhow::anyhow!("the batch fit panicked"))??;
     let history = run.history.as_ref().expect("kept");
     let smoothed;
-    let nodes: &[StateAndCovariance] = match job.method {
+    let nodes: &[PackedEstimate] = match job.method {
         Method::Smoother => {
             smoothed = smooth(&run)?;
             &smoothed
@@ -229,10 +271,10 @@ pub fn calibrate(
         batch_iterations = b.iterations,
         "filter, smoother and batch"
     );
-    let (ekf, ekf_std) = params_of(&StateAndCovariance {
+    let (ekf, ekf_std) = params_of(&PackedEstimate::pack(&StateAndCovariance {
         state: run.estimate.state,
         covariance: run.estimate.covariance,
-    });
+    }));
 
     let (params, std) = match job.method {
         Method::Batch => (b.params, b.std),
@@ -261,7 +303,11 @@ pub fn calibrate(
                     s.state[4],
                     s.state[5],
                 );
-                Some(twindrive_estimation::nees(s, &truth_state, &[0, 1, 2]))
+                Some(twindrive_estimation::nees(
+                    &s.unpack(),
+                    &truth_state,
+                    &[0, 1, 2],
+                ))
             })
             .collect();
         let n = values.len().max(1) as f64;
@@ -318,40 +364,21 @@ pub fn calibrate(
         },
     };
 
-    let reference: Vec<(f64, Pose)> = poses
-        .iter()
-        .filter_map(|p| p.heading_rad.map(|h| (p.t_s, Pose::new(p.x_m, p.y_m, h))))
-        .collect();
-    let start_pose = reference.first().map(|r| r.1).unwrap_or_else(|| {
-        let s = &history.filtered[0].state;
-        Pose::new(s[0], s[1], s[2])
-    });
-    let (t_a, t_b) = (report.data.start_s, report.data.end_s);
-    let dr = |p: [f64; 3]| {
-        dead_reckon(
-            &job.wheels,
-            start_pose,
-            t_a,
-            t_b,
-            &DiffDriveParams::new(p[0], p[1], p[2]),
-        )
+    let start_pose = match poses.iter().find_map(|p| p.heading_rad.map(|h| (p, h))) {
+        Some((p, h)) => Pose::new(p.x_m, p.y_m, h),
+        None => {
+            let s = &history.filtered[0].state;
+            Pose::new(s[0], s[1], s[2])
+        }
     };
-    let trace = history
-        .t_s
-        .iter()
-        .zip(&history.filtered)
-        .map(|(t, s)| {
-            let (v, sd) = params_of(s);
-            (*t, v, sd)
-        })
-        .collect();
     let artefacts = Artefacts {
-        trace,
         reported: params,
-        innovations: history.innovations.clone(),
-        reference,
-        dead_reckoning_initial: dr(job.initial),
-        dead_reckoning_calibrated: dr(params),
+        initial: job.initial,
+        history: run.history.expect("kept"),
+        poses,
+        wheels: job.wheels,
+        start_pose,
+        span_s: (report.data.start_s, report.data.end_s),
     };
     Ok((report, artefacts))
 }
@@ -531,34 +558,37 @@ pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Re
     staging.write_with(&file_name, |w| {
         serde_json::to_writer_pretty(w, report).map_err(Into::into)
     })?;
-    // Trajectories on one core, figures on the other.
-    let tracks = || -> anyhow::Result<()> {
-        for (suffix, track) in [
-            ("reference", &art.reference),
-            ("dead_reckoning_initial", &art.dead_reckoning_initial),
-            ("dead_reckoning_calibrated", &art.dead_reckoning_calibrated),
-        ] {
-            staging.write_with(&format!("{stem}_{suffix}.tum"), |w| {
-                let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
-                twindrive_log::write_tum(track.iter().map(|(t, p)| (ns(*t), *p)), w)
-                    .map_err(Into::into)
-            })?;
-        }
-        Ok(())
+    // The reference track, the dead-reckoned tracks and the figures side by side.
+    let write_tum = |suffix: &str, track: &mut dyn Iterator<Item = (f64, Pose)>| {
+        staging.write_with(&format!("{stem}_{suffix}.tum"), |w| {
+            let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
+            twindrive_log::write_tum(track.map(|(t, p)| (ns(t), p)), w).map_err(Into::into)
+        })
     };
-    let (tracks_done, figures_done) = std::thread::scope(|scope| {
-        let handle = scope.spawn(tracks);
-        let figs = figures::calibration_figures(
-            &art.trace,
+    let (reference, dead_reckoning, figures) = std::thread::scope(|scope| {
+        let reference = scope.spawn(|| write_tum("reference", &mut art.reference()));
+        let dead_reckoning = scope.spawn(|| -> anyhow::Result<()> {
+            for (suffix, params) in [
+                ("dead_reckoning_initial", art.initial),
+                ("dead_reckoning_calibrated", art.reported),
+            ] {
+                write_tum(suffix, &mut art.dead_reckoning(params).into_iter())?;
+            }
+            Ok(())
+        });
+        let figures = figures::calibration_figures(
+            &art.trace(),
             art.reported,
-            &art.innovations,
+            &art.history.innovations,
             staging.dir(),
             &stem,
         );
-        (handle.join(), figs)
+        (reference.join(), dead_reckoning.join(), figures)
     });
-    tracks_done.map_err(|_| anyhow::anyhow!("writing the trajectories panicked"))??;
-    figures_done?;
+    let panicked = |_| anyhow::anyhow!("writing the trajectories panicked");
+    reference.map_err(panicked)??;
+    dead_reckoning.map_err(panicked)??;
+    figures?;
     staging.commit()
 }
 
