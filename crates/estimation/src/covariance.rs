@@ -351,22 +351,31 @@ impl PackedCovariance {
     #[inline]
     pub fn pack(p: &Mat6) -> Self {
         let c = &p.data.0;
-        let mut out = [0.0; 21];
-        for j in 0..6 {
-            out[COLUMN_START[j]..COLUMN_START[j] + 6 - j].copy_from_slice(&c[j][j..]);
-        }
-        Self(out)
+        #[rustfmt::skip]
+        let packed = [
+            c[0][0], c[0][1], c[0][2], c[0][3], c[0][4], c[0][5],
+            c[1][1], c[1][2], c[1][3], c[1][4], c[1][5],
+            c[2][2], c[2][3], c[2][4], c[2][5],
+            c[3][3], c[3][4], c[3][5],
+            c[4][4], c[4][5],
+            c[5][5],
+        ];
+        Self(packed)
     }
 
     #[inline]
     pub fn unpack(&self) -> Mat6 {
-        let mut m = Mat6::zeros();
-        let c = &mut m.data.0;
-        for j in 0..6 {
-            c[j][j..].copy_from_slice(&self.0[COLUMN_START[j]..COLUMN_START[j] + 6 - j]);
-        }
-        mirror_lower(c);
-        m
+        let v = &self.0;
+        #[rustfmt::skip]
+        let columns = [
+            [v[0], v[1], v[2], v[3], v[4], v[5]],
+            [v[1], v[6], v[7], v[8], v[9], v[10]],
+            [v[2], v[7], v[11], v[12], v[13], v[14]],
+            [v[3], v[8], v[12], v[15], v[16], v[17]],
+            [v[4], v[9], v[13], v[16], v[18], v[19]],
+            [v[5], v[10], v[14], v[17], v[19], v[20]],
+        ];
+        Mat6::from_data(nalgebra::ArrayStorage(columns))
     }
 }
 

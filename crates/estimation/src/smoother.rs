@@ -17,10 +17,9 @@ pub fn rts_smooth(history: &FilterHistory) -> Option<Vec<PackedEstimate>> {
     let Some(last) = history.filtered.last() else {
         return Some(Vec::new());
     };
-    // Built backwards from the last node (whose smoothed estimate is the
-    // filtered one), then reversed.
-    let mut rev: Vec<PackedEstimate> = Vec::with_capacity(n);
-    rev.push(*last);
+    // Filled backwards over a copy of the filtered nodes; the last node's
+    // smoothed estimate is the filtered one.
+    let mut out = history.filtered.clone();
     let mut next_state: Col = last.state.into();
     let mut next_cov = last.covariance.unpack().data.0;
     for k in (0..n - 1).rev() {
@@ -60,57 +59,59 @@ pub fn rts_smooth(history: &FilterHistory) -> Option<Vec<PackedEstimate>> {
 
         next_state = state.to_col();
         next_cov = cov;
-        rev.push(PackedEstimate {
+        out[k] = PackedEstimate {
             state: next_state.into(),
             covariance: PackedCovariance::pack(&Mat6::from_data(nalgebra::ArrayStorage(cov))),
-        });
+        };
     }
-    rev.reverse();
-    Some(rev)
+    Some(out)
 }
 
 /// Solves `X A = B` for symmetric positive-definite `A` (`B` and `X` as
-/// columns) through `A = L Lᵀ`; `None` if `A` is not positive-definite.
+/// columns) through `A = L D Lᵀ` with unit lower-triangular `L` (no square
+/// roots on the critical path); `None` if `A` is not positive-definite.
 fn right_solve_spd(a: &Mat6, b: [Lanes; 6]) -> Option<[Lanes; 6]> {
-    // Cholesky, keeping the reciprocals of the diagonal.
+    let a = &a.data.0;
     let mut l = [[0.0f64; 6]; 6];
-    let mut inv_diag = [0.0f64; 6];
+    let mut d = [0.0f64; 6];
+    let mut inv_d = [0.0f64; 6];
     for j in 0..6 {
-        let d = a[(j, j)] - l[j][..j].iter().map(|v| v * v).sum::<f64>();
-        if d.is_nan() || d <= 0.0 {
+        // ld[k] = L[j][k] d_k.
+        let mut ld = [0.0f64; 6];
+        let mut dj = a[j][j];
+        for k in 0..j {
+            ld[k] = l[j][k] * d[k];
+            dj -= l[j][k] * ld[k];
+        }
+        if dj.is_nan() || dj <= 0.0 {
             return None;
         }
-        let d = d.sqrt();
-        l[j][j] = d;
-        inv_diag[j] = 1.0 / d;
+        d[j] = dj;
+        inv_d[j] = 1.0 / dj;
         for i in j + 1..6 {
-            let v = a[(i, j)]
-                - l[i][..j]
-                    .iter()
-                    .zip(&l[j][..j])
-                    .map(|(p, q)| p * q)
-                    .sum::<f64>();
-            l[i][j] = v * inv_diag[j];
+            let mut v = a[j][i];
+            for k in 0..j {
+                v -= l[i][k] * ld[k];
+            }
+            l[i][j] = v * inv_d[j];
         }
     }
-    // Z Lᵀ = B: Z[:, j] = (B[:, j] − Σ_{k<j} Z[:, k] L[j][k]) / L[j][j].
+    // Z Lᵀ = B: Z[:, j] = B[:, j] − Σ_{k<j} Z[:, k] L[j][k].
     let mut z = b;
-    for j in 0..6 {
+    for (j, lj) in l.iter().enumerate().skip(1) {
         let (done, rest) = z.split_at_mut(j);
-        let zj = &mut rest[0];
-        for (k, zk) in done.iter().enumerate() {
-            zj.axpy(-l[j][k], zk);
+        for (zk, ljk) in done.iter().zip(lj) {
+            rest[0].axpy(-ljk, zk);
         }
-        zj.scale(inv_diag[j]);
     }
-    // X L = Z: X[:, j] = (Z[:, j] − Σ_{k>j} X[:, k] L[k][j]) / L[j][j].
+    // Y = Z D⁻¹, then X L = Y: X[:, j] = Y[:, j] − Σ_{k>j} X[:, k] L[k][j].
     for j in (0..6).rev() {
         let (head, done) = z.split_at_mut(j + 1);
         let xj = &mut head[j];
+        xj.scale(inv_d[j]);
         for (k, xk) in done.iter().enumerate() {
             xj.axpy(-l[j + 1 + k][j], xk);
         }
-        xj.scale(inv_diag[j]);
     }
     Some(z)
 }
