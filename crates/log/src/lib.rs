@@ -14,7 +14,7 @@ mod tum;
 
 pub use csv_io::{read_csv, read_csv_from, write_csv};
 pub use error::LogError;
-pub use mcap_io::{read_mcap, write_mcap};
+pub use mcap_io::{Track, read_mcap, write_mcap, write_tracks_mcap};
 pub use time::{format_seconds, ns_from_seconds, push_seconds, seconds_from_ns};
 pub use tum::{read_tum, write_tum};
 
@@ -24,7 +24,7 @@ use twindrive_kinematics::{DiffDriveParams, Pose};
 /// Identifies the header of a mission log.
 pub const LOG_FORMAT: &str = "twindrive-mission-log";
 /// Bumped whenever the meaning of a field or column changes.
-pub const LOG_VERSION: u32 = 1;
+pub const LOG_VERSION: u32 = 2;
 
 /// Reads a log header written as JSON (`log.meta.json`).
 pub fn read_header_json(path: &std::path::Path) -> Result<LogHeader, LogError> {
@@ -68,6 +68,12 @@ pub struct LogHeader {
     /// The parameters the operator believes (not the twin's hidden truth).
     pub nominal: DiffDriveParams,
     pub footprint_radius_m: f64,
+    /// Wheel limits of the robot (the pipeline's plans must respect them).
+    pub max_wheel_speed_rad_s: f64,
+    pub max_wheel_accel_rad_s2: f64,
+    /// Where the mission started: the operator places the robot, so this is
+    /// known, unlike the path that followed.
+    pub start: Pose,
     pub range_sensors: Vec<RangeSensorInfo>,
 }
 
@@ -235,6 +241,9 @@ pub(crate) mod testutil {
             ticks_per_rev: 512,
             nominal: DiffDriveParams::new(0.064, 0.064, 0.26),
             footprint_radius_m: 0.17,
+            max_wheel_speed_rad_s: 12.0,
+            max_wheel_accel_rad_s2: 40.0,
+            start: Pose::new(0.5, 0.25, 0.1),
             range_sensors: vec![
                 RangeSensorInfo {
                     name: "side_ir".into(),

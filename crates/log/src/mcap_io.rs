@@ -367,6 +367,119 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
 }
 
 /// Object-safe JSON serialisation for the message structs above.
+/// One named pose track with optional wheel speeds, for [`write_tracks_mcap`].
+pub struct Track<'a> {
+    /// Topic prefix, e.g. `/executed`.
+    pub topic: &'a str,
+    /// (t_ns, pose) in time order.
+    pub poses: &'a [(u64, Pose)],
+    /// (t_ns, [left, right] rad/s), or empty.
+    pub wheels: &'a [(u64, [f64; 2])],
+}
+
+/// Writes several pose tracks (`<topic>` as `foxglove.PoseInFrame` in frame
+/// `world`, `<topic>/wheels` as `twindrive.WheelSpeeds`) into one MCAP file,
+/// so stages of a pipeline can be scrubbed side by side in Foxglove. No
+/// wall-clock time is recorded: the same tracks give the same bytes.
+pub fn write_tracks_mcap<W: Write + Seek>(
+    tracks: &[Track],
+    metadata: &[(&str, String)],
+    out: W,
+) -> Result<(), mcap::McapError> {
+    let mut w = mcap::WriteOptions::new()
+        .profile("")
+        .library(concat!("twindrive-log ", env!("CARGO_PKG_VERSION")))
+        .compression(Some(mcap::Compression::Zstd))
+        .create(out)?;
+    for (name, json) in metadata {
+        w.write_metadata(&mcap::records::Metadata {
+            name: (*name).into(),
+            metadata: BTreeMap::from([("json".to_string(), json.clone())]),
+        })?;
+    }
+    let none = BTreeMap::new();
+    let pose_in_frame = w.add_schema(
+        "foxglove.PoseInFrame",
+        "jsonschema",
+        &object_schema(
+            "foxglove.PoseInFrame",
+            json!({"frame_id": {"type": "string"}, "pose": pose_schema(), "heading_rad": {"type": "number"}}),
+        ),
+    )?;
+    let num = json!({"type": "number"});
+    let wheel_speeds = w.add_schema(
+        "twindrive.WheelSpeeds",
+        "jsonschema",
+        &object_schema(
+            "twindrive.WheelSpeeds",
+            json!({"left_rad_s": num, "right_rad_s": num}),
+        ),
+    )?;
+    #[derive(Serialize)]
+    struct WheelSpeeds {
+        timestamp: Stamp,
+        left_rad_s: f64,
+        right_rad_s: f64,
+    }
+    let mut sequence = 0u32;
+    let mut buf = Vec::with_capacity(512);
+    for track in tracks {
+        let poses = w.add_channel(pose_in_frame, track.topic, "json", &none)?;
+        for (t, p) in track.poses {
+            buf.clear();
+            serde_json::to_writer(
+                &mut buf,
+                &PoseInFrame {
+                    timestamp: Stamp::new(*t),
+                    frame_id: "world".into(),
+                    pose: PoseMsg::planar(p),
+                    heading_rad: p.heading_rad,
+                },
+            )
+            .expect("message serialises");
+            sequence = sequence.wrapping_add(1);
+            let header = mcap::records::MessageHeader {
+                channel_id: poses,
+                sequence,
+                log_time: *t,
+                publish_time: *t,
+            };
+            w.write_to_known_channel(&header, &buf)?;
+        }
+        if track.wheels.is_empty() {
+            continue;
+        }
+        let wheels = w.add_channel(
+            wheel_speeds,
+            &format!("{}/wheels", track.topic),
+            "json",
+            &none,
+        )?;
+        for (t, [l, r]) in track.wheels {
+            buf.clear();
+            serde_json::to_writer(
+                &mut buf,
+                &WheelSpeeds {
+                    timestamp: Stamp::new(*t),
+                    left_rad_s: *l,
+                    right_rad_s: *r,
+                },
+            )
+            .expect("message serialises");
+            sequence = sequence.wrapping_add(1);
+            let header = mcap::records::MessageHeader {
+                channel_id: wheels,
+                sequence,
+                log_time: *t,
+                publish_time: *t,
+            };
+            w.write_to_known_channel(&header, &buf)?;
+        }
+    }
+    w.finish()?;
+    Ok(())
+}
+
 mod erased {
     pub trait Json {
         fn write_json(&self, out: &mut Vec<u8>);

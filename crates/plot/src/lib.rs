@@ -304,18 +304,21 @@ fn draw_chart<DB: DrawingBackend>(
             });
     }
     // Width 1: plotters' bitmap backend leaves gaps in thicker polylines.
+    // A series with an empty label draws without a legend entry (several
+    // pieces of one thing).
     for s in spec.series {
         let color = s.color;
-        chart
+        let drawn = chart
             .draw_series(LineSeries::new(
                 s.points.iter().copied(),
                 color.stroke_width(1),
             ))
-            .map_err(|e| e.to_string())?
-            .label(s.label)
-            .legend(move |(x, y)| {
+            .map_err(|e| e.to_string())?;
+        if !s.label.is_empty() {
+            drawn.label(s.label).legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
             });
+        }
     }
     let radius = spec.marker_radius;
     for m in spec.markers {

@@ -394,6 +394,9 @@ impl Scenario {
             ticks_per_rev: self.robot.encoder.ticks_per_rev,
             nominal: self.robot.nominal_params,
             footprint_radius_m: self.robot.footprint_radius_m,
+            max_wheel_speed_rad_s: self.robot.max_wheel_speed_rad_s,
+            max_wheel_accel_rad_s2: self.robot.max_wheel_accel_rad_s2,
+            start: self.robot.start,
             range_sensors: self.range_sensors.iter().map(|s| s.info.clone()).collect(),
         }
     }

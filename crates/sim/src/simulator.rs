@@ -39,6 +39,26 @@ pub struct StepOutput {
     /// Every beam of every range sensor; NaN where a sensor did not sample.
     pub ranges: Vec<f64>,
     pub wall_mode: Option<WallMode>,
+    /// A wall stopped the robot during this step (a collision).
+    pub blocked: bool,
+}
+
+/// A controller outside the simulator: sensor readings in, wheel commands
+/// [left, right] (rad/s) out.
+pub type ExternalControl<'c> = dyn FnMut(&Sensed) -> [f64; 2] + 'c;
+
+/// What an external controller sees at a step ([`Simulator::step_with`]):
+/// the robot's own sensors, never the true pose.
+#[derive(Debug, Clone, Copy)]
+pub struct Sensed<'a> {
+    pub t_ns: u64,
+    pub bump: bool,
+    /// Cumulative encoder counts, when the encoders sampled.
+    pub encoder_ticks: Option<[i64; 2]>,
+    /// The external tracker's pose, when it sampled.
+    pub tracker: Option<Pose>,
+    /// The latest first-beam reading of each range sensor.
+    pub latest_range_m: &'a [f64],
 }
 
 impl StepOutput {
@@ -55,6 +75,7 @@ impl StepOutput {
             },
             ranges: vec![f64::NAN; beams],
             wall_mode: None,
+            blocked: false,
         }
     }
 }
@@ -64,6 +85,97 @@ struct RangeState {
     rng: ChaCha8Rng,
     next_ns: u64,
     offset: usize,
+}
+
+/// Whether the bumper of the scenario's robot touches a wall at `pose`.
+fn bumper_pressed(scenario: &Scenario, pose: &Pose) -> bool {
+    let robot = &scenario.robot;
+    let bump = &scenario.bump;
+    let p = Vector::new(pose.x_m, pose.y_m);
+    match scenario
+        .world
+        .nearest_within(p, robot.footprint_radius_m + bump.contact_margin_m)
+    {
+        None => false,
+        Some(n) => {
+            let d = n.point - p;
+            let bearing = wrap_angle(d.y.atan2(d.x) - pose.heading_rad);
+            bearing.abs() <= 0.5 * bump.arc_rad
+        }
+    }
+}
+
+/// Noise-free readings of a scenario's sensors at any pose: what the twin
+/// expects the robot to read there (plans carry them so the robot can tell
+/// when reality departs).
+pub struct SensorModel<'a> {
+    scenario: &'a Scenario,
+    kernels: Vec<Option<ScanKernel>>,
+    beams: usize,
+}
+
+impl<'a> SensorModel<'a> {
+    pub fn new(scenario: &'a Scenario) -> Self {
+        let kernels = scenario
+            .range_sensors
+            .iter()
+            .map(|s| {
+                let (angle_min_rad, increment_rad) = s.info.angle_min_and_increment();
+                (s.info.beams > 1).then(|| {
+                    ScanKernel::new(Fan {
+                        angle_min_rad,
+                        increment_rad,
+                        beams: s.info.beams as usize,
+                    })
+                })
+            })
+            .collect();
+        Self {
+            scenario,
+            kernels,
+            beams: scenario
+                .range_sensors
+                .iter()
+                .map(|s| s.info.beams as usize)
+                .sum(),
+        }
+    }
+
+    /// Beams over all range sensors (the length `read` fills).
+    pub fn beams(&self) -> usize {
+        self.beams
+    }
+
+    /// Fills `ranges` (every beam of every sensor; the maximum range where
+    /// nothing is in reach, the minimum where something is closer) and
+    /// returns whether the bumper is pressed.
+    pub fn read(&mut self, pose: &Pose, ranges: &mut [f64]) -> bool {
+        let world = &self.scenario.world;
+        let mut offset = 0;
+        for (cfg, kernel) in self.scenario.range_sensors.iter().zip(&mut self.kernels) {
+            let n = cfg.info.beams as usize;
+            let beams = &mut ranges[offset..offset + n];
+            offset += n;
+            let m = &cfg.info.mount;
+            let (ox, oy) = pose.transform_point(m.x_m, m.y_m);
+            let origin = Vector::new(ox, oy);
+            let heading = pose.heading_rad + m.heading_rad;
+            let max = cfg.info.max_range_m;
+            match kernel {
+                None => {
+                    let dir = Vector::new(heading.cos(), heading.sin());
+                    beams[0] = world.cast_ray(origin, dir, max);
+                }
+                Some(kernel) => kernel.scan(world, origin, heading, max, beams),
+            }
+            for r in beams.iter_mut() {
+                if *r < max {
+                    *r = r.max(cfg.info.min_range_m);
+                }
+            }
+        }
+        bumper_pressed(self.scenario, pose)
+    }
 }
 
 /// Steps a [`Scenario`] forward in time.
@@ -173,6 +285,24 @@ impl Simulator {
     /// over one time step. Returns false (and does nothing) once the
     /// scenario's duration is reached.
     pub fn step(&mut self, out: &mut StepOutput) -> bool {
+        self.step_inner(out, None)
+    }
+
+    /// Like [`Simulator::step`], with the wheel commands coming from `control`
+    /// instead of the scenario's controller (plans, path trackers).
+    pub fn step_with(
+        &mut self,
+        out: &mut StepOutput,
+        control: &mut ExternalControl,
+    ) -> bool {
+        self.step_inner(out, Some(control))
+    }
+
+    fn step_inner(
+        &mut self,
+        out: &mut StepOutput,
+        external: Option<&mut ExternalControl>,
+    ) -> bool {
         if self.finished() {
             return false;
         }
@@ -189,14 +319,24 @@ impl Simulator {
         });
         let tracker = self.sense_tracker(t_ns);
 
-        let obs = Observation {
-            t_ns,
-            bump,
-            latest_range_m: &self.latest_range_m,
+        let mut cmd = match external {
+            Some(control) => control(&Sensed {
+                t_ns,
+                bump,
+                encoder_ticks,
+                tracker,
+                latest_range_m: &self.latest_range_m,
+            }),
+            None => {
+                let obs = Observation {
+                    t_ns,
+                    bump,
+                    latest_range_m: &self.latest_range_m,
+                };
+                self.controller
+                    .command(&obs, &self.scenario.robot.nominal_params)
+            }
         };
-        let mut cmd = self
-            .controller
-            .command(&obs, &self.scenario.robot.nominal_params);
         // Saturate by scaling both wheels, which keeps the commanded curvature.
         let max = self.scenario.robot.max_wheel_speed_rad_s;
         let peak = cmd[0].abs().max(cmd[1].abs());
@@ -213,7 +353,9 @@ impl Simulator {
             tracker,
             ground_truth: self.pose,
         };
-        out.record.wheel_rad_s = self.advance(cmd);
+        let (reached, blocked) = self.advance(cmd);
+        out.record.wheel_rad_s = reached;
+        out.blocked = blocked;
         out.wall_mode = self.controller.wall_mode();
         self.step += 1;
         true
@@ -238,21 +380,7 @@ impl Simulator {
     }
 
     fn bumper_pressed(&self) -> bool {
-        let robot = &self.scenario.robot;
-        let bump = &self.scenario.bump;
-        let p = Vector::new(self.pose.x_m, self.pose.y_m);
-        match self
-            .scenario
-            .world
-            .nearest_within(p, robot.footprint_radius_m + bump.contact_margin_m)
-        {
-            None => false,
-            Some(n) => {
-                let d = n.point - p;
-                let bearing = wrap_angle(d.y.atan2(d.x) - self.pose.heading_rad);
-                bearing.abs() <= 0.5 * bump.arc_rad
-            }
-        }
+        bumper_pressed(&self.scenario, &self.pose)
     }
 
     fn sense_ranges(&mut self, t_ns: u64, out: &mut [f64]) {
@@ -315,8 +443,9 @@ impl Simulator {
     }
 
     /// Applies the wheel limits, moves the robot along the exact arc and stops
-    /// it at first contact with a wall. Returns the wheel speeds reached.
-    fn advance(&mut self, cmd: [f64; 2]) -> [f64; 2] {
+    /// it at first contact with a wall. Returns the wheel speeds reached and
+    /// whether a wall stopped the robot.
+    fn advance(&mut self, cmd: [f64; 2]) -> ([f64; 2], bool) {
         let robot = &self.scenario.robot;
         let dt_s = self.scenario.dt_s();
         let max_change = robot.max_wheel_accel_rad_s2 * dt_s;
@@ -369,6 +498,6 @@ impl Simulator {
         self.wheel_angle_rad[0] += rotation[0] * fraction;
         self.wheel_angle_rad[1] += rotation[1] * fraction;
         self.wheel_rad_s = w;
-        w
+        (w, fraction < 1.0)
     }
 }

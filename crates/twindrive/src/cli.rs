@@ -46,6 +46,58 @@ pub enum Command {
     /// of the innovations, and TUM trajectories of the reference and of dead
     /// reckoning with the initial and calibrated parameters.
     Calibrate(CalibrateArgs),
+    /// Turn a mission run on the twin into a plan for the real robot.
+    ///
+    /// The executed path from the log's encoders and the calibrated
+    /// parameters; redundancy (loops, bump-and-back-up kinks) removed; wheel
+    /// speeds re-computed; control spikes filtered within the robot's wheel
+    /// limits; the twin's predicted sensor readings along it. Writes --out
+    /// (versioned JSON with a SHA-256 over its content) and beside it
+    /// <stem>.csv, <stem>.tum, <stem>_stages.mcap (every stage, for
+    /// Foxglove) and the figures <stem>_executed (pinch points),
+    /// <stem>_cleaned (spikes), <stem>_filtered and <stem>_wheel_speeds.
+    Plan(PlanArgs),
+    /// Replay a plan on the twin's robot (hidden true parameters and noise).
+    ///
+    /// Open loop (the plan's wheel speeds, and the same path's speeds through
+    /// the operator's nominal parameters for comparison) and closed loop (a
+    /// regulated pure pursuit tracker on the robot's odometry). Writes
+    /// report.json (collisions, bumps, max/mean deviation from the plan's
+    /// path, duration, path length for each replay), the replayed tracks as
+    /// TUM and an overlay figure into DIR.
+    VerifyPlan {
+        /// The plan JSON.
+        plan: PathBuf,
+        /// The twin's scenario TOML (default: the built-in scenario the plan names).
+        #[arg(long)]
+        scenario: Option<PathBuf>,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Remove loops and kinks from any path file and write the rest.
+    ///
+    /// PATH is a CSV with header `t,x,y,theta` or a TUM file. Prints how many
+    /// loops and kinks were removed; --out is a CSV in the same columns.
+    Prune {
+        /// The path file (CSV `t,x,y,theta` or TUM).
+        path: PathBuf,
+        /// Samples closer than this (metres) pinch the path.
+        #[arg(long, value_name = "METRES")]
+        pinch_distance: f64,
+        /// Shortest loop (metres of path) worth cutting; default 3 pinch distances.
+        #[arg(long, value_name = "METRES")]
+        min_loop_length: Option<f64>,
+        /// Shortest loop (seconds) worth cutting.
+        #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+        min_loop_duration: f64,
+        /// Keep reversing stretches (bump and back up) instead of cutting them.
+        #[arg(long)]
+        keep_reversals: bool,
+        /// Output CSV (`t,x,y,theta`).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Run the paper's case study end to end into ./twindrive-out/.
     ///
     /// The built-in calibration drive on the twin (calibration_drive/), its
@@ -63,6 +115,35 @@ pub enum Command {
         /// Directory for office.pgm and office.yaml.
         dir: PathBuf,
     },
+}
+
+#[derive(Debug, clap::Args)]
+pub struct PlanArgs {
+    /// Simulator output directory of the mission (log.csv + log.meta.json).
+    pub log_dir: PathBuf,
+    /// calib.json from `twindrive calibrate` (its three parameters are used).
+    #[arg(long)]
+    pub calibration: PathBuf,
+    /// Redundancy definition (TOML: pinch_distance_m, min_loop_length_m,
+    /// min_loop_duration_s, reversing_is_redundant, keep_regions, keep_windows).
+    #[arg(long, value_name = "R.toml")]
+    pub redundancy: Option<PathBuf>,
+    /// Pinch distance in metres (overrides the file; default 0.1).
+    #[arg(long, value_name = "METRES")]
+    pub pinch_distance: Option<f64>,
+    /// Shortest loop worth cutting, metres of path (overrides the file).
+    #[arg(long, value_name = "METRES")]
+    pub min_loop_length: Option<f64>,
+    /// Keep reversing stretches (bump and back up).
+    #[arg(long)]
+    pub keep_reversals: bool,
+    /// The twin's scenario TOML for the sensor predictions (default: the
+    /// built-in scenario named in the log).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Output plan JSON; exports and figures go beside it.
+    #[arg(long, default_value = "plan.json")]
+    pub out: PathBuf,
 }
 
 /// Which estimate `calibrate` reports.

@@ -246,3 +246,162 @@ pub fn calibration_figures(
     .write(&dir.join(format!("{stem}_innovations")))?;
     Ok(())
 }
+
+/// The pipeline's figures (paper Figs. 7, 8a, 8b and 9): `<stem>_executed`,
+/// `<stem>_cleaned`, `<stem>_filtered` and `<stem>_wheel_speeds`.
+pub fn plan_figures(
+    stages: &twindrive_mission::pipeline::Stages,
+    walls: &[[(f64, f64); 2]],
+    dir: &Path,
+    stem: &str,
+) -> anyhow::Result<()> {
+    use twindrive_mission::PathSample;
+    let xy = |p: &[PathSample]| -> Vec<(f64, f64)> {
+        p.iter().map(|s| (s.pose.x_m, s.pose.y_m)).collect()
+    };
+    let executed = xy(&stages.executed);
+    let deleted: Vec<Vec<(f64, f64)>> = stages
+        .pruned
+        .deletions
+        .iter()
+        .map(|d| {
+            let from = d.first_removed.saturating_sub(1);
+            let to = (d.last_removed + 1).min(executed.len() - 1);
+            executed[from..=to].to_vec()
+        })
+        .collect();
+    let mut paths = vec![Series {
+        label: "executed path (encoders, calibrated)",
+        points: &executed,
+        color: palette::TRUTH,
+    }];
+    for (k, d) in deleted.iter().enumerate() {
+        paths.push(Series {
+            label: if k == 0 { "redundant (deleted)" } else { "" },
+            points: d,
+            color: palette::BAD,
+        });
+    }
+    // The pinch points each cut joined (the kept samples either side).
+    let pinches: Vec<(f64, f64)> = stages
+        .pruned
+        .deletions
+        .iter()
+        .flat_map(|d| {
+            [
+                executed[d.first_removed.saturating_sub(1)],
+                executed[(d.last_removed + 1).min(executed.len() - 1)],
+            ]
+        })
+        .collect();
+    let start = [executed[0]];
+    WorldFigure {
+        title: "Mission planner: executed path, redundant parts and pinch points (Fig. 7)",
+        walls,
+        paths: &paths,
+        markers: &[
+            Markers {
+                label: "start",
+                points: &start,
+                color: palette::GOOD,
+            },
+            Markers {
+                label: "pinch points",
+                points: &pinches,
+                color: palette::PURPLE,
+            },
+        ],
+    }
+    .write(&dir.join(format!("{stem}_executed")))?;
+
+    let cleaned = xy(&stages.cleaned);
+    let spikes: Vec<(f64, f64)> = stages
+        .cleaned_spikes
+        .iter()
+        .map(|s| cleaned[s.segment.min(cleaned.len() - 1)])
+        .collect();
+    WorldFigure {
+        title: "Redundancy removed: control spikes (Fig. 8a)",
+        walls,
+        paths: &[Series {
+            label: "cleaned path",
+            points: &cleaned,
+            color: palette::TRUTH,
+        }],
+        markers: &[Markers {
+            label: "control spikes",
+            points: &spikes,
+            color: palette::BAD,
+        }],
+    }
+    .write(&dir.join(format!("{stem}_cleaned")))?;
+
+    let filtered = xy(&stages.filtered.samples);
+    WorldFigure {
+        title: "Filtered path: the plan (Fig. 8b)",
+        walls,
+        paths: &[
+            Series {
+                label: "cleaned path",
+                points: &cleaned,
+                color: palette::MUTED,
+            },
+            Series {
+                label: "plan (spikes filtered)",
+                points: &filtered,
+                color: palette::GOOD,
+            },
+        ],
+        markers: &[],
+    }
+    .write(&dir.join(format!("{stem}_filtered")))?;
+
+    let wheel = |p: &[PathSample], c: &[twindrive_mission::control::WheelCommand], w: usize| {
+        let k = stride(p.len());
+        p.iter()
+            .zip(c)
+            .step_by(k)
+            .map(|(s, c)| (s.t_s, c.wheels()[w]))
+            .collect::<Vec<_>>()
+    };
+    let (cl, cr) = (
+        wheel(&stages.cleaned, &stages.cleaned_commands, 0),
+        wheel(&stages.cleaned, &stages.cleaned_commands, 1),
+    );
+    let f = &stages.filtered;
+    let (fl, fr) = (
+        wheel(&f.samples, &f.commands, 0),
+        wheel(&f.samples, &f.commands, 1),
+    );
+    TimeFigure {
+        title: "Wheel speeds before and after filtering (Fig. 9)",
+        x_label: "t [s]",
+        y_label: "wheel speed [rad/s]",
+        series: &[
+            Series {
+                label: "left, before",
+                points: &cl,
+                color: palette::MUTED,
+            },
+            Series {
+                label: "right, before",
+                points: &cr,
+                color: palette::ALT,
+            },
+            Series {
+                label: "left, filtered",
+                points: &fl,
+                color: palette::TRUTH,
+            },
+            Series {
+                label: "right, filtered",
+                points: &fr,
+                color: palette::GOOD,
+            },
+        ],
+        markers: &[],
+        bands: &[],
+    }
+    .write(&dir.join(format!("{stem}_wheel_speeds")))?;
+    Ok(())
+}

@@ -8,6 +8,7 @@ mod figures;
 mod inputs;
 mod output;
 mod progress;
+mod report;
 
 use std::process::ExitCode;
 

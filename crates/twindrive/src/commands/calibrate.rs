@@ -2,7 +2,7 @@
 //! absolute pose reference.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
@@ -541,19 +541,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
 /// Writes `out` (calib.json) and, beside it, `<stem>_*.svg/png` figures and
 /// `<stem>_*.tum` trajectories.
 pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Result<()> {
-    let file_name = out
-        .file_name()
-        .context("--out needs a file name")?
-        .to_string_lossy()
-        .into_owned();
-    let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "calib".into());
-    let dir = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
+    let (dir, stem, file_name) = crate::output::split_out_path(out, "calib")?;
     let staging = Staging::new(&dir, &format!("calibrate:{stem}"))?;
     staging.write_with(&file_name, |w| {
         serde_json::to_writer_pretty(w, report).map_err(Into::into)

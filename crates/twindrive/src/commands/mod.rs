@@ -3,7 +3,10 @@
 mod calibrate;
 mod demo;
 mod draw_map;
+mod plan;
+mod prune;
 mod simulate;
+mod verify_plan;
 
 use crate::cli::{Args, Command};
 
@@ -16,6 +19,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             duration_s,
         } => simulate::run(&scenario, &out, seed, duration_s),
         Command::Calibrate(a) => calibrate::run(&a),
+        Command::Plan(a) => plan::run(&a),
+        Command::VerifyPlan {
+            plan,
+            scenario,
+            out,
+        } => verify_plan::run(&plan, scenario.as_deref(), &out),
+        Command::Prune {
+            path,
+            pinch_distance,
+            min_loop_length,
+            min_loop_duration,
+            keep_reversals,
+            out,
+        } => prune::run(
+            &path,
+            pinch_distance,
+            min_loop_length,
+            min_loop_duration,
+            keep_reversals,
+            &out,
+        ),
         Command::Demo { out } => demo::run(&out),
         Command::DrawMap { dir } => draw_map::run(&dir),
     }

@@ -1,0 +1,30 @@
+//! The mission pipeline (paper section 5): turn a mission run on the twin
+//! into a clean plan for the real robot.
+//!
+//! One algorithm per module, each usable alone:
+//! - [`path`]: the path type shared by every stage;
+//! - [`planner`]: the executed path from encoder counts and calibrated parameters;
+//! - [`redundancy`]: pinch points, self-crossings and reversals; loop removal;
+//! - [`control`]: body and wheel speeds along a path (inverse kinematics);
+//! - [`spikes`]: control spikes, their removal by re-interpolation, and
+//!   time-optimal re-timing;
+//! - [`plan`]: the versioned, hashed mission plan and its CSV/TUM exports;
+//! - [`retime`]: the fastest timing of a path under wheel speed and acceleration limits;
+//! - [`verify`]: replaying a plan on the twin, open and closed loop;
+//! - [`pipeline`]: the whole chain on one mission log.
+//!
+//! REP-103 frames, SI units, radians throughout.
+
+pub mod control;
+mod error;
+pub mod path;
+pub mod pipeline;
+pub mod plan;
+pub mod planner;
+pub mod redundancy;
+pub mod retime;
+pub mod spikes;
+pub mod verify;
+
+pub use error::PipelineError;
+pub use path::{PathSample, path_length_m};

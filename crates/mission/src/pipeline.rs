@@ -1,0 +1,142 @@
+//! The whole chain on one mission log: planner → redundancy removal →
+//! re-compute control → filter control signals (and the time-optimal
+//! alternative). Each stage's output is kept for figures and reports.
+
+use serde::{Deserialize, Serialize};
+use twindrive_kinematics::DiffDriveParams;
+use twindrive_log::MissionLog;
+
+use crate::control::{WheelCommand, recompute};
+use crate::error::PipelineError;
+use crate::path::{PathSample, path_length_m};
+use crate::planner::{PlannerSettings, executed_path};
+use crate::redundancy::{Pruned, RedundancyConfig, remove_redundancy};
+use crate::retime::WheelLimits;
+use crate::spikes::{FilterSettings, Filtered, Spike, filter_spikes, find_spikes, time_optimal};
+
+/// Every setting of the pipeline (the plan records them).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineSettings {
+    #[serde(default)]
+    pub planner: PlannerSettings,
+    pub redundancy: RedundancyConfig,
+    #[serde(default)]
+    pub filter: FilterSettings,
+}
+
+/// Each stage's output.
+#[derive(Debug, Clone)]
+pub struct Stages {
+    /// The executed path from the encoders (mission planner).
+    pub executed: Vec<PathSample>,
+    pub pruned: Pruned,
+    /// The path without its redundant parts; every junction is driven in
+    /// one control period, as the deletion leaves it.
+    pub cleaned: Vec<PathSample>,
+    pub cleaned_commands: Vec<WheelCommand>,
+    /// The spikes of the cleaned path (the paper's Fig. 8a).
+    pub cleaned_spikes: Vec<Spike>,
+    /// The plan: spikes filtered (Fig. 8b).
+    pub filtered: Filtered,
+    /// The same path as fast as the limits allow.
+    pub fastest: Vec<PathSample>,
+    pub fastest_commands: Vec<WheelCommand>,
+    /// The control period of the source (mean encoder period).
+    pub period_s: f64,
+}
+
+/// Numbers for people.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StageSummary {
+    pub executed_length_m: f64,
+    pub executed_duration_s: f64,
+    pub deletions: usize,
+    pub loops_removed: usize,
+    pub kinks_removed: usize,
+    pub cleaned_length_m: f64,
+    pub spikes_found: usize,
+    pub filtered_duration_s: f64,
+    pub filter_windows: usize,
+    pub time_optimal_duration_s: f64,
+}
+
+impl Stages {
+    pub fn summary(&self) -> StageSummary {
+        use crate::redundancy::DeletionReason;
+        let duration = |p: &[PathSample]| match (p.first(), p.last()) {
+            (Some(a), Some(b)) => b.t_s - a.t_s,
+            _ => 0.0,
+        };
+        let kinks = self
+            .pruned
+            .deletions
+            .iter()
+            .filter(|d| d.reason == DeletionReason::Reversal)
+            .count();
+        StageSummary {
+            executed_length_m: path_length_m(&self.executed),
+            executed_duration_s: duration(&self.executed),
+            deletions: self.pruned.deletions.len(),
+            loops_removed: self.pruned.deletions.len() - kinks,
+            kinks_removed: kinks,
+            cleaned_length_m: path_length_m(&self.cleaned),
+            spikes_found: self.cleaned_spikes.len(),
+            filtered_duration_s: duration(&self.filtered.samples),
+            filter_windows: self.filtered.windows.len(),
+            time_optimal_duration_s: duration(&self.fastest),
+        }
+    }
+}
+
+/// Re-times kept samples: each kept stretch keeps its durations, and each
+/// junction a deletion left is given one control period.
+fn close_gaps(path: &[PathSample], kept: &[usize], period_s: f64) -> Vec<PathSample> {
+    let mut out: Vec<PathSample> = Vec::with_capacity(kept.len());
+    for (n, &k) in kept.iter().enumerate() {
+        let t = match n.checked_sub(1) {
+            None => path[k].t_s,
+            Some(m) => {
+                let previous = kept[m];
+                let step = if k == previous + 1 {
+                    path[k].t_s - path[previous].t_s
+                } else {
+                    period_s
+                };
+                out[m].t_s + step
+            }
+        };
+        out.push(PathSample { t_s: t, ..path[k] });
+    }
+    out
+}
+
+/// Runs the pipeline on `log` with the calibrated `params`.
+pub fn run(
+    log: &MissionLog,
+    params: &DiffDriveParams,
+    limits: &WheelLimits,
+    settings: &PipelineSettings,
+) -> Result<Stages, PipelineError> {
+    limits.validate()?;
+    let executed = executed_path(log, params, &settings.planner)?;
+    let period_s = (executed.last().expect("two samples at least").t_s - executed[0].t_s)
+        / (executed.len() - 1) as f64;
+    let pruned = remove_redundancy(&executed, &settings.redundancy)?;
+    let mut cleaned = close_gaps(&executed, &pruned.kept, period_s);
+    let cleaned_commands = recompute(&mut cleaned, params);
+    let cleaned_spikes = find_spikes(&cleaned, &cleaned_commands, limits);
+    let filtered = filter_spikes(&cleaned, params, limits, &settings.filter)?;
+    let (fastest, fastest_commands) = time_optimal(&filtered.samples, params, limits)?;
+    Ok(Stages {
+        executed,
+        pruned,
+        cleaned,
+        cleaned_commands,
+        cleaned_spikes,
+        filtered,
+        fastest,
+        fastest_commands,
+        period_s,
+    })
+}

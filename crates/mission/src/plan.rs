@@ -1,0 +1,343 @@
+//! The mission plan: what is uploaded to the real robot.
+//!
+//! A versioned JSON document: a header (robot, calibrated parameters,
+//! limits, time step, pipeline settings, the SHA-256 of the source log, the
+//! pipeline's summary) and one sample per plan step: time, pose, body
+//! velocities, each wheel's angular speed, and what the twin predicts the
+//! robot's sensors will read there (so the robot can tell when reality
+//! departs). `sha256` is the SHA-256 of the plan's canonical content: the
+//! document itself serialised compactly with the `sha256` field empty
+//! (fields in their declared order, floats in their shortest round-trip
+//! form, so any reader that keeps the numbers reproduces the bytes).
+//!
+//! CSV and TUM exports carry the samples for other tools.
+
+use std::io::Write;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use twindrive_kinematics::{DiffDriveParams, Pose};
+
+use crate::error::PipelineError;
+use crate::retime::WheelLimits;
+
+/// Identifies a plan document.
+pub const PLAN_FORMAT: &str = "twindrive-mission-plan";
+/// Bumped whenever the meaning of a field changes.
+pub const PLAN_VERSION: u32 = 1;
+
+/// The robot the plan is for.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotInfo {
+    /// The scenario (twin) the mission was rehearsed in.
+    pub scenario: String,
+    pub footprint_radius_m: f64,
+    pub ticks_per_rev: u32,
+    /// The range sensors whose beams `expected_ranges_m` predicts, in order.
+    pub range_sensors: Vec<twindrive_log::RangeSensorInfo>,
+}
+
+/// Everything a reader needs besides the samples.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanHeader {
+    pub robot: RobotInfo,
+    pub calibrated: DiffDriveParams,
+    pub limits: WheelLimits,
+    /// The control period the plan was made at (the source log's encoder
+    /// period); sample times may be further apart where the plan slows down.
+    pub time_step_s: f64,
+    pub start: Pose,
+    /// SHA-256 (hex) of the source log files.
+    pub source_log_sha256: String,
+    /// The pipeline's settings, as given.
+    pub settings: serde_json::Value,
+    /// What the pipeline did (deletions, durations), for people.
+    pub summary: serde_json::Value,
+}
+
+/// One step of the plan: hold the wheel speeds from `t_s` to the next sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanSample {
+    pub t_s: f64,
+    pub x_m: f64,
+    pub y_m: f64,
+    pub heading_rad: f64,
+    pub v_m_s: f64,
+    pub omega_rad_s: f64,
+    pub left_rad_s: f64,
+    pub right_rad_s: f64,
+    /// The twin's prediction of each beam (metres; the sensor's maximum
+    /// range when nothing is in reach).
+    pub expected_ranges_m: Vec<f64>,
+    pub expected_bump: bool,
+}
+
+impl PlanSample {
+    pub fn pose(&self) -> Pose {
+        Pose::new(self.x_m, self.y_m, self.heading_rad)
+    }
+}
+
+/// The plan document.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MissionPlan {
+    pub format: String,
+    pub version: u32,
+    pub header: PlanHeader,
+    pub samples: Vec<PlanSample>,
+    /// SHA-256 (hex) of the canonical content; see the module docs.
+    pub sha256: String,
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// SHA-256 of some bytes, in hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+impl MissionPlan {
+    /// A plan with its hash filled in.
+    pub fn new(header: PlanHeader, samples: Vec<PlanSample>) -> Self {
+        let mut plan = Self {
+            format: PLAN_FORMAT.into(),
+            version: PLAN_VERSION,
+            header,
+            samples,
+            sha256: String::new(),
+        };
+        plan.sha256 = plan.content_hash();
+        plan
+    }
+
+    /// The SHA-256 of the canonical content (this plan with `sha256` empty).
+    pub fn content_hash(&self) -> String {
+        let mut hasher = Sha256::new();
+        let canonical = MissionPlan {
+            sha256: String::new(),
+            ..self.clone()
+        };
+        serde_json::to_writer(HashWriter(&mut hasher), &canonical)
+            .expect("a plan of finite numbers serialises");
+        hex(&hasher.finalize())
+    }
+
+    /// Checks format, version, hash and contents.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        if self.format != PLAN_FORMAT || self.version != PLAN_VERSION {
+            return Err(PipelineError::Infeasible(format!(
+                "is `{}` version {}, expected `{PLAN_FORMAT}` version {PLAN_VERSION}",
+                self.format, self.version
+            )));
+        }
+        let beams: usize = self
+            .header
+            .robot
+            .range_sensors
+            .iter()
+            .map(|s| s.beams as usize)
+            .sum();
+        let mut previous = f64::NEG_INFINITY;
+        for (index, s) in self.samples.iter().enumerate() {
+            let numbers = [
+                ("t_s", s.t_s),
+                ("x_m", s.x_m),
+                ("y_m", s.y_m),
+                ("heading_rad", s.heading_rad),
+                ("v_m_s", s.v_m_s),
+                ("omega_rad_s", s.omega_rad_s),
+                ("left_rad_s", s.left_rad_s),
+                ("right_rad_s", s.right_rad_s),
+            ];
+            if let Some((what, _)) = numbers.iter().find(|(_, v)| !v.is_finite()) {
+                return Err(PipelineError::NonFinite { what, index });
+            }
+            if s.expected_ranges_m.iter().any(|v| !v.is_finite()) {
+                return Err(PipelineError::NonFinite {
+                    what: "expected_ranges_m",
+                    index,
+                });
+            }
+            if s.expected_ranges_m.len() != beams {
+                return Err(PipelineError::Infeasible(format!(
+                    "sample {index} predicts {} range readings for {beams} beams",
+                    s.expected_ranges_m.len()
+                )));
+            }
+            if s.t_s <= previous {
+                return Err(PipelineError::TimeNotIncreasing {
+                    index,
+                    t_s: s.t_s,
+                    previous_s: previous,
+                });
+            }
+            previous = s.t_s;
+        }
+        let actual = self.content_hash();
+        if actual != self.sha256 {
+            return Err(PipelineError::Infeasible(format!(
+                "the plan's content does not match its sha256 (recorded {}, content {actual}): it was changed or damaged",
+                self.sha256
+            )));
+        }
+        Ok(())
+    }
+
+    /// Mission duration (first to last sample).
+    pub fn duration_s(&self) -> f64 {
+        match (self.samples.first(), self.samples.last()) {
+            (Some(a), Some(b)) => b.t_s - a.t_s,
+            _ => 0.0,
+        }
+    }
+
+    /// `t,x,y,theta,v,omega,left_rad_s,right_rad_s` rows.
+    pub fn write_csv(&self, mut out: impl Write) -> std::io::Result<()> {
+        let mut buf = ryu::Buffer::new();
+        writeln!(out, "t,x,y,theta,v,omega,left_rad_s,right_rad_s")?;
+        for s in &self.samples {
+            let row = [
+                s.t_s,
+                s.x_m,
+                s.y_m,
+                s.heading_rad,
+                s.v_m_s,
+                s.omega_rad_s,
+                s.left_rad_s,
+                s.right_rad_s,
+            ];
+            for (k, v) in row.iter().enumerate() {
+                if k > 0 {
+                    out.write_all(b",")?;
+                }
+                out.write_all(buf.format(*v).as_bytes())?;
+            }
+            out.write_all(b"\n")?;
+        }
+        out.flush()
+    }
+
+    /// The plan's poses as a TUM trajectory.
+    pub fn write_tum(&self, out: impl Write) -> std::io::Result<()> {
+        let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
+        twindrive_log::write_tum(self.samples.iter().map(|s| (ns(s.t_s), s.pose())), out)
+    }
+}
+
+/// Feeds serialised bytes straight into the hasher.
+struct HashWriter<'a>(&'a mut Sha256);
+
+impl Write for HashWriter<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.update(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan() -> MissionPlan {
+        let header = PlanHeader {
+            robot: RobotInfo {
+                scenario: "unit".into(),
+                footprint_radius_m: 0.15,
+                ticks_per_rev: 512,
+                range_sensors: vec![twindrive_log::RangeSensorInfo {
+                    name: "side_ir".into(),
+                    mount: Pose::new(0.05, -0.12, -1.047),
+                    beams: 1,
+                    fov_rad: 0.0,
+                    min_range_m: 0.1,
+                    max_range_m: 0.8,
+                }],
+            },
+            calibrated: DiffDriveParams::new(0.0652, 0.0665, 0.2678),
+            limits: WheelLimits {
+                max_speed_rad_s: 12.0,
+                max_accel_rad_s2: 30.0,
+            },
+            time_step_s: 0.01,
+            start: Pose::new(3.0, 1.05, std::f64::consts::PI),
+            source_log_sha256: sha256_hex(b"log"),
+            settings: serde_json::json!({ "pinch_distance_m": 0.1 }),
+            summary: serde_json::json!({ "loops_removed": 2 }),
+        };
+        let samples = (0..50)
+            .map(|k| PlanSample {
+                t_s: k as f64 * 0.01,
+                x_m: 3.0 - 0.002 * k as f64,
+                y_m: 1.05,
+                heading_rad: std::f64::consts::PI,
+                v_m_s: 0.2,
+                omega_rad_s: 0.0,
+                left_rad_s: 6.13,
+                right_rad_s: 6.01,
+                expected_ranges_m: vec![0.8 - 0.001 * k as f64],
+                expected_bump: false,
+            })
+            .collect();
+        MissionPlan::new(header, samples)
+    }
+
+    #[test]
+    fn the_hash_is_stable_and_survives_a_json_round_trip() {
+        let a = plan();
+        assert_eq!(a.sha256, plan().sha256, "same content, same hash");
+        assert_eq!(a.sha256.len(), 64);
+        let text = serde_json::to_string_pretty(&a).unwrap();
+        let b: MissionPlan = serde_json::from_str(&text).unwrap();
+        assert_eq!(b, a);
+        b.validate().unwrap();
+    }
+
+    #[test]
+    fn changing_any_sample_changes_the_hash() {
+        let a = plan();
+        for k in [0, 17, 49] {
+            for field in 0..4 {
+                let mut b = a.clone();
+                let s = &mut b.samples[k];
+                match field {
+                    0 => s.x_m = f64::from_bits(s.x_m.to_bits() + 1),
+                    1 => s.left_rad_s += 1e-9,
+                    2 => s.expected_ranges_m[0] += 1e-6,
+                    _ => s.expected_bump = !s.expected_bump,
+                }
+                assert_ne!(b.content_hash(), a.sha256, "sample {k} field {field}");
+                assert!(b.validate().is_err(), "a changed plan fails validation");
+            }
+        }
+    }
+
+    #[test]
+    fn bad_samples_are_named() {
+        let mut b = plan();
+        b.samples[3].v_m_s = f64::NAN;
+        assert_eq!(
+            b.validate(),
+            Err(PipelineError::NonFinite {
+                what: "v_m_s",
+                index: 3
+            })
+        );
+        let mut c = plan();
+        c.samples[5].t_s = c.samples[4].t_s;
+        c.sha256 = c.content_hash();
+        assert!(matches!(
+            c.validate(),
+            Err(PipelineError::TimeNotIncreasing { index: 5, .. })
+        ));
+    }
+}

@@ -1,0 +1,140 @@
+//! The mission planner (paper section 5): re-creates the executed path from
+//! the log's encoder counts and sampling times with the *calibrated*
+//! parameters, which is what the robot's own odometry says, not from the
+//! twin's hidden ground truth. The start pose is the one the operator placed
+//! the robot at (`LogHeader::start`).
+//!
+//! Encoder counts are quantised: at 100 Hz a wheel turns a few ticks per
+//! sample, so differences of raw counts jitter by a tick (tens of percent of
+//! the speed) and their changes look like accelerations far above any real
+//! motor's. The cumulative wheel angles are therefore smoothed first with a
+//! Savitzky-Golay filter (local quadratic fits over `smoothing_window_s`),
+//! which keeps constant accelerations exact and leaves the integrated path
+//! within a fraction of a tick of the raw one.
+
+use twindrive_kinematics::{DiffDriveParams, arc_step_wheels, body_increment};
+use twindrive_log::MissionLog;
+
+use crate::error::PipelineError;
+use crate::path::PathSample;
+
+/// Planner settings.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlannerSettings {
+    /// Span of the local quadratic fits that smooth the encoder angles
+    /// (0: use the raw counts).
+    pub smoothing_window_s: f64,
+}
+
+impl Default for PlannerSettings {
+    fn default() -> Self {
+        Self {
+            smoothing_window_s: 0.6,
+        }
+    }
+}
+
+/// Savitzky-Golay smoothing (quadratic, symmetric windows of up to
+/// `2 half + 1` samples, shrinking near the ends).
+pub fn savitzky_golay(values: &[f64], half: usize) -> Vec<f64> {
+    let n = values.len();
+    let coefficients = |m: usize| -> Vec<f64> {
+        let mf = m as f64;
+        let norm = (2.0 * mf - 1.0) * (2.0 * mf + 1.0) * (2.0 * mf + 3.0);
+        (0..=2 * m)
+            .map(|i| {
+                let j = i as f64 - mf;
+                (3.0 * (3.0 * mf * mf + 3.0 * mf - 1.0) - 15.0 * j * j) / norm
+            })
+            .collect()
+    };
+    let table: Vec<Vec<f64>> = (0..=half).map(coefficients).collect();
+    (0..n)
+        .map(|k| {
+            let m = half.min(k).min(n - 1 - k);
+            if m < 2 {
+                return values[k];
+            }
+            table[m]
+                .iter()
+                .zip(&values[k - m..=k + m])
+                .map(|(c, v)| c * v)
+                .sum()
+        })
+        .collect()
+}
+
+/// The executed path at every encoder sample. `v_m_s` and `omega_rad_s` of a
+/// sample are the velocities over the interval that starts there (the last
+/// sample's are zero).
+pub fn executed_path(
+    log: &MissionLog,
+    params: &DiffDriveParams,
+    settings: &PlannerSettings,
+) -> Result<Vec<PathSample>, PipelineError> {
+    if log.steps.is_empty() {
+        return Err(PipelineError::EmptyLog);
+    }
+    let rad_per_tick = std::f64::consts::TAU / f64::from(log.header.ticks_per_rev);
+    let encoders: Vec<(f64, [f64; 2])> = log
+        .steps
+        .iter()
+        .filter_map(|s| {
+            s.encoder_ticks
+                .map(|[l, r]| (s.t_s(), [l as f64 * rad_per_tick, r as f64 * rad_per_tick]))
+        })
+        .collect();
+    if encoders.len() < 2 {
+        return Err(PipelineError::NoEncoderData(encoders.len()));
+    }
+    if !(settings.smoothing_window_s.is_finite() && settings.smoothing_window_s >= 0.0) {
+        return Err(PipelineError::BadSetting {
+            field: "smoothing_window_s",
+            value: settings.smoothing_window_s,
+        });
+    }
+    let span = encoders.last().expect("two at least").0 - encoders[0].0;
+    let period = span / (encoders.len() - 1) as f64;
+    let half = (0.5 * settings.smoothing_window_s / period).round() as usize;
+    let smoothed: Vec<[f64; 2]> = {
+        let left = savitzky_golay(&encoders.iter().map(|e| e.1[0]).collect::<Vec<_>>(), half);
+        let right = savitzky_golay(&encoders.iter().map(|e| e.1[1]).collect::<Vec<_>>(), half);
+        left.into_iter().zip(right).map(|(l, r)| [l, r]).collect()
+    };
+    let encoders: Vec<(f64, [f64; 2])> = encoders
+        .iter()
+        .zip(smoothed)
+        .map(|(e, a)| (e.0, a))
+        .collect();
+    let mut out = Vec::with_capacity(encoders.len());
+    let mut pose = log.header.start;
+    for (k, w) in encoders.windows(2).enumerate() {
+        let ((t0, a0), (t1, a1)) = (w[0], w[1]);
+        if t1 <= t0 {
+            return Err(PipelineError::TimeNotIncreasing {
+                index: k + 1,
+                t_s: t1,
+                previous_s: t0,
+            });
+        }
+        let (dl, dr) = (a1[0] - a0[0], a1[1] - a0[1]);
+        let (left_m, right_m) = params.wheel_travel_from_angles(dl, dr);
+        let (ds, dtheta) = body_increment(left_m, right_m, params.wheelbase_m);
+        let dt = t1 - t0;
+        out.push(PathSample {
+            t_s: t0,
+            pose,
+            v_m_s: ds / dt,
+            omega_rad_s: dtheta / dt,
+        });
+        pose = arc_step_wheels(&pose, params, dl, dr);
+    }
+    out.push(PathSample {
+        t_s: encoders.last().expect("two at least").0,
+        pose,
+        v_m_s: 0.0,
+        omega_rad_s: 0.0,
+    });
+    Ok(out)
+}

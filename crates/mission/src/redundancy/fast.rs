@@ -1,0 +1,292 @@
+//! The fast pinch finder: one grid hash over the samples and over anchors
+//! along the segments.
+//!
+//! For sample `i` the candidates `j` form an index window: `j >= lo(i)`,
+//! where the path from `i` is long and slow enough (a two-pointer sweep, as
+//! lengths and times only grow), and `j <= hi(i)`, the next protected sample.
+//! Each cell holds its entries in index order, so the farthest partner in a
+//! cell is the first hit scanning down from `hi(i)`, and the scan stops at
+//! `lo(i)`. On a path without loops the cells around `i` hold only `i`'s own
+//! neighbours along the path, below `lo(i)`: one look-up of the largest
+//! index around settles it.
+//!
+//! Segment `(b, b+1)` is anchored at sample `b`, and if it is long, also at
+//! points along it: two segments that meet then have anchors less than 0.9
+//! cells apart, in neighbouring cells.
+
+use super::geometry::{Point, distance, distance2, segments_meet};
+use super::grid::{Anchor, Entry, Grid, NO_CELL};
+use super::track::{Criteria, Track};
+use super::{Pinch, PinchKind};
+
+/// Largest spacing of segment anchors, in cells.
+const ANCHOR_SPACING_IN_CELLS: f64 = 0.45;
+
+pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
+    let n = track.len();
+    let mut out = Vec::new();
+    if n < 3 {
+        return out;
+    }
+    let pts = &track.points;
+    let t0 = std::time::Instant::now();
+    let cell_m = cell_size_m(track, crit.pinch_distance_m);
+    let anchors = Anchors::new(pts, ANCHOR_SPACING_IN_CELLS * cell_m);
+    let (grid, anchor_cell) = Grid::build(cell_m, anchors.len(), anchors.iter(pts));
+    let t1 = t0.elapsed();
+    let next_protected = track.next_protected();
+    let t2 = t0.elapsed();
+
+    let mut lo = 0;
+    for i in 0..n - 2 {
+        lo = lo.max(i + 2);
+        while lo < n && !long_enough(track, crit, i, lo) {
+            lo += 1;
+        }
+        if lo == n {
+            break; // lo(i) never decreases: no later sample pinches either
+        }
+        let hi = next_protected[i] as usize;
+        if lo > hi {
+            continue;
+        }
+        // Segment b ends at j = b + 1, so segments from lo - 1 count.
+        let cells = anchors.of_segment(i, &anchor_cell);
+        if cells.iter().all(|&c| (grid.latest_around(c) as usize) < lo - 1) {
+            continue;
+        }
+        let near = farthest_near(
+            &grid,
+            cells[0],
+            pts[i],
+            crit.pinch_distance2,
+            lo as u32,
+            hi as u32,
+        );
+        // A crossing only matters if it reaches beyond the nearest pinch.
+        let b_lo = (lo - 1).max(i + 2).max(near.map_or(0, |j| j as usize));
+        let crossing = (b_lo < hi)
+            .then(|| farthest_meeting(&grid, cells, pts, i, b_lo as u32, (hi - 1) as u32))
+            .flatten();
+        let (j, kind) = match (near, crossing) {
+            (_, Some(b)) => (b as usize + 1, PinchKind::Crossing),
+            (Some(j), None) => (j as usize, PinchKind::Near),
+            (None, None) => continue,
+        };
+        out.push(Pinch {
+            i,
+            j,
+            distance_m: distance(pts[i], pts[j]),
+            kind,
+        });
+    }
+    eprintln!("n {n} grid {:?} np {:?} total {:?}", t1, t2 - t1, t0.elapsed());
+    out
+}
+
+#[inline]
+fn long_enough(track: &Track, crit: &Criteria, i: usize, j: usize) -> bool {
+    track.cum_length_m[j] - track.cum_length_m[i] >= crit.min_loop_length_m
+        && track.t_s[j] - track.t_s[i] >= crit.min_loop_duration_s
+}
+
+/// At least the pinch distance (plus a relative margin that absorbs the
+/// rounding of `x / cell`, so partners are never two cells apart); large
+/// enough that cell coordinates stay within ±2^30; and at least the mean
+/// segment length / 0.9, which bounds the anchors to 3 per sample.
+fn cell_size_m(track: &Track, pinch_distance_m: f64) -> f64 {
+    let max_abs = track
+        .points
+        .iter()
+        .fold(0.0f64, |m, p| m.max(p[0].abs()).max(p[1].abs()));
+    let length = track.cum_length_m.last().copied().unwrap_or(0.0);
+    let mean_segment = length / (track.len().max(2) - 1) as f64;
+    (pinch_distance_m * (1.0 + 1e-6))
+        .max(max_abs * (-30f64).exp2())
+        .max(mean_segment / (2.0 * ANCHOR_SPACING_IN_CELLS))
+}
+
+/// The anchors in order: sample `k` itself, then points along segment
+/// `(k, k+1)` if it is longer than the spacing.
+struct Anchors {
+    spacing_m: f64,
+    /// Index of sample `k`'s anchor among all anchors (`k + 1` entries);
+    /// empty when no segment needs extra anchors.
+    starts: Vec<u32>,
+}
+
+impl Anchors {
+    fn new(pts: &[Point], spacing_m: f64) -> Self {
+        let mut starts = Vec::new();
+        if pts.windows(2).any(|w| distance(w[0], w[1]) > spacing_m) {
+            let mut count = 0u32;
+            for k in 0..pts.len() {
+                starts.push(count);
+                count += 1 + pts.get(k + 1).map_or(0, |&q| extra(pts[k], q, spacing_m)) as u32;
+            }
+            starts.push(count);
+        }
+        Self { spacing_m, starts }
+    }
+
+    fn len(&self) -> usize {
+        self.starts.last().map_or(0, |&c| c as usize)
+    }
+
+    fn iter<'a>(&'a self, pts: &'a [Point]) -> impl Iterator<Item = Anchor> + 'a {
+        let spacing_m = self.spacing_m;
+        pts.iter().enumerate().flat_map(move |(k, &p)| {
+            let tag = k as u32;
+            let q = pts.get(k + 1).copied().unwrap_or(p);
+            let pieces = extra(p, q, spacing_m) + 1;
+            (0..pieces).map(move |m| {
+                let f = m as f64 / pieces as f64;
+                Anchor {
+                    pos: if m == 0 {
+                        p
+                    } else {
+                        [p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]
+                    },
+                    tag,
+                    is_sample: m == 0,
+                }
+            })
+        })
+    }
+
+    /// Cells of segment `a`'s anchors; the first is sample `a`'s cell.
+    fn of_segment<'c>(&self, a: usize, anchor_cell: &'c [u32]) -> &'c [u32] {
+        if self.starts.is_empty() {
+            &anchor_cell[a..a + 1]
+        } else {
+            &anchor_cell[self.starts[a] as usize..self.starts[a + 1] as usize]
+        }
+    }
+}
+
+/// Anchors a segment needs beyond its start.
+#[inline]
+fn extra(p: Point, q: Point, spacing_m: f64) -> usize {
+    let length = distance(p, q);
+    if length > spacing_m {
+        (length / spacing_m).ceil() as usize - 1
+    } else {
+        0
+    }
+}
+
+/// Entries of a cell with `first <= hi`.
+#[inline]
+fn up_to(entries: &[Entry], hi: u32) -> &[Entry] {
+    match entries.last() {
+        Some(e) if e.first > hi => &entries[..entries.partition_point(|e| e.first <= hi)],
+        _ => entries,
+    }
+}
+
+/// The largest sample index in `lo..=hi` closer than the pinch distance.
+fn farthest_near(
+    grid: &Grid,
+    cell: u32,
+    p: Point,
+    pinch_distance2: f64,
+    mut lo: u32,
+    hi: u32,
+) -> Option<u32> {
+    let mut best = None;
+    for &c in grid.neighbours(cell) {
+        if c == NO_CELL || grid.latest_around(c) < lo {
+            continue;
+        }
+        for e in up_to(grid.entries(c), hi).iter().rev() {
+            let top = e.last.min(hi);
+            if top < lo {
+                break;
+            }
+            // Fails for anchors along segments (NaN position).
+            if distance2(e.pos, p) < pinch_distance2 {
+                best = Some(top);
+                lo = top + 1;
+                break;
+            }
+        }
+    }
+    best
+}
+
+/// The largest segment index `b` in `lo..=hi` whose segment `(b, b+1)`
+/// meets segment `(a, a+1)`, whose anchors lie in `cells`.
+fn farthest_meeting(
+    grid: &Grid,
+    cells: &[u32],
+    pts: &[Point],
+    a: usize,
+    mut lo: u32,
+    hi: u32,
+) -> Option<u32> {
+    let (p1, p2) = (pts[a], pts[a + 1]);
+    let meets = |b: u32| segments_meet(p1, p2, pts[b as usize], pts[b as usize + 1]);
+    let mut best = None;
+    for &anchor_cell in cells {
+        for &c in grid.neighbours(anchor_cell) {
+            if c == NO_CELL {
+                continue;
+            }
+            for e in up_to(grid.entries(c), hi).iter().rev() {
+                let top = e.last.min(hi);
+                if top < lo {
+                    break;
+                }
+                // Segments first..last-1 of a sample entry have zero length
+                // at e.pos, and one test covers the entry: such a segment
+                // meets (p1, p2) only if e.pos lies on it, and then so does
+                // (to the bit) segment `last`, which leaves e.pos.
+                if meets(top) {
+                    best = Some(top);
+                    lo = top + 1;
+                    break;
+                }
+            }
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::path::PathSample;
+    use crate::redundancy::RedundancyConfig;
+    use twindrive_kinematics::Pose;
+
+    fn path(points: &[[f64; 2]]) -> Vec<PathSample> {
+        points
+            .iter()
+            .enumerate()
+            .map(|(k, p)| PathSample {
+                t_s: k as f64,
+                pose: Pose::new(p[0], p[1], 0.0),
+                v_m_s: 1.0,
+                omega_rad_s: 0.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn partners_just_under_the_pinch_distance_are_one_cell_apart() {
+        // 1 - 4e-10 apart, just either side of where cells of 1 - 1e-9
+        // (a cell a hair smaller than the pinch distance) would put them
+        // two cells apart.
+        let (a, b) = (1.0 - 1.5e-9, 2.0 - 1.9e-9);
+        let mut cfg = RedundancyConfig::with_pinch_distance(1.0);
+        cfg.min_loop_length_m = Some(0.0);
+        // Up from A, across, down to B in short steps (so cells stay one
+        // pinch distance wide); only A and B are that close.
+        let mut points: Vec<[f64; 2]> = (0..=10).map(|k| [a, 0.5 * k as f64]).collect();
+        points.extend((0..10).map(|k| [b, 5.0 - 0.5 * k as f64]));
+        points.push([b, 0.0]);
+        let track = Track::new(&path(&points), &cfg).unwrap();
+        let pinches = farthest_pinches(&track, &Criteria::new(&cfg));
+        assert_eq!((pinches[0].i, pinches[0].j), (0, points.len() - 1));
+    }
+}

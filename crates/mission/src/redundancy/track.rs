@@ -1,0 +1,184 @@
+//! The path as the finders see it: flat arrays of the samples still in
+//! play, with their cumulative length and protection.
+
+use super::geometry::distance;
+use super::{RedundancyConfig, RedundancyError};
+use crate::path::PathSample;
+
+/// The largest path the finders index (entries are `u32`).
+pub(super) const MAX_SAMPLES: usize = u32::MAX as usize - 1;
+
+/// The thresholds every finder applies, from a validated config.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Criteria {
+    pub pinch_distance_m: f64,
+    pub pinch_distance2: f64,
+    pub min_loop_length_m: f64,
+    pub min_loop_duration_s: f64,
+}
+
+impl Criteria {
+    pub fn new(cfg: &RedundancyConfig) -> Self {
+        Self {
+            pinch_distance_m: cfg.pinch_distance_m,
+            pinch_distance2: cfg.pinch_distance_m * cfg.pinch_distance_m,
+            min_loop_length_m: cfg.effective_min_loop_length_m(),
+            min_loop_duration_s: cfg.min_loop_duration_s,
+        }
+    }
+}
+
+/// The samples still in play (a subsequence of the input).
+#[derive(Debug, Clone)]
+pub(super) struct Track {
+    pub points: Vec<[f64; 2]>,
+    /// Path length from the first sample, along the current polyline.
+    pub cum_length_m: Vec<f64>,
+    pub t_s: Vec<f64>,
+    pub reversing: Vec<bool>,
+    /// Never deleted: first, last, kept regions and windows, and reversing
+    /// samples when reversing is not redundant.
+    pub protected: Vec<bool>,
+    /// Index of each sample in the input path.
+    pub input_index: Vec<usize>,
+}
+
+impl Track {
+    /// Validates the config and the path, and sets up the full path.
+    pub fn new(path: &[PathSample], cfg: &RedundancyConfig) -> Result<Self, RedundancyError> {
+        cfg.validate()?;
+        check_samples(path)?;
+        let n = path.len();
+        let points: Vec<[f64; 2]> = path.iter().map(PathSample::position).collect();
+        let reversing: Vec<bool> = path.iter().map(|s| s.v_m_s < 0.0).collect();
+        let protected = path
+            .iter()
+            .enumerate()
+            .map(|(k, s)| {
+                k == 0
+                    || k + 1 == n
+                    || cfg.keeps(s.position(), s.t_s)
+                    || (!cfg.reversing_is_redundant && s.v_m_s < 0.0)
+            })
+            .collect();
+        Ok(Self {
+            cum_length_m: cumulative_length_m(&points),
+            points,
+            t_s: path.iter().map(|s| s.t_s).collect(),
+            reversing,
+            protected,
+            input_index: (0..n).collect(),
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// The track without the samples strictly inside each cut `(i, j)`;
+    /// cuts are sorted and do not overlap.
+    pub fn without(&self, cuts: &[(usize, usize)]) -> Self {
+        let mut keep = vec![true; self.len()];
+        for &(i, j) in cuts {
+            keep[i + 1..j].iter_mut().for_each(|k| *k = false);
+        }
+        let pick = |v: &[bool]| -> Vec<bool> {
+            v.iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(x, _)| *x)
+                .collect()
+        };
+        let points: Vec<[f64; 2]> = self
+            .points
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .collect();
+        Self {
+            cum_length_m: cumulative_length_m(&points),
+            points,
+            t_s: self
+                .t_s
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(t, _)| *t)
+                .collect(),
+            reversing: pick(&self.reversing),
+            protected: pick(&self.protected),
+            input_index: self
+                .input_index
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(x, _)| *x)
+                .collect(),
+        }
+    }
+
+    /// For each sample, the first protected sample after it (`len - 1`
+    /// for the last): a cut starting at `i` may end at most there.
+    pub fn next_protected(&self) -> Vec<u32> {
+        let n = self.len();
+        let mut next = vec![0u32; n];
+        let mut after = (n.max(1) - 1) as u32;
+        for k in (0..n).rev() {
+            next[k] = after;
+            if self.protected[k] {
+                after = k as u32;
+            }
+        }
+        next
+    }
+}
+
+/// Running sum of segment lengths, in order (every finder and the Python
+/// peer sum the same way, so thresholds agree to the bit).
+pub(super) fn cumulative_length_m(points: &[[f64; 2]]) -> Vec<f64> {
+    let mut cum = Vec::with_capacity(points.len());
+    let mut total = 0.0;
+    let mut previous = points.first().copied();
+    for &p in points {
+        if let Some(q) = previous {
+            total += distance(q, p);
+        }
+        cum.push(total);
+        previous = Some(p);
+    }
+    cum
+}
+
+fn check_samples(path: &[PathSample]) -> Result<(), RedundancyError> {
+    if path.len() > MAX_SAMPLES {
+        return Err(RedundancyError::TooManySamples {
+            samples: path.len(),
+            max: MAX_SAMPLES,
+        });
+    }
+    for (index, s) in path.iter().enumerate() {
+        for (field, value) in [
+            ("t_s", s.t_s),
+            ("pose.x_m", s.pose.x_m),
+            ("pose.y_m", s.pose.y_m),
+            ("v_m_s", s.v_m_s),
+        ] {
+            if !value.is_finite() {
+                return Err(RedundancyError::NotFinite {
+                    index,
+                    field,
+                    value,
+                });
+            }
+        }
+        if index > 0 && s.t_s <= path[index - 1].t_s {
+            return Err(RedundancyError::TimeNotIncreasing {
+                index,
+                t_s: s.t_s,
+                previous_t_s: path[index - 1].t_s,
+            });
+        }
+    }
+    Ok(())
+}

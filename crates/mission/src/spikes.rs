@@ -1,0 +1,335 @@
+//! Filter control signals (paper section 5): deleting parts of a path leaves
+//! jumps that would need impossible wheel speeds or accelerations ("spikes").
+//! Around each spike the path is re-interpolated and driven with a longer
+//! travel time: positions by a cubic Hermite curve that keeps the path's own
+//! velocity at both ends, the heading separately along the shorter arc, then
+//! the window's segments are re-timed as fast as the wheel limits allow
+//! ([`crate::retime`]) but never faster than before. Repeated until no spike
+//! is left.
+//!
+//! [`time_optimal`] re-times a whole path the same way with no lower bound:
+//! the shortest mission the limits allow on that geometry.
+
+use twindrive_kinematics::{DiffDriveParams, Pose, wheel_speeds, wrap_angle};
+
+use crate::control::{WheelCommand, recompute, segment_arc};
+use crate::error::PipelineError;
+use crate::path::PathSample;
+use crate::retime::{WheelLimits, fastest_durations};
+
+/// Which limit a segment breaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpikeKind {
+    Speed,
+    Acceleration,
+}
+
+/// A wheel speed or acceleration above the robot's limit.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Spike {
+    /// Segment index (from sample `segment` to `segment + 1`).
+    pub segment: usize,
+    pub t_s: f64,
+    /// 0 left, 1 right.
+    pub wheel: usize,
+    pub kind: SpikeKind,
+    pub value: f64,
+    pub limit: f64,
+}
+
+/// Relative tolerance on the limits (round-off of the re-timing).
+const TOLERANCE: f64 = 1e-6;
+
+/// Wheel speeds above the limit and speed changes faster than the
+/// acceleration limit (spread over the two half segments), from rest at the
+/// start to rest at the end.
+pub fn find_spikes(
+    samples: &[PathSample],
+    commands: &[WheelCommand],
+    limits: &WheelLimits,
+) -> Vec<Spike> {
+    let mut out = Vec::new();
+    let n = samples.len();
+    if n < 2 {
+        return out;
+    }
+    // (wheel speeds, duration) of the previous segment; rest before the start.
+    let mut previous: ([f64; 2], f64) = ([0.0; 2], 0.0);
+    for k in 0..n {
+        // The last "segment" is the stop after the final sample.
+        let (wheels, duration) = if k + 1 < n {
+            (commands[k].wheels(), samples[k + 1].t_s - samples[k].t_s)
+        } else {
+            ([0.0; 2], 0.0)
+        };
+        let span = 0.5 * (previous.1 + duration);
+        for (w, (speed, before)) in wheels.iter().zip(previous.0).enumerate() {
+            if speed.abs() > limits.max_speed_rad_s * (1.0 + TOLERANCE) {
+                out.push(Spike {
+                    segment: k,
+                    t_s: samples[k].t_s,
+                    wheel: w,
+                    kind: SpikeKind::Speed,
+                    value: speed.abs(),
+                    limit: limits.max_speed_rad_s,
+                });
+            }
+            if span > 0.0 {
+                let accel = (speed - before).abs() / span;
+                if accel > limits.max_accel_rad_s2 * (1.0 + TOLERANCE) {
+                    out.push(Spike {
+                        segment: k.min(n - 2),
+                        t_s: samples[k].t_s,
+                        wheel: w,
+                        kind: SpikeKind::Acceleration,
+                        value: accel,
+                        limit: limits.max_accel_rad_s2,
+                    });
+                }
+            }
+        }
+        previous = (wheels, duration);
+    }
+    out
+}
+
+/// Settings of the spike filter.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FilterSettings {
+    /// Samples kept on each side of a spike in the first window.
+    pub window_samples: usize,
+    /// Largest heading change per re-interpolated segment (rad).
+    pub max_turn_per_segment_rad: f64,
+    pub max_iterations: usize,
+}
+
+impl Default for FilterSettings {
+    fn default() -> Self {
+        Self {
+            window_samples: 3,
+            max_turn_per_segment_rad: 0.05,
+            max_iterations: 20,
+        }
+    }
+}
+
+/// The filtered path and what was done.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Filtered {
+    pub samples: Vec<PathSample>,
+    pub commands: Vec<WheelCommand>,
+    /// Spikes of the input.
+    pub spikes: Vec<Spike>,
+    /// Re-interpolated windows (time spans in the output).
+    pub windows: Vec<(f64, f64)>,
+    pub iterations: usize,
+}
+
+/// Wheel rotations [left, right] of the arc from `a` to `b`.
+fn increments(a: &PathSample, b: &PathSample, params: &DiffDriveParams) -> [f64; 2] {
+    let (ds, dtheta) = segment_arc(a, b);
+    let (l, r) = wheel_speeds(params, ds, dtheta);
+    [l, r]
+}
+
+/// Cubic Hermite basis at `s` in [0, 1]: (h00, h10, h01, h11).
+fn hermite(s: f64) -> [f64; 4] {
+    let (s2, s3) = (s * s, s * s * s);
+    [
+        2.0 * s3 - 3.0 * s2 + 1.0,
+        s3 - 2.0 * s2 + s,
+        -2.0 * s3 + 3.0 * s2,
+        s3 - s2,
+    ]
+}
+
+/// Re-interpolates samples `a..=b` (positions by Hermite with the end
+/// velocities, heading along the shorter arc with the end turn rates).
+fn reinterpolate(
+    samples: &[PathSample],
+    a: usize,
+    b: usize,
+    settings: &FilterSettings,
+) -> Vec<PathSample> {
+    let (pa, pb) = (&samples[a], &samples[b]);
+    let span = pb.t_s - pa.t_s;
+    let velocity = |p: &PathSample| {
+        let (s, c) = p.pose.heading_rad.sin_cos();
+        [p.v_m_s * c * span, p.v_m_s * s * span]
+    };
+    let (ma, mb) = (velocity(pa), velocity(pb));
+    let dtheta = wrap_angle(pb.pose.heading_rad - pa.pose.heading_rad);
+    let (wa, wb) = (pa.omega_rad_s * span, pb.omega_rad_s * span);
+    let segments = (b - a)
+        .max((dtheta.abs() / settings.max_turn_per_segment_rad).ceil() as usize)
+        .max(1);
+    (0..=segments)
+        .map(|i| {
+            let s = i as f64 / segments as f64;
+            let h = hermite(s);
+            let x = h[0] * pa.pose.x_m + h[1] * ma[0] + h[2] * pb.pose.x_m + h[3] * mb[0];
+            let y = h[0] * pa.pose.y_m + h[1] * ma[1] + h[2] * pb.pose.y_m + h[3] * mb[1];
+            // Heading relative to a, ending at a + Δθ (the shorter arc).
+            let th = h[1] * wa + h[2] * dtheta + h[3] * wb;
+            PathSample {
+                t_s: pa.t_s + s * span,
+                pose: Pose::new(x, y, pa.pose.heading_rad + th),
+                v_m_s: 0.0,
+                omega_rad_s: 0.0,
+            }
+        })
+        .collect()
+}
+
+/// Assigns the segment durations to the samples, from the first sample's time.
+fn apply_durations(samples: &mut [PathSample], durations: &[f64]) {
+    let mut t = samples.first().map_or(0.0, |p| p.t_s);
+    for (k, p) in samples.iter_mut().enumerate() {
+        p.t_s = t;
+        if let Some(d) = durations.get(k) {
+            t += d;
+        }
+    }
+}
+
+/// Re-times `samples` as fast as `limits` allow but never faster than
+/// `min_durations`. The re-timing's acceleration model is continuous while
+/// the check ([`find_spikes`]) is per segment; where they disagree (jagged
+/// geometry) the segments around each remaining spike get a longer minimum
+/// duration and the re-timing runs again, so only those places slow down.
+fn retime_checked(
+    samples: &mut [PathSample],
+    min_durations: &[f64],
+    params: &DiffDriveParams,
+    limits: &WheelLimits,
+) -> Result<Vec<WheelCommand>, PipelineError> {
+    let inc: Vec<[f64; 2]> = samples
+        .windows(2)
+        .map(|w| increments(&w[0], &w[1], params))
+        .collect();
+    let mut mins = min_durations.to_vec();
+    let planning = limits.scaled(0.95);
+    for _ in 0..60 {
+        let durations = fastest_durations(&inc, &mins, &planning)?;
+        apply_durations(samples, &durations);
+        let commands = recompute(samples, params);
+        let spikes = find_spikes(samples, &commands, limits);
+        if spikes.is_empty() {
+            return Ok(commands);
+        }
+        for s in &spikes {
+            let lo = s.segment.saturating_sub(1);
+            let hi = (s.segment + 1).min(durations.len() - 1);
+            for k in lo..=hi {
+                mins[k] = mins[k].max(durations[k] * 1.15);
+            }
+        }
+    }
+    Err(PipelineError::Infeasible(
+        "re-timing could not bring every segment within the wheel limits".into(),
+    ))
+}
+
+/// Removes every spike; see the module docs.
+pub fn filter_spikes(
+    input: &[PathSample],
+    params: &DiffDriveParams,
+    limits: &WheelLimits,
+    settings: &FilterSettings,
+) -> Result<Filtered, PipelineError> {
+    limits.validate()?;
+    let mut samples = input.to_vec();
+    let mut commands = recompute(&mut samples, params);
+    let first_spikes = find_spikes(&samples, &commands, limits);
+    // Which samples were re-interpolated (for the windows reported).
+    let mut touched = vec![false; samples.len()];
+    let mut width = settings.window_samples.max(1);
+    let mut iterations = 0;
+    loop {
+        let spikes = find_spikes(&samples, &commands, limits);
+        if spikes.is_empty() {
+            break;
+        }
+        if iterations == settings.max_iterations {
+            return Err(PipelineError::Infeasible(format!(
+                "control spikes remain after {iterations} re-interpolations; the limits cannot be met on this path"
+            )));
+        }
+        iterations += 1;
+        // Windows around clusters of spikes, merged when they overlap.
+        let last = samples.len() - 1;
+        let mut spans: Vec<(usize, usize)> = Vec::new();
+        for s in &spikes {
+            let lo = s.segment.saturating_sub(width);
+            let hi = (s.segment + 1 + width).min(last);
+            match spans.last_mut() {
+                Some(prev) if lo <= prev.1 => prev.1 = prev.1.max(hi),
+                _ => spans.push((lo, hi)),
+            }
+        }
+        // New geometry in each window, spread evenly over its old time span.
+        let mut out: Vec<PathSample> = Vec::with_capacity(samples.len() + 64);
+        let mut out_touched: Vec<bool> = Vec::with_capacity(samples.len() + 64);
+        let mut next = 0;
+        for &(a, b) in &spans {
+            out.extend_from_slice(&samples[next..a]);
+            out_touched.extend_from_slice(&touched[next..a]);
+            let geometry = reinterpolate(&samples, a, b, settings);
+            out.extend_from_slice(&geometry[..geometry.len() - 1]);
+            out_touched.extend(std::iter::repeat_n(true, geometry.len() - 1));
+            next = b;
+        }
+        out.extend_from_slice(&samples[next..]);
+        out_touched.extend_from_slice(&touched[next..]);
+        // Longer travel times where needed, never shorter than before.
+        let min_durations: Vec<f64> = out.windows(2).map(|w| w[1].t_s - w[0].t_s).collect();
+        commands = retime_checked(&mut out, &min_durations, params, limits)?;
+        samples = out;
+        touched = out_touched;
+        width *= 2;
+    }
+    let mut windows: Vec<(f64, f64)> = Vec::new();
+    for (k, p) in samples.iter().enumerate() {
+        if !touched[k] {
+            continue;
+        }
+        let end = samples.get(k + 1).map_or(p.t_s, |q| q.t_s);
+        match windows.last_mut() {
+            Some(w) if k > 0 && touched[k - 1] => w.1 = end,
+            _ => windows.push((p.t_s, end)),
+        }
+    }
+    Ok(Filtered {
+        samples,
+        commands,
+        spikes: first_spikes,
+        windows,
+        iterations,
+    })
+}
+
+/// Re-times the whole path as fast as the limits allow, from rest to rest
+/// (samples where neither wheel moves are merged away).
+pub fn time_optimal(
+    input: &[PathSample],
+    params: &DiffDriveParams,
+    limits: &WheelLimits,
+) -> Result<(Vec<PathSample>, Vec<WheelCommand>), PipelineError> {
+    limits.validate()?;
+    let mut kept: Vec<PathSample> = Vec::with_capacity(input.len());
+    for p in input {
+        match kept.last() {
+            Some(q) if increments(q, p, params).iter().all(|v| v.abs() < 1e-9) => {}
+            _ => kept.push(*p),
+        }
+    }
+    if kept.len() < 2 {
+        let commands = recompute(&mut kept, params);
+        return Ok((kept, commands));
+    }
+    let mins = vec![0.0; kept.len() - 1];
+    let commands = retime_checked(&mut kept, &mins, params, limits)?;
+    Ok((kept, commands))
+}

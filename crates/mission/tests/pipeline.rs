@@ -1,0 +1,166 @@
+//! The pipeline stages on the paper's case study (the wall-following
+//! mission on the twin), checked against the forward model and the limits.
+
+use std::sync::OnceLock;
+
+use twindrive_kinematics::DiffDriveParams;
+use twindrive_log::MissionLog;
+use twindrive_mission::PipelineError;
+use twindrive_mission::control::{forward, recompute};
+use twindrive_mission::planner::{PlannerSettings, executed_path};
+use twindrive_mission::retime::WheelLimits;
+use twindrive_mission::spikes::{FilterSettings, filter_spikes, find_spikes, time_optimal};
+
+/// The twin's hidden truth (what calibration recovers to 0.01 %).
+const CALIBRATED: DiffDriveParams = DiffDriveParams {
+    left_diameter_m: 0.0652,
+    right_diameter_m: 0.0665,
+    wheelbase_m: 0.2678,
+};
+
+fn wall_following() -> &'static MissionLog {
+    static LOG: OnceLock<MissionLog> = OnceLock::new();
+    LOG.get_or_init(|| {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios/wall_following.toml");
+        let scenario = twindrive_sim::Scenario::load(&path).expect("scenario loads");
+        twindrive_sim::Simulator::new(scenario).run(|_, _| {})
+    })
+}
+
+fn limits(log: &MissionLog) -> WheelLimits {
+    WheelLimits {
+        max_speed_rad_s: log.header.max_wheel_speed_rad_s,
+        max_accel_rad_s2: log.header.max_wheel_accel_rad_s2,
+    }
+}
+
+#[test]
+fn the_planner_recreates_the_path_from_encoders_and_calibrated_parameters() {
+    let log = wall_following();
+    let end_error = |params: &DiffDriveParams| {
+        let path = executed_path(log, params, &PlannerSettings::default()).unwrap();
+        let last = path.last().unwrap();
+        let truth = log
+            .steps
+            .iter()
+            .rev()
+            .find(|s| s.encoder_ticks.is_some())
+            .unwrap()
+            .ground_truth;
+        (path.len(), last.pose.distance_to(&truth))
+    };
+    let (n, calibrated) = end_error(&CALIBRATED);
+    let (_, nominal) = end_error(&log.header.nominal);
+    assert_eq!(
+        n,
+        log.steps
+            .iter()
+            .filter(|s| s.encoder_ticks.is_some())
+            .count()
+    );
+    // Over 120 s and ~24 m with slip noise: calibrated odometry ends within
+    // a few centimetres, far closer than the hand-measured parameters.
+    assert!(calibrated < 0.05, "calibrated end error {calibrated} m");
+    assert!(
+        nominal > 5.0 * calibrated,
+        "nominal {nominal} vs calibrated {calibrated}"
+    );
+}
+
+#[test]
+fn recomputed_wheel_speeds_reproduce_the_path_through_the_forward_model() {
+    let log = wall_following();
+    let mut path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
+    let commands = recompute(&mut path, &CALIBRATED);
+    let reached = forward(&path, &commands, &CALIBRATED);
+    let worst = path
+        .iter()
+        .zip(&reached)
+        .map(|(p, q)| {
+            p.pose
+                .distance_to(q)
+                .max((p.pose.heading_rad - q.heading_rad).abs())
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9, "forward model departs by {worst}");
+}
+
+#[test]
+fn filtering_leaves_no_speed_or_acceleration_above_the_limits() {
+    let log = wall_following();
+    let lim = limits(log);
+    let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
+    let f = filter_spikes(&path, &CALIBRATED, &lim, &FilterSettings::default()).unwrap();
+    assert!(!f.spikes.is_empty(), "the bumps make spikes to remove");
+    assert!(find_spikes(&f.samples, &f.commands, &lim).is_empty());
+    // Every command within the limits, checked directly.
+    let mut previous = ([0.0f64; 2], 0.0f64);
+    for (k, c) in f.commands.iter().enumerate() {
+        let dt = f
+            .samples
+            .get(k + 1)
+            .map_or(0.0, |q| q.t_s - f.samples[k].t_s);
+        let span = 0.5 * (previous.1 + dt);
+        for w in 0..2 {
+            assert!(c.wheels()[w].abs() <= lim.max_speed_rad_s * (1.0 + 1e-6));
+            if span > 0.0 {
+                let accel = (c.wheels()[w] - previous.0[w]).abs() / span;
+                assert!(
+                    accel <= lim.max_accel_rad_s2 * (1.0 + 1e-6),
+                    "segment {k}: {accel}"
+                );
+            }
+        }
+        previous = (c.wheels(), dt);
+    }
+    // Slower where needed, never faster; the filtered plan still follows
+    // the path through the forward model.
+    let (t0, t1) = (path.last().unwrap().t_s, f.samples.last().unwrap().t_s);
+    assert!(t1 >= t0, "{t1} < {t0}");
+    let reached = forward(&f.samples, &f.commands, &CALIBRATED);
+    let worst = f
+        .samples
+        .iter()
+        .zip(&reached)
+        .map(|(p, q)| p.pose.distance_to(q))
+        .fold(0.0, f64::max);
+    assert!(worst < 0.01, "filtered plan departs by {worst} m");
+    // The time-optimal re-timing of the same path is no slower.
+    let (fastest, commands) = time_optimal(&f.samples, &CALIBRATED, &lim).unwrap();
+    assert!(find_spikes(&fastest, &commands, &lim).is_empty());
+    let t2 = fastest.last().unwrap().t_s;
+    eprintln!(
+        "mission {t0:.2} s, filtered {t1:.2} s ({} spikes, {} windows), time-optimal {t2:.2} s",
+        f.spikes.len(),
+        f.windows.len()
+    );
+    assert!(t2 <= t1, "time-optimal {t2} s vs filtered {t1} s");
+}
+
+#[test]
+fn bad_inputs_are_clear_errors() {
+    let log = wall_following();
+    let mut empty = log.clone();
+    empty.steps.clear();
+    assert_eq!(
+        executed_path(&empty, &CALIBRATED, &PlannerSettings::default()),
+        Err(PipelineError::EmptyLog)
+    );
+    let mut blind = log.clone();
+    blind.steps.iter_mut().for_each(|s| s.encoder_ticks = None);
+    assert_eq!(
+        executed_path(&blind, &CALIBRATED, &PlannerSettings::default()),
+        Err(PipelineError::NoEncoderData(0))
+    );
+    let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
+    let zero = WheelLimits {
+        max_speed_rad_s: 12.0,
+        max_accel_rad_s2: 0.0,
+    };
+    let err = filter_spikes(&path, &CALIBRATED, &zero, &FilterSettings::default()).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "max_wheel_accel_rad_s2 must be a finite number > 0, got 0"
+    );
+}

@@ -1,0 +1,293 @@
+//! `twindrive plan`: a mission log and a calibration in, a verified-format,
+//! hashed mission plan out, with the pipeline's figures and an MCAP of every
+//! stage.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use serde::Deserialize;
+use twindrive_kinematics::{DiffDriveParams, Pose};
+use twindrive_log::MissionLog;
+use twindrive_mission::pipeline::{PipelineSettings, StageSummary, Stages};
+use twindrive_mission::plan::{MissionPlan, PlanHeader, PlanSample, RobotInfo, sha256_hex};
+use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_mission::retime::WheelLimits;
+use twindrive_mission::{PathSample, pipeline};
+use twindrive_sim::{Scenario, SensorModel};
+
+use crate::cli::PlanArgs;
+use crate::figures;
+use crate::output::Staging;
+
+/// The three parameters of a `calib.json` (other fields are ignored).
+#[derive(Debug, Deserialize)]
+struct Calibration {
+    left_diameter_m: f64,
+    right_diameter_m: f64,
+    wheelbase_m: f64,
+}
+
+/// Reads the calibrated parameters from a `twindrive calibrate` output.
+pub fn read_calibration(path: &Path) -> anyhow::Result<DiffDriveParams> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let c: Calibration = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{}: expected a calib.json with left_diameter_m, right_diameter_m and wheelbase_m",
+            path.display()
+        )
+    })?;
+    let params = DiffDriveParams::new(c.left_diameter_m, c.right_diameter_m, c.wheelbase_m);
+    params
+        .validate()
+        .with_context(|| format!("{}", path.display()))?;
+    Ok(params)
+}
+
+/// Everything one plan needs, checked.
+pub struct Job {
+    pub log: MissionLog,
+    pub log_sha256: String,
+    pub params: DiffDriveParams,
+    /// The twin the plan's sensor predictions come from.
+    pub scenario: Scenario,
+    pub settings: PipelineSettings,
+}
+
+/// SHA-256 of a log directory's two files.
+pub fn log_dir_sha256(dir: &Path) -> anyhow::Result<String> {
+    let mut bytes = Vec::new();
+    for name in ["log.meta.json", "log.csv"] {
+        let path = dir.join(name);
+        bytes.extend(std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?);
+    }
+    Ok(sha256_hex(&bytes))
+}
+
+/// The scenario named in the log, when it is a built-in one.
+pub fn scenario_for(log: &MissionLog, given: Option<&Path>) -> anyhow::Result<Scenario> {
+    match given {
+        Some(path) => Ok(Scenario::load(path)?),
+        None => match twindrive_sim::builtin::load(&log.header.scenario) {
+            Some(s) => Ok(s?),
+            None => bail!(
+                "the log's scenario `{}` is not built in; pass --scenario with its TOML file (the twin predicts the plan's sensor readings)",
+                log.header.scenario
+            ),
+        },
+    }
+}
+
+fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
+    let log = twindrive_log::read_log_dir(&args.log_dir)?;
+    let log_sha256 = log_dir_sha256(&args.log_dir)?;
+    let params = read_calibration(&args.calibration)?;
+    let mut redundancy = match &args.redundancy {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            toml::from_str::<RedundancyConfig>(&text)
+                .with_context(|| format!("{}", path.display()))?
+        }
+        None => RedundancyConfig::with_pinch_distance(args.pinch_distance.unwrap_or(0.1)),
+    };
+    if let Some(d) = args.pinch_distance {
+        redundancy.pinch_distance_m = d;
+    }
+    if let Some(l) = args.min_loop_length {
+        redundancy.min_loop_length_m = Some(l);
+    }
+    if args.keep_reversals {
+        redundancy.reversing_is_redundant = false;
+    }
+    redundancy.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let scenario = scenario_for(&log, args.scenario.as_deref())?;
+    Ok(Job {
+        log,
+        log_sha256,
+        params,
+        scenario,
+        settings: PipelineSettings {
+            planner: Default::default(),
+            redundancy,
+            filter: Default::default(),
+        },
+    })
+}
+
+/// Runs the pipeline and assembles the plan (with the twin's sensor predictions).
+pub fn make_plan(job: &Job) -> anyhow::Result<(MissionPlan, Stages)> {
+    let header = &job.log.header;
+    let limits = WheelLimits {
+        max_speed_rad_s: header.max_wheel_speed_rad_s,
+        max_accel_rad_s2: header.max_wheel_accel_rad_s2,
+    };
+    let stages = pipeline::run(&job.log, &job.params, &limits, &job.settings)?;
+    let mut model = SensorModel::new(&job.scenario);
+    let mut ranges = vec![0.0; model.beams()];
+    let f = &stages.filtered;
+    let samples: Vec<PlanSample> = f
+        .samples
+        .iter()
+        .zip(&f.commands)
+        .map(|(p, c)| {
+            let bump = model.read(&p.pose, &mut ranges);
+            PlanSample {
+                t_s: p.t_s,
+                x_m: p.pose.x_m,
+                y_m: p.pose.y_m,
+                heading_rad: p.pose.heading_rad,
+                v_m_s: c.v_m_s,
+                omega_rad_s: c.omega_rad_s,
+                left_rad_s: c.left_rad_s,
+                right_rad_s: c.right_rad_s,
+                expected_ranges_m: ranges.clone(),
+                expected_bump: bump,
+            }
+        })
+        .collect();
+    let plan = MissionPlan::new(
+        PlanHeader {
+            robot: RobotInfo {
+                scenario: header.scenario.clone(),
+                footprint_radius_m: header.footprint_radius_m,
+                ticks_per_rev: header.ticks_per_rev,
+                range_sensors: job
+                    .scenario
+                    .range_sensors
+                    .iter()
+                    .map(|s| s.info.clone())
+                    .collect(),
+            },
+            calibrated: job.params,
+            limits,
+            time_step_s: stages.period_s,
+            start: header.start,
+            source_log_sha256: job.log_sha256.clone(),
+            settings: serde_json::to_value(&job.settings)?,
+            summary: serde_json::to_value(stages.summary())?,
+        },
+        samples,
+    );
+    plan.validate()?;
+    Ok((plan, stages))
+}
+
+fn ns(t_s: f64) -> u64 {
+    (t_s * 1e9).round().max(0.0) as u64
+}
+
+/// Writes `out` (the plan JSON) and beside it `<stem>.csv`, `<stem>.tum`,
+/// `<stem>_stages.mcap` and the figures.
+pub fn write_outputs(
+    plan: &MissionPlan,
+    stages: &Stages,
+    scenario: &Scenario,
+    out: &Path,
+) -> anyhow::Result<()> {
+    let (dir, stem, file_name) = crate::output::split_out_path(out, "plan")?;
+    let staging = Staging::new(&dir, &format!("plan:{stem}"))?;
+    staging.write_with(&file_name, |w| {
+        serde_json::to_writer_pretty(&mut *w, plan)?;
+        writeln!(w)?;
+        Ok(())
+    })?;
+    staging.write_with(&format!("{stem}.csv"), |w| {
+        plan.write_csv(w).map_err(Into::into)
+    })?;
+    staging.write_with(&format!("{stem}.tum"), |w| {
+        plan.write_tum(w).map_err(Into::into)
+    })?;
+    let poses =
+        |p: &[PathSample]| -> Vec<(u64, Pose)> { p.iter().map(|s| (ns(s.t_s), s.pose)).collect() };
+    let wheels = |p: &[PathSample], c: &[twindrive_mission::control::WheelCommand]| {
+        p.iter()
+            .zip(c)
+            .map(|(s, c)| (ns(s.t_s), c.wheels()))
+            .collect::<Vec<_>>()
+    };
+    let (executed, cleaned, filtered, fastest) = (
+        poses(&stages.executed),
+        poses(&stages.cleaned),
+        poses(&stages.filtered.samples),
+        poses(&stages.fastest),
+    );
+    let (cleaned_w, filtered_w, fastest_w) = (
+        wheels(&stages.cleaned, &stages.cleaned_commands),
+        wheels(&stages.filtered.samples, &stages.filtered.commands),
+        wheels(&stages.fastest, &stages.fastest_commands),
+    );
+    staging.write_with(&format!("{stem}_stages.mcap"), |w| {
+        twindrive_log::write_tracks_mcap(
+            &[
+                twindrive_log::Track {
+                    topic: "/executed",
+                    poses: &executed,
+                    wheels: &[],
+                },
+                twindrive_log::Track {
+                    topic: "/cleaned",
+                    poses: &cleaned,
+                    wheels: &cleaned_w,
+                },
+                twindrive_log::Track {
+                    topic: "/plan",
+                    poses: &filtered,
+                    wheels: &filtered_w,
+                },
+                twindrive_log::Track {
+                    topic: "/time_optimal",
+                    poses: &fastest,
+                    wheels: &fastest_w,
+                },
+            ],
+            &[(
+                "twindrive.plan_header",
+                serde_json::to_string(&plan.header)?,
+            )],
+            w,
+        )
+        .map_err(Into::into)
+    })?;
+    figures::plan_figures(
+        stages,
+        &figures::walls(&scenario.world),
+        staging.dir(),
+        &stem,
+    )?;
+    staging.commit()
+}
+
+pub fn print_summary(s: &StageSummary, plan: &MissionPlan, out: &Path) -> anyhow::Result<()> {
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "executed path {:.2} m in {:.1} s; removed {} loop(s) and {} bump-and-back-up kink(s) -> {:.2} m",
+        s.executed_length_m,
+        s.executed_duration_s,
+        s.loops_removed,
+        s.kinks_removed,
+        s.cleaned_length_m
+    )?;
+    writeln!(
+        o,
+        "{} control spike(s) filtered in {} window(s): mission {:.1} s (time-optimal re-timing {:.1} s)",
+        s.spikes_found, s.filter_windows, s.filtered_duration_s, s.time_optimal_duration_s
+    )?;
+    writeln!(
+        o,
+        "plan {} ({} samples, sha256 {}) and its figures beside it",
+        out.display(),
+        plan.samples.len(),
+        &plan.sha256[..16]
+    )?;
+    Ok(())
+}
+
+pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
+    let job = resolve(args)?;
+    let (plan, stages) = make_plan(&job)?;
+    write_outputs(&plan, &stages, &job.scenario, &args.out)?;
+    print_summary(&stages.summary(), &plan, &args.out)
+}

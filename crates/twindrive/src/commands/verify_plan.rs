@@ -1,0 +1,213 @@
+//! `twindrive verify-plan`: replay a plan on the twin before the real robot
+//! sees it.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::Context;
+use serde::Serialize;
+use twindrive_kinematics::{DiffDriveParams, Pose};
+use twindrive_mission::plan::MissionPlan;
+use twindrive_mission::verify::{self, Replay, ReplayReport, TrackerSettings};
+use twindrive_plot::{Series, WorldFigure, palette};
+use twindrive_sim::Scenario;
+
+use crate::figures;
+use crate::output::Staging;
+
+/// `report.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct VerifyReport {
+    pub plan_sha256: String,
+    pub scenario: String,
+    /// Over the plan's open- and closed-loop replays: collisions and bumps
+    /// added up, the larger maximum deviation, the mean of the mean deviations.
+    pub collisions: u64,
+    pub bumps: u64,
+    pub max_deviation_m: f64,
+    pub mean_deviation_m: f64,
+    /// The plan's own duration and path length.
+    pub duration_s: f64,
+    pub path_length_m: f64,
+    /// The plan's wheel speeds played blind.
+    pub open_loop: ReplayReport,
+    /// Regulated pure pursuit on odometry with the calibrated parameters.
+    pub closed_loop: ReplayReport,
+    /// The same path's wheel speeds through the operator's nominal parameters.
+    pub open_loop_nominal: ReplayReport,
+    pub nominal_params: DiffDriveParams,
+    pub calibrated_params: DiffDriveParams,
+}
+
+/// Reads and checks a plan file (format, hash, contents).
+pub fn read_plan(path: &Path) -> anyhow::Result<MissionPlan> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let plan: MissionPlan = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a twindrive mission plan", path.display()))?;
+    plan.validate()
+        .with_context(|| format!("{}", path.display()))?;
+    Ok(plan)
+}
+
+/// The three replays.
+pub struct Verification {
+    pub report: VerifyReport,
+    pub open_loop: Replay,
+    pub closed_loop: Replay,
+    pub open_loop_nominal: Replay,
+}
+
+pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> anyhow::Result<Verification> {
+    let samples = &plan.samples;
+    let calibrated = plan.header.calibrated;
+    let nominal = scenario.robot.nominal_params;
+    let (open_loop, closed_loop, open_loop_nominal) = std::thread::scope(|s| {
+        let closed = s.spawn(|| {
+            verify::closed_loop(
+                samples,
+                scenario.clone(),
+                &calibrated,
+                &TrackerSettings::default(),
+            )
+        });
+        let nominal_run = s.spawn(|| verify::open_loop(samples, scenario.clone(), Some(&nominal)));
+        let open = verify::open_loop(samples, scenario.clone(), None);
+        (open, closed.join(), nominal_run.join())
+    });
+    let panicked = |_| anyhow::anyhow!("a replay panicked");
+    let (open_loop, closed_loop, open_loop_nominal) = (
+        open_loop?,
+        closed_loop.map_err(panicked)??,
+        open_loop_nominal.map_err(panicked)??,
+    );
+    let (o, c) = (&open_loop.report, &closed_loop.report);
+    let path_length_m = samples
+        .windows(2)
+        .map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m))
+        .sum();
+    let report = VerifyReport {
+        plan_sha256: plan.sha256.clone(),
+        scenario: scenario.name.clone(),
+        collisions: o.collisions + c.collisions,
+        bumps: o.bumps + c.bumps,
+        max_deviation_m: o.max_deviation_m.max(c.max_deviation_m),
+        mean_deviation_m: 0.5 * (o.mean_deviation_m + c.mean_deviation_m),
+        duration_s: plan.duration_s(),
+        path_length_m,
+        open_loop: open_loop.report.clone(),
+        closed_loop: closed_loop.report.clone(),
+        open_loop_nominal: open_loop_nominal.report.clone(),
+        nominal_params: nominal,
+        calibrated_params: calibrated,
+    };
+    Ok(Verification {
+        report,
+        open_loop,
+        closed_loop,
+        open_loop_nominal,
+    })
+}
+
+/// Writes report.json, the replayed tracks (TUM) and the overlay figure.
+pub fn write_outputs(
+    plan: &MissionPlan,
+    v: &Verification,
+    scenario: &Scenario,
+    out: &Path,
+) -> anyhow::Result<()> {
+    let staging = Staging::new(out, "verify-plan")?;
+    staging.write_with("report.json", |w| {
+        serde_json::to_writer_pretty(&mut *w, &v.report)?;
+        writeln!(w)?;
+        Ok(())
+    })?;
+    for (name, replay) in [
+        ("open_loop", &v.open_loop),
+        ("closed_loop", &v.closed_loop),
+        ("open_loop_nominal", &v.open_loop_nominal),
+    ] {
+        staging.write_with(&format!("{name}.tum"), |w| {
+            let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
+            twindrive_log::write_tum(replay.track.iter().map(|(t, p)| (ns(*t), *p)), w)
+                .map_err(Into::into)
+        })?;
+    }
+    let xy =
+        |t: &[(f64, Pose)]| -> Vec<(f64, f64)> { t.iter().map(|(_, p)| (p.x_m, p.y_m)).collect() };
+    let planned: Vec<(f64, f64)> = plan.samples.iter().map(|s| (s.x_m, s.y_m)).collect();
+    let (open, closed, nominal) = (
+        xy(&v.open_loop.track),
+        xy(&v.closed_loop.track),
+        xy(&v.open_loop_nominal.track),
+    );
+    WorldFigure {
+        title: "Plan replayed on the twin (true parameters and noise)",
+        walls: &figures::walls(&scenario.world),
+        paths: &[
+            Series {
+                label: "plan",
+                points: &planned,
+                color: palette::WALL,
+            },
+            Series {
+                label: "open loop, nominal parameters",
+                points: &nominal,
+                color: palette::BAD,
+            },
+            Series {
+                label: "open loop, calibrated plan",
+                points: &open,
+                color: palette::TRUTH,
+            },
+            Series {
+                label: "closed loop (pure pursuit)",
+                points: &closed,
+                color: palette::GOOD,
+            },
+        ],
+        markers: &[],
+    }
+    .write(&staging.dir().join("replays"))?;
+    staging.commit()
+}
+
+pub fn print_report(r: &VerifyReport, out: &Path) -> anyhow::Result<()> {
+    let mut o = std::io::stdout().lock();
+    for (name, x) in [
+        ("open loop (plan)", &r.open_loop),
+        ("closed loop", &r.closed_loop),
+        ("open loop (nominal)", &r.open_loop_nominal),
+    ] {
+        writeln!(
+            o,
+            "{name:20} collisions {}, bumps {}, deviation max {:.3} m mean {:.3} m, end error {:.3} m, {:.1} s, {:.2} m",
+            x.collisions,
+            x.bumps,
+            x.max_deviation_m,
+            x.mean_deviation_m,
+            x.final_error_m,
+            x.duration_s,
+            x.path_length_m
+        )?;
+    }
+    writeln!(o, "report in {}/report.json", out.display())?;
+    Ok(())
+}
+
+pub fn run(plan_path: &Path, scenario: Option<&Path>, out: &Path) -> anyhow::Result<()> {
+    let plan = read_plan(plan_path)?;
+    let scenario = match scenario {
+        Some(p) => Scenario::load(p)?,
+        None => match twindrive_sim::builtin::load(&plan.header.robot.scenario) {
+            Some(s) => s?,
+            None => anyhow::bail!(
+                "the plan's scenario `{}` is not built in; pass --scenario",
+                plan.header.robot.scenario
+            ),
+        },
+    };
+    let v = verify(&plan, &scenario)?;
+    write_outputs(&plan, &v, &scenario, out)?;
+    print_report(&v.report, out)
+}
