@@ -40,7 +40,7 @@ pub fn wall_following_path(samples: usize, seed: u64) -> Vec<PathSample> {
     let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
     let mut wall = 0.0f64; // direction of the wall being followed
     let mut phase = 0.0f64;
-    let mut push = |x: f64, y: f64, heading: f64, v: f64, omega: f64, out: &mut Vec<PathSample>| {
+    let push = |x: f64, y: f64, heading: f64, v: f64, omega: f64, out: &mut Vec<PathSample>| {
         out.push(PathSample {
             t_s: out.len() as f64 * DT_S,
             pose: Pose::new(x, y, heading),

@@ -102,6 +102,8 @@ pub struct FilterSettings {
     pub window_samples: usize,
     /// Largest heading change per re-interpolated segment (rad).
     pub max_turn_per_segment_rad: f64,
+    /// Re-interpolated windows get this many times their old sample count.
+    pub oversample: usize,
     pub max_iterations: usize,
 }
 
@@ -110,6 +112,7 @@ impl Default for FilterSettings {
         Self {
             window_samples: 3,
             max_turn_per_segment_rad: 0.05,
+            oversample: 8,
             max_iterations: 20,
         }
     }
@@ -162,7 +165,9 @@ fn reinterpolate(
     let (ma, mb) = (velocity(pa), velocity(pb));
     let dtheta = wrap_angle(pb.pose.heading_rad - pa.pose.heading_rad);
     let (wa, wb) = (pa.omega_rad_s * span, pb.omega_rad_s * span);
-    let segments = (b - a)
+    // Several times the old sample count: the window will be driven more
+    // slowly, and its segments should stay short in time.
+    let segments = ((b - a) * settings.oversample.max(1))
         .max((dtheta.abs() / settings.max_turn_per_segment_rad).ceil() as usize)
         .max(1);
     (0..=segments)
@@ -181,6 +186,45 @@ fn reinterpolate(
             }
         })
         .collect()
+}
+
+/// Splits every segment into about `max_duration_s` long equal pieces
+/// along its arc (segments shorter than 1.5 times that stay whole), so that
+/// no wheel command is held much longer than the control period: a robot (and the twin) changes wheel speed at most `α dt` per
+/// tick, so a plan's speed changes must come in steps that small. Returns
+/// the new samples and, per input sample, whether its pieces inherit a flag.
+fn subdivide(
+    samples: &[PathSample],
+    flags: &[bool],
+    max_duration_s: f64,
+) -> (Vec<PathSample>, Vec<bool>) {
+    let mut out = Vec::with_capacity(samples.len());
+    let mut out_flags = Vec::with_capacity(samples.len());
+    for (k, w) in samples.windows(2).enumerate() {
+        let (a, b) = (&w[0], &w[1]);
+        let dt = b.t_s - a.t_s;
+        let pieces = (dt / max_duration_s).round().max(1.0) as usize;
+        let (ds, dtheta) = segment_arc(a, b);
+        for i in 0..pieces {
+            let f = i as f64 / pieces as f64;
+            let pose = if i == 0 {
+                a.pose
+            } else {
+                twindrive_kinematics::arc_step(&a.pose, ds * f, dtheta * f)
+            };
+            out.push(PathSample {
+                t_s: a.t_s + f * dt,
+                pose,
+                ..*a
+            });
+            out_flags.push(flags[k]);
+        }
+    }
+    if let Some(last) = samples.last() {
+        out.push(*last);
+        out_flags.push(flags[samples.len() - 1]);
+    }
+    (out, out_flags)
 }
 
 /// Assigns the segment durations to the samples, from the first sample's time.
@@ -230,6 +274,14 @@ fn retime_checked(
     Err(PipelineError::Infeasible(
         "re-timing could not bring every segment within the wheel limits".into(),
     ))
+}
+
+/// The control period of a path: its mean sample spacing.
+fn settings_period(path: &[PathSample]) -> f64 {
+    match (path.first(), path.last()) {
+        (Some(a), Some(b)) if path.len() > 1 => (b.t_s - a.t_s) / (path.len() - 1) as f64,
+        _ => f64::INFINITY,
+    }
 }
 
 /// Removes every spike; see the module docs.
@@ -290,6 +342,21 @@ pub fn filter_spikes(
         touched = out_touched;
         width *= 2;
     }
+    // Executable at the control period: no command held longer than it.
+    let period = settings_period(input);
+    for _ in 0..4 {
+        if samples
+            .windows(2)
+            .all(|w| w[1].t_s - w[0].t_s < 1.5 * period)
+        {
+            break;
+        }
+        let (finer, finer_touched) = subdivide(&samples, &touched, period);
+        let mins: Vec<f64> = finer.windows(2).map(|w| w[1].t_s - w[0].t_s).collect();
+        samples = finer;
+        touched = finer_touched;
+        commands = retime_checked(&mut samples, &mins, params, limits)?;
+    }
     let mut windows: Vec<(f64, f64)> = Vec::new();
     for (k, p) in samples.iter().enumerate() {
         if !touched[k] {
@@ -329,7 +396,18 @@ pub fn time_optimal(
         let commands = recompute(&mut kept, params);
         return Ok((kept, commands));
     }
+    let period = settings_period(input);
     let mins = vec![0.0; kept.len() - 1];
-    let commands = retime_checked(&mut kept, &mins, params, limits)?;
+    let mut commands = retime_checked(&mut kept, &mins, params, limits)?;
+    for _ in 0..4 {
+        if kept.windows(2).all(|w| w[1].t_s - w[0].t_s < 1.5 * period) {
+            break;
+        }
+        let flags = vec![false; kept.len()];
+        let (finer, _) = subdivide(&kept, &flags, period);
+        kept = finer;
+        let mins = vec![0.0; kept.len() - 1];
+        commands = retime_checked(&mut kept, &mins, params, limits)?;
+    }
     Ok((kept, commands))
 }

@@ -207,7 +207,10 @@ fn replay(
 }
 
 /// Plays the plan's wheel speeds (or, with `params`, the plan's body
-/// velocities through those parameters' inverse kinematics) open loop.
+/// velocities through those parameters' inverse kinematics) open loop. The
+/// plan holds wheel speeds between its samples, which need not fall on the
+/// robot's control ticks: each tick commands the mean speed of the plan over
+/// that tick, so the wheel angles follow the plan's exactly.
 pub fn open_loop(
     samples: &[PlanSample],
     scenario: Scenario,
@@ -215,23 +218,48 @@ pub fn open_loop(
 ) -> Result<Replay, PipelineError> {
     let t0 = samples.first().map_or(0.0, |s| s.t_s);
     let end = samples.last().map_or(0.0, |s| s.t_s) - t0;
-    let mut k = 0;
-    replay(samples, scenario, end + 1.0, |s, _| {
-        let t = s.t_ns as f64 * 1e-9 + t0;
-        while k + 1 < samples.len() && samples[k + 1].t_s <= t {
-            k += 1;
-        }
-        if k + 1 >= samples.len() {
-            return None;
-        }
-        let p = &samples[k];
-        Some(match params {
+    let speeds: Vec<[f64; 2]> = samples
+        .iter()
+        .map(|p| match params {
             None => [p.left_rad_s, p.right_rad_s],
             Some(params) => {
                 let (l, r) = wheel_speeds(params, p.v_m_s, p.omega_rad_s);
                 [l, r]
             }
         })
+        .collect();
+    // Planned cumulative wheel angles at the sample times.
+    let mut angles = vec![[0.0f64; 2]; samples.len()];
+    for k in 1..samples.len() {
+        let dt = samples[k].t_s - samples[k - 1].t_s;
+        angles[k] = [
+            angles[k - 1][0] + speeds[k - 1][0] * dt,
+            angles[k - 1][1] + speeds[k - 1][1] * dt,
+        ];
+    }
+    let last = samples.len().saturating_sub(1);
+    let angle_at = |t: f64, k: &mut usize| -> [f64; 2] {
+        while *k < last && samples[*k + 1].t_s <= t {
+            *k += 1;
+        }
+        if *k >= last {
+            return angles[last];
+        }
+        let dt = (t - samples[*k].t_s).max(0.0);
+        [
+            angles[*k][0] + speeds[*k][0] * dt,
+            angles[*k][1] + speeds[*k][1] * dt,
+        ]
+    };
+    let dt_s = scenario.dt_s();
+    let (mut k0, mut k1) = (0, 0);
+    replay(samples, scenario, end + 1.0, |s, _| {
+        let t = s.t_ns as f64 * 1e-9 + t0;
+        if t >= t0 + end {
+            return None;
+        }
+        let (a, b) = (angle_at(t, &mut k0), angle_at(t + dt_s, &mut k1));
+        Some([(b[0] - a[0]) / dt_s, (b[1] - a[1]) / dt_s])
     })
 }
 

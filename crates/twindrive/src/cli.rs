@@ -83,13 +83,18 @@ pub enum Command {
         /// The path file (CSV `t,x,y,theta` or TUM).
         path: PathBuf,
         /// Samples closer than this (metres) pinch the path.
-        #[arg(long, value_name = "METRES")]
+        #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
         pinch_distance: f64,
         /// Shortest loop (metres of path) worth cutting; default 3 pinch distances.
-        #[arg(long, value_name = "METRES")]
+        #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
         min_loop_length: Option<f64>,
         /// Shortest loop (seconds) worth cutting.
-        #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+        #[arg(
+            long,
+            value_name = "SECONDS",
+            default_value_t = 0.0,
+            allow_negative_numbers = true
+        )]
         min_loop_duration: f64,
         /// Keep reversing stretches (bump and back up) instead of cutting them.
         #[arg(long)]
@@ -129,10 +134,10 @@ pub struct PlanArgs {
     #[arg(long, value_name = "R.toml")]
     pub redundancy: Option<PathBuf>,
     /// Pinch distance in metres (overrides the file; default 0.1).
-    #[arg(long, value_name = "METRES")]
+    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
     pub pinch_distance: Option<f64>,
     /// Shortest loop worth cutting, metres of path (overrides the file).
-    #[arg(long, value_name = "METRES")]
+    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
     pub min_loop_length: Option<f64>,
     /// Keep reversing stretches (bump and back up).
     #[arg(long)]

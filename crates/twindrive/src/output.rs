@@ -197,6 +197,28 @@ impl Drop for Staging {
     }
 }
 
+/// Splits an `--out` file path into (directory, stem, file name); the stem
+/// names the files written beside it. `default_stem` when the name has none.
+pub fn split_out_path(
+    out: &Path,
+    default_stem: &str,
+) -> anyhow::Result<(std::path::PathBuf, String, String)> {
+    let file_name = out
+        .file_name()
+        .context("--out needs a file name")?
+        .to_string_lossy()
+        .into_owned();
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| default_stem.into());
+    let dir = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    Ok((dir, stem, file_name))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -290,26 +312,4 @@ mod tests {
         assert_eq!(std::fs::read_to_string(dest.join("a.txt")).unwrap(), "user");
         assert_eq!(names(tmp.path()), vec!["out"]);
     }
-}
-
-/// Splits an `--out` file path into (directory, stem, file name); the stem
-/// names the files written beside it. `default_stem` when the name has none.
-pub fn split_out_path(
-    out: &Path,
-    default_stem: &str,
-) -> anyhow::Result<(std::path::PathBuf, String, String)> {
-    let file_name = out
-        .file_name()
-        .context("--out needs a file name")?
-        .to_string_lossy()
-        .into_owned();
-    let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| default_stem.into());
-    let dir = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    Ok((dir, stem, file_name))
 }

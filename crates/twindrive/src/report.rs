@@ -26,8 +26,11 @@ impl Report {
         self.blocks.push(Block::Heading(level, text.into()));
     }
 
+    /// A paragraph; runs of whitespace (source line breaks) become one space.
     pub fn paragraph(&mut self, text: impl Into<String>) {
-        self.blocks.push(Block::Paragraph(text.into()));
+        let text: String = text.into();
+        let words: Vec<&str> = text.split_whitespace().collect();
+        self.blocks.push(Block::Paragraph(words.join(" ")));
     }
 
     pub fn table(&mut self, header: &[&str], rows: Vec<Vec<String>>) {
@@ -101,9 +104,7 @@ impl Report {
                     let svg = std::fs::read_to_string(&file)
                         .with_context(|| format!("reading figure {}", file.display()))?;
                     // Drop an XML declaration; the SVG element itself is valid HTML.
-                    let svg = svg
-                        .find("<svg")
-                        .map_or(svg.as_str(), |start| &svg[start..]);
+                    let svg = svg.find("<svg").map_or(svg.as_str(), |start| &svg[start..]);
                     h.push_str(&format!(
                         "<figure>\n{svg}\n<figcaption>{}</figcaption>\n</figure>\n",
                         inline(caption)
@@ -161,7 +162,7 @@ mod tests {
         .unwrap();
         let mut r = Report::default();
         r.heading(1, "Case <study>");
-        r.paragraph("Run `twindrive demo`.");
+        r.paragraph("Run   `twindrive demo`.\n   Then read.");
         r.table(&["a", "b"], vec![vec!["1".into(), "2 & 3".into()]]);
         r.figure("f.svg", "A figure");
         let md = r.markdown();
@@ -170,7 +171,7 @@ mod tests {
         assert!(md.contains("![A figure](f.svg)"));
         let html = r.html("t", dir.path()).unwrap();
         assert!(html.contains("<h1>Case &lt;study&gt;</h1>"));
-        assert!(html.contains("<code>twindrive demo</code>"));
+        assert!(html.contains("Run <code>twindrive demo</code>. Then read."));
         assert!(html.contains("<td>2 &amp; 3</td>"));
         assert!(html.contains("<svg xmlns") && !html.contains("<?xml"));
         assert!(r.html("t", Path::new("/nonexistent")).is_err());

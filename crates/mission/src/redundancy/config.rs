@@ -192,14 +192,14 @@ fn finite(field: &str, value: f64) -> Result<(), RedundancyError> {
 }
 
 fn positive(field: &str, value: f64) -> Result<(), RedundancyError> {
-    if !(value > 0.0) {
+    if value.is_nan() || value <= 0.0 {
         return Err(bad(field, "must be > 0", value));
     }
     finite(field, value)
 }
 
 fn non_negative(field: &str, value: f64) -> Result<(), RedundancyError> {
-    if !(value >= 0.0) {
+    if value.is_nan() || value < 0.0 {
         return Err(bad(field, "must be >= 0", value));
     }
     finite(field, value)

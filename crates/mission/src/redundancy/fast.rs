@@ -29,13 +29,10 @@ pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
         return out;
     }
     let pts = &track.points;
-    let t0 = std::time::Instant::now();
     let cell_m = cell_size_m(track, crit.pinch_distance_m);
-    let anchors = Anchors::new(pts, ANCHOR_SPACING_IN_CELLS * cell_m);
-    let (grid, anchor_cell) = Grid::build(cell_m, anchors.len(), anchors.iter(pts));
-    let t1 = t0.elapsed();
+    let anchors = Anchors::new(track, ANCHOR_SPACING_IN_CELLS * cell_m);
+    let (grid, anchor_cell) = Grid::build(cell_m, anchors.len(), anchors.iter());
     let next_protected = track.next_protected();
-    let t2 = t0.elapsed();
 
     let mut lo = 0;
     for i in 0..n - 2 {
@@ -52,7 +49,10 @@ pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
         }
         // Segment b ends at j = b + 1, so segments from lo - 1 count.
         let cells = anchors.of_segment(i, &anchor_cell);
-        if cells.iter().all(|&c| (grid.latest_around(c) as usize) < lo - 1) {
+        if cells
+            .iter()
+            .all(|&c| (grid.latest_around(c) as usize) < lo - 1)
+        {
             continue;
         }
         let near = farthest_near(
@@ -80,7 +80,6 @@ pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
             kind,
         });
     }
-    eprintln!("n {n} grid {:?} np {:?} total {:?}", t1, t2 - t1, t0.elapsed());
     out
 }
 
@@ -108,50 +107,85 @@ fn cell_size_m(track: &Track, pinch_distance_m: f64) -> f64 {
 
 /// The anchors in order: sample `k` itself, then points along segment
 /// `(k, k+1)` if it is longer than the spacing.
-struct Anchors {
+struct Anchors<'a> {
+    pts: &'a [Point],
+    cum_length_m: &'a [f64],
     spacing_m: f64,
     /// Index of sample `k`'s anchor among all anchors (`k + 1` entries);
     /// empty when no segment needs extra anchors.
     starts: Vec<u32>,
 }
 
-impl Anchors {
-    fn new(pts: &[Point], spacing_m: f64) -> Self {
-        let mut starts = Vec::new();
-        if pts.windows(2).any(|w| distance(w[0], w[1]) > spacing_m) {
+impl<'a> Anchors<'a> {
+    fn new(track: &'a Track, spacing_m: f64) -> Self {
+        let mut anchors = Self {
+            pts: &track.points,
+            cum_length_m: &track.cum_length_m,
+            spacing_m,
+            starts: Vec::new(),
+        };
+        let n = track.len();
+        if (1..n).any(|k| anchors.extra(k - 1) > 0) {
             let mut count = 0u32;
-            for k in 0..pts.len() {
-                starts.push(count);
-                count += 1 + pts.get(k + 1).map_or(0, |&q| extra(pts[k], q, spacing_m)) as u32;
+            anchors.starts.reserve(n + 1);
+            for k in 0..n {
+                anchors.starts.push(count);
+                count += 1 + anchors.extra(k) as u32;
             }
-            starts.push(count);
+            anchors.starts.push(count);
         }
-        Self { spacing_m, starts }
+        anchors
+    }
+
+    /// Anchors segment `k` needs beyond sample `k` (its length from the
+    /// running sum: a rounding error far inside the spacing's margin).
+    #[inline]
+    fn extra(&self, k: usize) -> usize {
+        let length = match self.cum_length_m.get(k + 1) {
+            Some(next) => next - self.cum_length_m[k],
+            None => return 0,
+        };
+        if length > self.spacing_m {
+            (length / self.spacing_m).ceil() as usize - 1
+        } else {
+            0
+        }
     }
 
     fn len(&self) -> usize {
-        self.starts.last().map_or(0, |&c| c as usize)
+        self.starts.last().map_or(self.pts.len(), |&c| c as usize)
     }
 
-    fn iter<'a>(&'a self, pts: &'a [Point]) -> impl Iterator<Item = Anchor> + 'a {
-        let spacing_m = self.spacing_m;
-        pts.iter().enumerate().flat_map(move |(k, &p)| {
-            let tag = k as u32;
-            let q = pts.get(k + 1).copied().unwrap_or(p);
-            let pieces = extra(p, q, spacing_m) + 1;
-            (0..pieces).map(move |m| {
-                let f = m as f64 / pieces as f64;
-                Anchor {
-                    pos: if m == 0 {
-                        p
-                    } else {
-                        [p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]
-                    },
-                    tag,
-                    is_sample: m == 0,
-                }
+    fn iter(&self) -> impl Iterator<Item = Anchor> + '_ {
+        let samples = self.starts.is_empty().then(|| {
+            self.pts.iter().enumerate().map(|(k, &pos)| Anchor {
+                pos,
+                tag: k as u32,
+                is_sample: true,
             })
-        })
+        });
+        let with_extra = (!self.starts.is_empty()).then(|| {
+            self.pts.iter().enumerate().flat_map(move |(k, &p)| {
+                let q = self.pts.get(k + 1).copied().unwrap_or(p);
+                let pieces = self.extra(k) + 1;
+                (0..pieces).map(move |m| {
+                    let f = m as f64 / pieces as f64;
+                    Anchor {
+                        pos: if m == 0 {
+                            p
+                        } else {
+                            [p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]
+                        },
+                        tag: k as u32,
+                        is_sample: m == 0,
+                    }
+                })
+            })
+        });
+        samples
+            .into_iter()
+            .flatten()
+            .chain(with_extra.into_iter().flatten())
     }
 
     /// Cells of segment `a`'s anchors; the first is sample `a`'s cell.
@@ -161,17 +195,6 @@ impl Anchors {
         } else {
             &anchor_cell[self.starts[a] as usize..self.starts[a + 1] as usize]
         }
-    }
-}
-
-/// Anchors a segment needs beyond its start.
-#[inline]
-fn extra(p: Point, q: Point, spacing_m: f64) -> usize {
-    let length = distance(p, q);
-    if length > spacing_m {
-        (length / spacing_m).ceil() as usize - 1
-    } else {
-        0
     }
 }
 

@@ -49,26 +49,29 @@ impl Track {
         cfg.validate()?;
         check_samples(path)?;
         let n = path.len();
-        let points: Vec<[f64; 2]> = path.iter().map(PathSample::position).collect();
-        let reversing: Vec<bool> = path.iter().map(|s| s.v_m_s < 0.0).collect();
-        let protected = path
-            .iter()
-            .enumerate()
-            .map(|(k, s)| {
+        let mut track = Self {
+            points: Vec::with_capacity(n),
+            cum_length_m: Vec::new(),
+            t_s: Vec::with_capacity(n),
+            reversing: Vec::with_capacity(n),
+            protected: Vec::with_capacity(n),
+            input_index: (0..n).collect(),
+        };
+        let keeps_any = !cfg.keep_regions.is_empty() || !cfg.keep_windows.is_empty();
+        for (k, s) in path.iter().enumerate() {
+            let reversing = s.v_m_s < 0.0;
+            track.points.push(s.position());
+            track.t_s.push(s.t_s);
+            track.reversing.push(reversing);
+            track.protected.push(
                 k == 0
                     || k + 1 == n
-                    || cfg.keeps(s.position(), s.t_s)
-                    || (!cfg.reversing_is_redundant && s.v_m_s < 0.0)
-            })
-            .collect();
-        Ok(Self {
-            cum_length_m: cumulative_length_m(&points),
-            points,
-            t_s: path.iter().map(|s| s.t_s).collect(),
-            reversing,
-            protected,
-            input_index: (0..n).collect(),
-        })
+                    || (!cfg.reversing_is_redundant && reversing)
+                    || (keeps_any && cfg.keeps(s.position(), s.t_s)),
+            );
+        }
+        track.cum_length_m = cumulative_length_m(&track.points);
+        Ok(track)
     }
 
     pub fn len(&self) -> usize {
@@ -78,44 +81,33 @@ impl Track {
     /// The track without the samples strictly inside each cut `(i, j)`;
     /// cuts are sorted and do not overlap.
     pub fn without(&self, cuts: &[(usize, usize)]) -> Self {
-        let mut keep = vec![true; self.len()];
-        for &(i, j) in cuts {
-            keep[i + 1..j].iter_mut().for_each(|k| *k = false);
-        }
-        let pick = |v: &[bool]| -> Vec<bool> {
-            v.iter()
-                .zip(&keep)
-                .filter(|(_, k)| **k)
-                .map(|(x, _)| *x)
-                .collect()
+        let removed: usize = cuts.iter().map(|&(i, j)| j - i - 1).sum();
+        let m = self.len() - removed;
+        let mut out = Self {
+            points: Vec::with_capacity(m),
+            cum_length_m: Vec::new(),
+            t_s: Vec::with_capacity(m),
+            reversing: Vec::with_capacity(m),
+            protected: Vec::with_capacity(m),
+            input_index: Vec::with_capacity(m),
         };
-        let points: Vec<[f64; 2]> = self
-            .points
+        let mut keep_from = 0;
+        for &(i, j) in cuts
             .iter()
-            .zip(&keep)
-            .filter(|(_, k)| **k)
-            .map(|(p, _)| *p)
-            .collect();
-        Self {
-            cum_length_m: cumulative_length_m(&points),
-            points,
-            t_s: self
-                .t_s
-                .iter()
-                .zip(&keep)
-                .filter(|(_, k)| **k)
-                .map(|(t, _)| *t)
-                .collect(),
-            reversing: pick(&self.reversing),
-            protected: pick(&self.protected),
-            input_index: self
-                .input_index
-                .iter()
-                .zip(&keep)
-                .filter(|(_, k)| **k)
-                .map(|(x, _)| *x)
-                .collect(),
+            .chain(std::iter::once(&(self.len(), self.len())))
+        {
+            let kept = keep_from..(i + 1).min(self.len());
+            out.points.extend_from_slice(&self.points[kept.clone()]);
+            out.t_s.extend_from_slice(&self.t_s[kept.clone()]);
+            out.reversing
+                .extend_from_slice(&self.reversing[kept.clone()]);
+            out.protected
+                .extend_from_slice(&self.protected[kept.clone()]);
+            out.input_index.extend_from_slice(&self.input_index[kept]);
+            keep_from = j;
         }
+        out.cum_length_m = cumulative_length_m(&out.points);
+        out
     }
 
     /// For each sample, the first protected sample after it (`len - 1`

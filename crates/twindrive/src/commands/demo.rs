@@ -164,7 +164,11 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
     let report = case_study_report(&CaseStudy {
         nominal,
         calibrated,
-        truth: [truth.left_diameter_m, truth.right_diameter_m, truth.wheelbase_m],
+        truth: [
+            truth.left_diameter_m,
+            truth.right_diameter_m,
+            truth.wheelbase_m,
+        ],
         cal_summary: &cal_summary,
         t1: &t1,
         s6: &s6,
@@ -174,7 +178,9 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
         verification: &verification.report,
     });
     let staging = Staging::new(out, "demo-report")?;
-    staging.write_with("report.md", |w| Ok(w.write_all(report.markdown().as_bytes())?))?;
+    staging.write_with("report.md", |w| {
+        Ok(w.write_all(report.markdown().as_bytes())?)
+    })?;
     let html = report.html("twindrive: the case study", out)?;
     staging.write_with("report.html", |w| Ok(w.write_all(html.as_bytes())?))?;
     staging.commit()?;
@@ -214,9 +220,19 @@ fn case_study_report(c: &CaseStudy) -> Report {
         "The calibration drive ({:.0} s, {:.1} m, circles at several curvatures) logs encoder counts and an          external tracker. The augmented EKF over [x, y, θ, dL, dR, b], followed by a Rauch-Tung-Striebel          smoother, starts from the operator's hand-measured values and recovers the twin's hidden ones.",
         c.cal_summary.duration_s, c.cal_summary.distance_m
     ));
-    let names = ["left wheel diameter (m)", "right wheel diameter (m)", "wheelbase (m)"];
+    let names = [
+        "left wheel diameter (m)",
+        "right wheel diameter (m)",
+        "wheelbase (m)",
+    ];
     r.table(
-        &["parameter", "hand-measured", "calibrated", "twin's hidden truth", "calibrated error"],
+        &[
+            "parameter",
+            "hand-measured",
+            "calibrated",
+            "twin's hidden truth",
+            "calibrated error",
+        ],
         (0..3)
             .map(|i| {
                 vec![
@@ -235,9 +251,16 @@ fn case_study_report(c: &CaseStudy) -> Report {
         c.t1.t0_s, c.t1.t1_s
     ));
     r.table(
-        &["path", "major axis (m)", "minor axis (m)", "area (m²)", "major err", "minor err", "area err"],
-        c.t1
-            .rows
+        &[
+            "path",
+            "major axis (m)",
+            "minor axis (m)",
+            "area (m²)",
+            "major err",
+            "minor err",
+            "area err",
+        ],
+        c.t1.rows
             .iter()
             .map(|row| {
                 vec![
@@ -252,12 +275,20 @@ fn case_study_report(c: &CaseStudy) -> Report {
             })
             .collect(),
     );
-    r.figure("evidence/table1_circle.svg", "One circle: tracker, nominal and calibrated dead reckoning");
+    r.figure(
+        "evidence/table1_circle.svg",
+        "One circle: tracker, nominal and calibrated dead reckoning",
+    );
     r.heading(3, "Section 6: what a wrong wheelbase costs");
     r.table(
-        &["dead reckoning", "mean squared error (m²)", "RMS (m)", "sum of abs. differences (m)", "final error (m)"],
-        c.s6
-            .wheelbase_perturbation
+        &[
+            "dead reckoning",
+            "mean squared error (m²)",
+            "RMS (m)",
+            "sum of abs. differences (m)",
+            "final error (m)",
+        ],
+        c.s6.wheelbase_perturbation
             .iter()
             .map(|e| {
                 vec![
@@ -270,14 +301,23 @@ fn case_study_report(c: &CaseStudy) -> Report {
             })
             .collect(),
     );
-    r.figure("evidence/section6_wheelbase.svg", "Wheelbase ±4 %: dead-reckoned paths against the true one (Fig. 10)");
-    r.figure("evidence/section6_sweep.svg", "Drift against the error of each parameter");
+    r.figure(
+        "evidence/section6_wheelbase.svg",
+        "Wheelbase ±4 %: dead-reckoned paths against the true one (Fig. 10)",
+    );
+    r.figure(
+        "evidence/section6_sweep.svg",
+        "Drift against the error of each parameter",
+    );
     r.heading(2, "2. The mission on the twin (paper section 5.1)");
     r.paragraph(format!(
         "The wall follower drives around a right-angled wall for {:.0} s ({:.1} m) with one side IR sensor;          it bumped {} time(s), each time backing up and turning away.",
         c.wf_summary.duration_s, c.wf_summary.distance_m, c.wf_summary.bumps
     ));
-    r.figure("wall_following/path.svg", "The mission as driven (ground truth)");
+    r.figure(
+        "wall_following/path.svg",
+        "The mission as driven (ground truth)",
+    );
     r.heading(2, "3. The plan (paper section 5)");
     let s = c.summary;
     r.paragraph(format!(
@@ -287,9 +327,21 @@ fn case_study_report(c: &CaseStudy) -> Report {
     r.table(
         &["", "path length (m)", "mission time (s)"],
         vec![
-            vec!["executed on the twin".into(), f(s.executed_length_m, 2), f(s.executed_duration_s, 1)],
-            vec!["plan (redundancy removed, spikes filtered)".into(), f(s.cleaned_length_m, 2), f(s.filtered_duration_s, 1)],
-            vec!["same path, time-optimal re-timing".into(), f(s.cleaned_length_m, 2), f(s.time_optimal_duration_s, 1)],
+            vec![
+                "executed on the twin".into(),
+                f(s.executed_length_m, 2),
+                f(s.executed_duration_s, 1),
+            ],
+            vec![
+                "plan (redundancy removed, spikes filtered)".into(),
+                f(s.cleaned_length_m, 2),
+                f(s.filtered_duration_s, 1),
+            ],
+            vec![
+                "same path, time-optimal re-timing".into(),
+                f(s.cleaned_length_m, 2),
+                f(s.time_optimal_duration_s, 1),
+            ],
         ],
     );
     r.paragraph(format!(
@@ -297,17 +349,37 @@ fn case_study_report(c: &CaseStudy) -> Report {
         c.plan.samples.len(),
         c.plan.sha256
     ));
-    r.figure("plan/plan_executed.svg", "Executed path, redundant parts and the pinch points of each cut (Fig. 7)");
-    r.figure("plan/plan_cleaned.svg", "Redundancy removed: control spikes (Fig. 8a)");
-    r.figure("plan/plan_filtered.svg", "The filtered path: the plan (Fig. 8b)");
-    r.figure("plan/plan_wheel_speeds.svg", "Wheel speeds before and after filtering (Fig. 9)");
+    r.figure(
+        "plan/plan_executed.svg",
+        "Executed path, redundant parts and the pinch points of each cut (Fig. 7)",
+    );
+    r.figure(
+        "plan/plan_cleaned.svg",
+        "Redundancy removed: control spikes (Fig. 8a)",
+    );
+    r.figure(
+        "plan/plan_filtered.svg",
+        "The filtered path: the plan (Fig. 8b)",
+    );
+    r.figure(
+        "plan/plan_wheel_speeds.svg",
+        "Wheel speeds before and after filtering (Fig. 9)",
+    );
     r.heading(2, "4. Verification on the twin");
     r.paragraph(
         "Before anything is uploaded, the plan is replayed on the twin's robot with its hidden true          parameters and noise: open loop (the wheel speeds as planned), closed loop (regulated pure          pursuit on the robot's own odometry), and, for comparison, open loop with the same path's wheel          speeds computed from the hand-measured parameters.",
     );
     let v = c.verification;
     r.table(
-        &["replay", "collisions", "bumps", "max deviation (m)", "mean deviation (m)", "end error (m)", "duration (s)"],
+        &[
+            "replay",
+            "collisions",
+            "bumps",
+            "max deviation (m)",
+            "mean deviation (m)",
+            "end error (m)",
+            "duration (s)",
+        ],
         [
             ("open loop, calibrated plan", &v.open_loop),
             ("closed loop (pure pursuit)", &v.closed_loop),

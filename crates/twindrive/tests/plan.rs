@@ -1,0 +1,289 @@
+//! `plan`, `verify-plan` and `prune` end to end: the case study, determinism
+//! and bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn twindrive(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twindrive"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("twindrive runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The wall-following mission and a calib.json with the twin's true
+/// parameters (what calibration recovers to 0.01 %), made once.
+fn mission() -> &'static (tempfile::TempDir, PathBuf, PathBuf) {
+    static M: OnceLock<(tempfile::TempDir, PathBuf, PathBuf)> = OnceLock::new();
+    M.get_or_init(|| {
+        let tmp = tempfile::tempdir().unwrap();
+        let log = tmp.path().join("wf");
+        let out = twindrive(&[
+            "simulate",
+            s(&repo().join("scenarios/wall_following.toml")),
+            "--out",
+            s(&log),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let calib = tmp.path().join("calib.json");
+        std::fs::write(
+            &calib,
+            r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678, "method": "smoother"}"#,
+        )
+        .unwrap();
+        (tmp, log, calib)
+    })
+}
+
+fn plan(out: &Path, extra: &[&str]) -> Output {
+    let (_, log, calib) = mission();
+    let mut args = vec!["plan", s(log), "--calibration", s(calib), "--out", s(out)];
+    args.extend_from_slice(extra);
+    twindrive(&args)
+}
+
+#[test]
+fn the_case_study_plan_is_stable_and_verifies_without_collisions() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (
+        tmp.path().join("a/plan.json"),
+        tmp.path().join("b/plan.json"),
+    );
+    for p in [&a, &b] {
+        let out = plan(p, &[]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        assert!(text(&out.stdout).contains("bump-and-back-up kink"));
+    }
+    let dir = a.parent().unwrap();
+    for name in [
+        "plan.json",
+        "plan.csv",
+        "plan.tum",
+        "plan_stages.mcap",
+        "plan_executed.svg",
+        "plan_cleaned.png",
+        "plan_filtered.svg",
+        "plan_wheel_speeds.png",
+    ] {
+        let (x, y) = (dir.join(name), b.parent().unwrap().join(name));
+        assert!(x.exists(), "missing {name}");
+        assert_eq!(
+            std::fs::read(&x).unwrap(),
+            std::fs::read(&y).unwrap(),
+            "{name} differs"
+        );
+    }
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&a).unwrap()).unwrap();
+    assert_eq!(doc["format"], "twindrive-mission-plan");
+    assert_eq!(doc["sha256"].as_str().unwrap().len(), 64);
+    assert!(doc["header"]["summary"]["kinks_removed"].as_u64().unwrap() >= 5);
+
+    let vdir = tmp.path().join("verify");
+    let out = twindrive(&["verify-plan", s(&a), "--out", s(&vdir)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(vdir.join("report.json")).unwrap()).unwrap();
+    for key in ["collisions", "bumps"] {
+        assert_eq!(r[key], 0, "{key}: {r}");
+    }
+    for key in [
+        "max_deviation_m",
+        "mean_deviation_m",
+        "duration_s",
+        "path_length_m",
+    ] {
+        assert!(r[key].as_f64().unwrap() >= 0.0, "{key}");
+    }
+    // The calibrated plan tracks its path better open loop than the same
+    // path driven with the hand-measured parameters.
+    let dev = |k: &str| r[k]["max_deviation_m"].as_f64().unwrap();
+    assert!(dev("open_loop") < 0.15, "{r}");
+    assert!(dev("open_loop_nominal") > 5.0 * dev("open_loop"), "{r}");
+    assert!(
+        r["closed_loop"]["mean_deviation_m"].as_f64().unwrap() < 0.02,
+        "{r}"
+    );
+    assert!(vdir.join("replays.svg").exists());
+}
+
+#[test]
+fn a_changed_or_broken_plan_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("plan.json");
+    assert!(plan(&p, &[]).status.success());
+    let original = std::fs::read_to_string(&p).unwrap();
+    // The last digit of one number of one sample changed.
+    let field = "\"left_rad_s\": ";
+    let start = original.find(field).unwrap() + field.len();
+    let end = start + original[start..].find([',', '\n']).unwrap();
+    let mut changed = original.clone();
+    let digit = changed.as_bytes()[end - 1];
+    changed.replace_range(end - 1..end, if digit == b'9' { "8" } else { "9" });
+    std::fs::write(&p, &changed).unwrap();
+    let out = twindrive(&["verify-plan", s(&p), "--out", s(&tmp.path().join("v1"))]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("sha256"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(!tmp.path().join("v1").join("report.json").exists());
+    // NaN is not a number a plan can hold.
+    let nan = original.replacen("\"v_m_s\": ", "\"v_m_s\": NaN, \"x\": ", 1);
+    std::fs::write(&p, nan).unwrap();
+    let out = twindrive(&["verify-plan", s(&p), "--out", s(&tmp.path().join("v2"))]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(err.contains("plan.json") && err.contains("line"), "{err}");
+}
+
+#[test]
+fn plan_inputs_that_cannot_work_are_clear_errors_and_leave_no_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("out");
+    let out = plan(&out_dir.join("plan.json"), &["--pinch-distance", "-1"]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("pinch_distance_m must be > 0"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(!out_dir.exists() || std::fs::read_dir(&out_dir).unwrap().next().is_none());
+
+    // A log with its header but no steps.
+    let (_, log, calib) = mission();
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    std::fs::copy(log.join("log.meta.json"), empty.join("log.meta.json")).unwrap();
+    let csv = std::fs::read_to_string(log.join("log.csv")).unwrap();
+    std::fs::write(
+        empty.join("log.csv"),
+        csv.lines().next().unwrap().to_string() + "\n",
+    )
+    .unwrap();
+    let out = twindrive(&[
+        "plan",
+        s(&empty),
+        "--calibration",
+        s(calib),
+        "--out",
+        s(&out_dir.join("plan.json")),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("no steps"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(!out_dir.join("plan.json").exists());
+
+    // A calibration that is not one.
+    let bad = tmp.path().join("bad.json");
+    std::fs::write(&bad, r#"{"left_diameter_m": 0.06}"#).unwrap();
+    let out = twindrive(&[
+        "plan",
+        s(log),
+        "--calibration",
+        s(&bad),
+        "--out",
+        s(&out_dir.join("plan.json")),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("bad.json"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+/// A path along x with one loop (radius 0.3 m) in the middle, at 1 cm steps.
+fn looped_path_csv() -> String {
+    let mut rows = vec!["t,x,y,theta".to_string()];
+    let mut t = 0.0;
+    let mut push = |x: f64, y: f64, th: f64| {
+        rows.push(format!("{t},{x},{y},{th}"));
+        t += 0.05;
+    };
+    for k in 0..100 {
+        push(k as f64 * 0.01, 0.0, 0.0);
+    }
+    let n = 188; // 2π · 0.3 m at 1 cm
+    for k in 0..n {
+        let a = std::f64::consts::TAU * k as f64 / n as f64;
+        push(1.0 + 0.3 * a.sin(), 0.3 - 0.3 * a.cos(), a);
+    }
+    for k in 0..100 {
+        push(1.0 + k as f64 * 0.01, 0.0, std::f64::consts::TAU);
+    }
+    rows.join("\n") + "\n"
+}
+
+#[test]
+fn prune_removes_a_loop_from_a_csv_path() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("path.csv");
+    std::fs::write(&input, looped_path_csv()).unwrap();
+    let out_csv = tmp.path().join("pruned.csv");
+    let out = twindrive(&[
+        "prune",
+        s(&input),
+        "--pinch-distance",
+        "0.05",
+        "--out",
+        s(&out_csv),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("removed 1 loop"),
+        "{}",
+        text(&out.stdout)
+    );
+    let kept = std::fs::read_to_string(&out_csv).unwrap();
+    let rows = kept.lines().count() - 1;
+    assert!(rows < 220 && rows > 190, "{rows} rows kept of 388");
+    // No point of the loop's far side (y > 0.1) survives.
+    assert!(
+        kept.lines()
+            .skip(1)
+            .all(|l| l.split(',').nth(2).unwrap().parse::<f64>().unwrap() < 0.1)
+    );
+
+    let out = twindrive(&[
+        "prune",
+        s(&input),
+        "--pinch-distance",
+        "0",
+        "--out",
+        s(&out_csv),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("pinch_distance_m must be > 0"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = twindrive(&[
+        "prune",
+        s(&tmp.path().join("missing.csv")),
+        "--pinch-distance",
+        "0.1",
+        "--out",
+        s(&out_csv),
+    ]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("missing.csv"));
+}
