@@ -8,6 +8,7 @@
 # Usage: bench/prune_vs_distance_matrix.sh   (from any directory; N=... SEED=...)
 # Needs python3 and about 4 GB of free memory (the Rust reference holds the
 # whole 20 000 x 20 000 matrix: 3.2 GB; numpy works in blocks of rows).
+# Takes about a minute, mostly numpy.
 set -euo pipefail
 
 NUMPY_VERSION=2.4.6
@@ -62,7 +63,7 @@ printf '%-34s %13.4fs %13.4fs\n' "numpy $NUMPY_VERSION distance matrix" "$np_fin
 printf '%-34s %13.4fs %14s\n' "  of which the distances alone" "$np_matrix" ""
 printf '%-34s %13.4fs %13.4fs\n' "twindrive distance-matrix reference" "$ref_find" "$ref_remove"
 printf '%-34s %13.6fs %13.6fs\n' "twindrive grid hash" "$fast_find" "$fast_remove"
-echo "numpy peak memory: ${np_rss} MB (blocks of 1024 rows)"
+echo "numpy peak memory: ${np_rss} MB (the matrix in blocks of $(value "$TMP/numpy.out" numpy_block_rows) rows)"
 awk -v a="$np_find" -v m="$np_matrix" -v r="$ref_find" -v f="$fast_find" \
     -v ar="$np_remove" -v rr="$ref_remove" -v fr="$fast_remove" 'BEGIN {
     printf "grid hash vs numpy:           %8.0fx (find), %8.0fx (remove), %8.0fx (numpy distances alone vs find)\n", a / f, ar / fr, m / f

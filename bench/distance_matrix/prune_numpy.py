@@ -22,8 +22,10 @@ floating-point operations so that both sides agree to the bit:
 - removal: rounds of (kinks, then pinches), each cut outermost first
   (earliest start, farthest end, go on from there), until nothing changes.
 
-The matrix is computed in blocks of rows (all columns) so that 20 000
-samples fit in memory: the same n x n distances, a bounded working set.
+The matrix is computed in blocks of rows (all columns; 64 rows was the
+fastest here): the same n x n distances, in a bounded working set (the
+whole 20 000 x 20 000 matrix at once needs several GB with numpy's
+temporaries, and is slower).
 
 Prints `key value` lines; writes pinches_numpy.txt (`i j kind`) and
 kept_numpy.txt. `--self-test` checks the predicates on small cases.
@@ -119,6 +121,21 @@ def next_protected(tr):
     return out
 
 
+def loop_starts(tr, crit):
+    """For each i the first j >= i + 2 with a path from i long and slow
+    enough (both only grow with j: one sweep, as in the Rust finder)."""
+    n = len(tr)
+    cum, t = tr.cum.tolist(), tr.t.tolist()
+    lo = np.empty(n, dtype=np.int64)
+    j = 0
+    for i in range(n):
+        j = max(j, i + 2)
+        while j < n and not (cum[j] - cum[i] >= crit["L"] and t[j] - t[i] >= crit["D"]):
+            j += 1
+        lo[i] = j
+    return lo
+
+
 def orient(ax, ay, bx, by, cx, cy):
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
@@ -153,13 +170,6 @@ def boxes_overlap(ax0, ay0, ax1, ay1, bx0, by0, bx1, by1):
     )
 
 
-def last_true(mask):
-    """Per row, the last column where mask holds, or -1."""
-    n = mask.shape[1]
-    last = n - 1 - np.argmax(mask[:, ::-1], axis=1)
-    return np.where(mask.any(axis=1), last, -1)
-
-
 def farthest_pinches(tr, crit, block_rows, clock):
     """For each i the farthest pinching j: [(i, j, kind)]. `clock` gathers
     the seconds spent on the distance matrix and on the crossing test."""
@@ -167,8 +177,8 @@ def farthest_pinches(tr, crit, block_rows, clock):
     out = []
     if n < 3:
         return out
-    x, y, cum, t = tr.x, tr.y, tr.cum, tr.t
-    hi = next_protected(tr)
+    x, y = tr.x, tr.y
+    lo, hi = loop_starts(tr, crit), next_protected(tr)
     J = np.arange(n)[None, :]
     # Segment (J-1, J) for each column J (column 0 is never a candidate).
     sx0, sy0 = np.concatenate([[x[0]], x[:-1]]), np.concatenate([[y[0]], y[:-1]])
@@ -181,13 +191,9 @@ def farthest_pinches(tr, crit, block_rows, clock):
         dy = y[i0:i1, None] - y[None, :]
         d2 = dx * dx + dy * dy
         del dx, dy
-        valid = (J >= I + 2) & (J <= hi[i0:i1, None])
-        valid &= (cum[None, :] - cum[i0:i1, None]) >= crit["L"]
-        valid &= (t[None, :] - t[i0:i1, None]) >= crit["D"]
-        near = valid & (d2 < crit["d2"])
+        valid = (J >= lo[i0:i1, None]) & (J <= hi[i0:i1, None])
+        near_j = np.where(valid & (d2 < crit["d2"]), J, -1).max(axis=1)
         del d2
-        near_j = last_true(near)
-        del near
         middle = time.perf_counter()
         # Crossings beyond the nearest pinch only.
         a = np.minimum(rows + 1, n - 1)
@@ -262,25 +268,23 @@ def outermost(candidates):
 
 
 def remove_redundancy(tr, crit, block_rows, clock):
+    """Indices of the samples kept; every round searches the whole path."""
     kinks_stale, pinches_stale = crit["reversing_is_redundant"], True
-    deleted = []  # (first_removed, last_removed) in input indices
     while kinks_stale or pinches_stale:
         if kinks_stale:
             kinks_stale = False
             cuts = outermost([(k, e, "reversal") for k, e in kinks(tr, crit)])
             if cuts:
-                deleted += [(tr.index[i] + 1, tr.index[j] - 1) for i, j, _ in cuts]
                 tr = tr.without(cuts)
                 pinches_stale = True
         if pinches_stale:
             pinches_stale = False
             cuts = outermost(farthest_pinches(tr, crit, block_rows, clock))
             if cuts:
-                deleted += [(tr.index[i] + 1, tr.index[j] - 1) for i, j, _ in cuts]
                 tr = tr.without(cuts)
                 pinches_stale = True
                 kinks_stale = crit["reversing_is_redundant"]
-    return tr.index.tolist(), deleted
+    return tr.index.tolist()
 
 
 def read_path(path):
@@ -322,7 +326,7 @@ def main():
     ap.add_argument("path", nargs="?")
     ap.add_argument("config", nargs="?")
     ap.add_argument("out_dir", nargs="?")
-    ap.add_argument("--block-rows", type=int, default=1024)
+    ap.add_argument("--block-rows", type=int, default=64)
     ap.add_argument("--self-test", action="store_true")
     args = ap.parse_args()
     if args.self_test:
@@ -344,7 +348,7 @@ def main():
 
     clock = {"distance_s": 0.0, "crossing_s": 0.0}
     start = time.perf_counter()
-    kept, deleted = remove_redundancy(track, crit, args.block_rows, clock)
+    kept = remove_redundancy(track, crit, args.block_rows, clock)
     remove_s = time.perf_counter() - start
 
     with open(f"{args.out_dir}/pinches_numpy.txt", "w") as f:
@@ -358,6 +362,7 @@ def main():
     print(f"numpy_find_distance_matrix_s {find_clock['distance_s']:.6e}")
     print(f"numpy_find_crossings_s {find_clock['crossing_s']:.6e}")
     print(f"numpy_remove_s {remove_s:.6e}")
+    print(f"numpy_block_rows {args.block_rows}")
     print(f"numpy_peak_rss_mb {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}")
 
 

@@ -423,28 +423,28 @@ pub fn write_tracks_mcap<W: Write + Seek>(
     }
     let mut sequence = 0u32;
     let mut buf = Vec::with_capacity(512);
+    let mut emit = |w: &mut mcap::Writer<W>, channel_id: u16, t_ns: u64, msg: &dyn erased::Json| {
+        buf.clear();
+        msg.write_json(&mut buf);
+        sequence = sequence.wrapping_add(1);
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence,
+            log_time: t_ns,
+            publish_time: t_ns,
+        };
+        w.write_to_known_channel(&header, &buf)
+    };
     for track in tracks {
         let poses = w.add_channel(pose_in_frame, track.topic, "json", &none)?;
         for (t, p) in track.poses {
-            buf.clear();
-            serde_json::to_writer(
-                &mut buf,
-                &PoseInFrame {
-                    timestamp: Stamp::new(*t),
-                    frame_id: "world".into(),
-                    pose: PoseMsg::planar(p),
-                    heading_rad: p.heading_rad,
-                },
-            )
-            .expect("message serialises");
-            sequence = sequence.wrapping_add(1);
-            let header = mcap::records::MessageHeader {
-                channel_id: poses,
-                sequence,
-                log_time: *t,
-                publish_time: *t,
+            let msg = PoseInFrame {
+                timestamp: Stamp::new(*t),
+                frame_id: "world".into(),
+                pose: PoseMsg::planar(p),
+                heading_rad: p.heading_rad,
             };
-            w.write_to_known_channel(&header, &buf)?;
+            emit(&mut w, poses, *t, &msg)?;
         }
         if track.wheels.is_empty() {
             continue;
@@ -456,24 +456,12 @@ pub fn write_tracks_mcap<W: Write + Seek>(
             &none,
         )?;
         for (t, [l, r]) in track.wheels {
-            buf.clear();
-            serde_json::to_writer(
-                &mut buf,
-                &WheelSpeeds {
-                    timestamp: Stamp::new(*t),
-                    left_rad_s: *l,
-                    right_rad_s: *r,
-                },
-            )
-            .expect("message serialises");
-            sequence = sequence.wrapping_add(1);
-            let header = mcap::records::MessageHeader {
-                channel_id: wheels,
-                sequence,
-                log_time: *t,
-                publish_time: *t,
+            let msg = WheelSpeeds {
+                timestamp: Stamp::new(*t),
+                left_rad_s: *l,
+                right_rad_s: *r,
             };
-            w.write_to_known_channel(&header, &buf)?;
+            emit(&mut w, wheels, *t, &msg)?;
         }
     }
     w.finish()?;

@@ -81,7 +81,11 @@ pub fn wall_following_path(samples: usize, seed: u64) -> Vec<PathSample> {
             4 if rng.random_range(0..3) == 0 => {
                 let radius = rng.random_range(0.2..1.0);
                 let laps = rng.random_range(1..=2) as f64;
-                let sign = if rng.random_range(0..2) == 0 { 1.0 } else { -1.0 };
+                let sign = if rng.random_range(0..2) == 0 {
+                    1.0
+                } else {
+                    -1.0
+                };
                 let steps = (laps * std::f64::consts::TAU * radius / STEP_M).round() as usize;
                 let dh = sign * laps * std::f64::consts::TAU / steps as f64;
                 for _ in 0..steps {
@@ -201,7 +205,8 @@ fn run(args: &[String]) -> Result<(), String> {
             let seed: u64 = seed.parse().map_err(|e| format!("SEED: {e}"))?;
             let path = wall_following_path(n, seed);
             write_path(&path, Path::new(csv)).map_err(|e| e.to_string())?;
-            let cfg = serde_json::to_string_pretty(&bench_config(&path)).map_err(|e| e.to_string())?;
+            let cfg =
+                serde_json::to_string_pretty(&bench_config(&path)).map_err(|e| e.to_string())?;
             std::fs::write(json, cfg).map_err(|e| e.to_string())
         }
         [flag, csv, json, out_dir, rest @ ..] if flag == "--run" => {

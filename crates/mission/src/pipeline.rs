@@ -59,6 +59,8 @@ pub struct StageSummary {
     pub filtered_duration_s: f64,
     pub filter_windows: usize,
     pub time_optimal_duration_s: f64,
+    /// Every deletion: time span and length on the executed path, and why.
+    pub deletion_list: Vec<crate::redundancy::Deletion>,
 }
 
 impl Stages {
@@ -85,6 +87,7 @@ impl Stages {
             filtered_duration_s: duration(&self.filtered.samples),
             filter_windows: self.filtered.windows.len(),
             time_optimal_duration_s: duration(&self.fastest),
+            deletion_list: self.pruned.deletions.clone(),
         }
     }
 }

@@ -47,7 +47,13 @@ impl Drive {
         for _ in 0..steps {
             let p = self.last().pose;
             let (s, c) = p.heading_rad.sin_cos();
-            self.push(p.x_m + ds * c, p.y_m + ds * s, p.heading_rad, ds / Self::DT_S, 0.0);
+            self.push(
+                p.x_m + ds * c,
+                p.y_m + ds * s,
+                p.heading_rad,
+                ds / Self::DT_S,
+                0.0,
+            );
         }
         self
     }
@@ -111,7 +117,13 @@ fn through(points: &[[f64; 2]], dt_s: f64) -> Vec<PathSample> {
         .map(|(k, p)| {
             let next = points.get(k + 1).unwrap_or(p);
             let (dx, dy) = (next[0] - p[0], next[1] - p[1]);
-            sample(k as f64 * dt_s, p[0], p[1], dy.atan2(dx), dx.hypot(dy) / dt_s)
+            sample(
+                k as f64 * dt_s,
+                p[0],
+                p[1],
+                dy.atan2(dx),
+                dx.hypot(dy) / dt_s,
+            )
         })
         .collect()
 }
@@ -132,24 +144,36 @@ fn deleted(pruned: &Pruned, n: usize) -> Vec<bool> {
 fn check_invariants(path: &[PathSample], cfg: &RedundancyConfig, pruned: &Pruned, what: &str) {
     let n = path.len();
     let kept = &pruned.kept;
-    assert!(kept.windows(2).all(|w| w[0] < w[1]), "{what}: kept not increasing");
+    assert!(
+        kept.windows(2).all(|w| w[0] < w[1]),
+        "{what}: kept not increasing"
+    );
     if n > 0 {
         assert_eq!(kept.first(), Some(&0), "{what}: first sample lost");
         assert_eq!(kept.last(), Some(&(n - 1)), "{what}: last sample lost");
     }
     let gone = deleted(pruned, n);
     for (k, s) in path.iter().enumerate() {
-        let protected = cfg.keeps(s.position(), s.t_s)
-            || (!cfg.reversing_is_redundant && s.v_m_s < 0.0);
-        assert!(!protected || !gone[k], "{what}: protected sample {k} deleted");
+        let protected =
+            cfg.keeps(s.position(), s.t_s) || (!cfg.reversing_is_redundant && s.v_m_s < 0.0);
+        assert!(
+            !protected || !gone[k],
+            "{what}: protected sample {k} deleted"
+        );
     }
     // Deletions: sorted, disjoint, and exactly the samples not kept.
     let mut covered = vec![false; n];
     let cum = cumulative(path);
     for (a, d) in pruned.deletions.iter().enumerate() {
-        assert!(d.first_removed >= 1 && d.first_removed <= d.last_removed, "{what}: {d:?}");
+        assert!(
+            d.first_removed >= 1 && d.first_removed <= d.last_removed,
+            "{what}: {d:?}"
+        );
         if a > 0 {
-            assert!(pruned.deletions[a - 1].last_removed < d.first_removed, "{what}: overlap");
+            assert!(
+                pruned.deletions[a - 1].last_removed < d.first_removed,
+                "{what}: overlap"
+            );
         }
         for c in &mut covered[d.first_removed..=d.last_removed] {
             *c = true;
@@ -157,12 +181,22 @@ fn check_invariants(path: &[PathSample], cfg: &RedundancyConfig, pruned: &Pruned
         assert_eq!(d.t_start_s, path[d.first_removed - 1].t_s, "{what}");
         assert_eq!(d.t_end_s, path[d.last_removed + 1].t_s, "{what}");
         let length = cum[d.last_removed + 1] - cum[d.first_removed - 1];
-        assert!((d.length_m - length).abs() <= 1e-9 * (1.0 + length), "{what}: {d:?}");
+        assert!(
+            (d.length_m - length).abs() <= 1e-9 * (1.0 + length),
+            "{what}: {d:?}"
+        );
     }
-    assert_eq!(covered, gone, "{what}: deletions do not match the kept samples");
+    assert_eq!(
+        covered, gone,
+        "{what}: deletions do not match the kept samples"
+    );
     // Nothing cuttable is left.
     let out = pruned.apply(path);
-    assert_eq!(find_pinches(&out, cfg).unwrap(), vec![], "{what}: pinches left");
+    assert_eq!(
+        find_pinches(&out, cfg).unwrap(),
+        vec![],
+        "{what}: pinches left"
+    );
 }
 
 fn cumulative(path: &[PathSample]) -> Vec<f64> {
@@ -180,16 +214,28 @@ fn cumulative(path: &[PathSample]) -> Vec<f64> {
 /// Wandering with loops, kinks, stops and turns in place.
 fn random_drive(rng: &mut ChaCha8Rng, samples: usize) -> Vec<PathSample> {
     let step = rng.random_range(0.005..0.03);
-    let mut d = Drive::start(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 0.0);
+    let mut d = Drive::start(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        0.0,
+    );
     while d.samples.len() < samples {
         match rng.random_range(0..10) {
             0..=2 => d.straight(rng.random_range(0.05..0.6), step),
             3..=4 => d.arc(rng.random_range(0.05..0.5), rng.random_range(-PI..PI), step),
-            5 => d.arc(rng.random_range(0.05..0.3), TAU * rng.random_range(0.8..2.2), step),
+            5 => d.arc(
+                rng.random_range(0.05..0.3),
+                TAU * rng.random_range(0.8..2.2),
+                step,
+            ),
             6 => d.straight(-rng.random_range(0.02..0.3), step),
             7 => d.turn(rng.random_range(-PI..PI), rng.random_range(1..20)),
             8 => d.stay(rng.random_range(1..30)),
-            _ => d.arc(rng.random_range(0.1..0.4), -TAU * rng.random_range(0.5..1.5), step),
+            _ => d.arc(
+                rng.random_range(0.1..0.4),
+                -TAU * rng.random_range(0.5..1.5),
+                step,
+            ),
         };
     }
     d.path()
@@ -355,7 +401,10 @@ fn fast_and_reference_pinch_finders_agree_on_random_paths() {
             let reference = find_pinches_reference(&path, &cfg).unwrap();
             assert_eq!(fast, reference, "{what}");
             nears += fast.iter().filter(|p| p.kind == PinchKind::Near).count();
-            crossings += fast.iter().filter(|p| p.kind == PinchKind::Crossing).count();
+            crossings += fast
+                .iter()
+                .filter(|p| p.kind == PinchKind::Crossing)
+                .count();
 
             let pruned = remove_redundancy(&path, &cfg).unwrap();
             let pruned_reference = remove_redundancy_reference(&path, &cfg).unwrap();
@@ -364,7 +413,10 @@ fn fast_and_reference_pinch_finders_agree_on_random_paths() {
         }
     }
     // The comparison means something only if both kinds occur often.
-    assert!(nears > 5_000 && crossings > 1_000, "{nears} near, {crossings} crossing");
+    assert!(
+        nears > 5_000 && crossings > 1_000,
+        "{nears} near, {crossings} crossing"
+    );
 }
 
 // ------------------------------------------------------------ shapes
@@ -409,7 +461,10 @@ fn a_sparse_figure_eight_is_cut_at_its_self_crossing() {
     let path = through(&(0..n).map(|k| lemniscate(s(k))).collect::<Vec<_>>(), 0.1);
     let cfg = cfg(0.05);
     let pinches = find_pinches(&path, &cfg).unwrap();
-    assert!(pinches.iter().all(|p| p.kind == PinchKind::Crossing), "{pinches:?}");
+    assert!(
+        pinches.iter().all(|p| p.kind == PinchKind::Crossing),
+        "{pinches:?}"
+    );
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     check_invariants(&path, &cfg, &pruned, "sparse figure-eight");
 
@@ -417,7 +472,11 @@ fn a_sparse_figure_eight_is_cut_at_its_self_crossing() {
     assert_eq!(pruned.deletions[0].reason, DeletionReason::Crossing);
     let gone = deleted(&pruned, n);
     for (k, p) in path.iter().enumerate() {
-        assert_eq!(gone[k], p.pose.x_m > 0.0 && k > 0 && k < n - 1, "sample {k}");
+        assert_eq!(
+            gone[k],
+            p.pose.x_m > 0.0 && k > 0 && k < n - 1,
+            "sample {k}"
+        );
     }
 }
 
@@ -462,7 +521,11 @@ fn a_circle_driven_twice_loses_the_second_lap_when_the_first_is_kept() {
     assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
     let cut = pruned.deletions[0];
     assert_eq!(cut.reason, DeletionReason::Loop);
-    assert_eq!(cut.first_removed, laps[1] + 1, "the cut starts where lap 1 ends");
+    assert_eq!(
+        cut.first_removed,
+        laps[1] + 1,
+        "the cut starts where lap 1 ends"
+    );
     assert!(cut.last_removed >= laps[2] - 1 && cut.last_removed <= laps[2] + 5);
     assert!((cut.length_m - PI).abs() < 0.06, "{}", cut.length_m);
 }
@@ -489,14 +552,19 @@ fn nested_loops_go_in_one_cut() {
     let path = d.path();
     let pinches = find_pinches(&path, &cfg).unwrap();
     assert!(
-        pinches.iter().any(|p| p.i >= small - 10 && p.j <= small_end + 10),
+        pinches
+            .iter()
+            .any(|p| p.i >= small - 10 && p.j <= small_end + 10),
         "the small loop pinches on its own: {pinches:?}"
     );
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     check_invariants(&path, &cfg, &pruned, "nested loops");
     assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
     let cut = pruned.deletions[0];
-    assert!(cut.first_removed < small && cut.last_removed > small_end, "{cut:?}");
+    assert!(
+        cut.first_removed < small && cut.last_removed > small_end,
+        "{cut:?}"
+    );
 }
 
 /// Forward 2 m along +x, back 0.3 m, a quarter turn left in place, 1 m up.
@@ -524,7 +592,10 @@ fn a_bump_and_back_up_kink_is_removed_when_reversing_is_redundant() {
             assert!(gone[k], "reversing sample {k} kept");
         } else if s.v_m_s > 0.0 && s.pose.y_m == 0.0 {
             let x = s.pose.x_m;
-            assert!(x >= 1.695 || !gone[k], "forward sample {k} at x = {x} deleted");
+            assert!(
+                x >= 1.695 || !gone[k],
+                "forward sample {k} at x = {x} deleted"
+            );
             assert!(x <= 1.705 || gone[k], "retraced sample {k} at x = {x} kept");
         } else {
             assert!(!gone[k], "sample {k} after the kink deleted");
@@ -556,7 +627,11 @@ fn a_loop_inside_a_keep_region_survives() {
     let (path, lap) = one_loop();
     let cfg_plain = cfg(0.05);
     let plain = remove_redundancy(&path, &cfg_plain).unwrap();
-    assert_eq!(plain.deletions.len(), 1, "without a keep region the loop goes");
+    assert_eq!(
+        plain.deletions.len(),
+        1,
+        "without a keep region the loop goes"
+    );
     assert!(plain.deletions[0].first_removed <= lap.start);
     assert_lifted_samples_deleted(&path, &plain, cfg_plain.pinch_distance_m);
 
@@ -661,17 +736,28 @@ fn bad_settings_and_samples_are_named() {
         max_x_m: 1.0,
         max_y_m: 2.0,
     });
-    assert!(remove_redundancy(&path, &bad).unwrap_err().to_string().starts_with("keep_regions[0] "));
+    assert!(
+        remove_redundancy(&path, &bad)
+            .unwrap_err()
+            .to_string()
+            .starts_with("keep_regions[0] ")
+    );
 
     let mut broken = path.clone();
     broken[17].pose.y_m = f64::NAN;
     assert_eq!(
-        remove_redundancy(&broken, &cfg(0.1)).unwrap_err().to_string(),
+        remove_redundancy(&broken, &cfg(0.1))
+            .unwrap_err()
+            .to_string(),
         "path sample 17: pose.y_m is NaN, not a finite number"
     );
     assert!(matches!(
         remove_redundancy(&broken, &cfg(0.1)),
-        Err(RedundancyError::NotFinite { index: 17, field: "pose.y_m", .. })
+        Err(RedundancyError::NotFinite {
+            index: 17,
+            field: "pose.y_m",
+            ..
+        })
     ));
     let mut broken = path.clone();
     broken[40].t_s = broken[39].t_s;

@@ -87,6 +87,40 @@ struct RangeState {
     offset: usize,
 }
 
+/// The kernel for a sensor's beams (`None` for a single beam: one ray).
+fn range_kernel(info: &twindrive_log::RangeSensorInfo) -> Option<ScanKernel> {
+    let (angle_min_rad, increment_rad) = info.angle_min_and_increment();
+    (info.beams > 1).then(|| {
+        ScanKernel::new(Fan {
+            angle_min_rad,
+            increment_rad,
+            beams: info.beams as usize,
+        })
+    })
+}
+
+/// Noise-free ranges of one sensor's beams from the robot at `pose`.
+fn cast_beams(
+    world: &crate::World,
+    info: &twindrive_log::RangeSensorInfo,
+    kernel: Option<&mut ScanKernel>,
+    pose: &Pose,
+    beams: &mut [f64],
+) {
+    let m = &info.mount;
+    let (ox, oy) = pose.transform_point(m.x_m, m.y_m);
+    let origin = Vector::new(ox, oy);
+    let heading = pose.heading_rad + m.heading_rad;
+    let max = info.max_range_m;
+    match kernel {
+        None => {
+            let dir = Vector::new(heading.cos(), heading.sin());
+            beams[0] = world.cast_ray(origin, dir, max);
+        }
+        Some(kernel) => kernel.scan(world, origin, heading, max, beams),
+    }
+}
+
 /// Whether the bumper of the scenario's robot touches a wall at `pose`.
 fn bumper_pressed(scenario: &Scenario, pose: &Pose) -> bool {
     let robot = &scenario.robot;
@@ -119,16 +153,7 @@ impl<'a> SensorModel<'a> {
         let kernels = scenario
             .range_sensors
             .iter()
-            .map(|s| {
-                let (angle_min_rad, increment_rad) = s.info.angle_min_and_increment();
-                (s.info.beams > 1).then(|| {
-                    ScanKernel::new(Fan {
-                        angle_min_rad,
-                        increment_rad,
-                        beams: s.info.beams as usize,
-                    })
-                })
-            })
+            .map(|s| range_kernel(&s.info))
             .collect();
         Self {
             scenario,
@@ -156,18 +181,8 @@ impl<'a> SensorModel<'a> {
             let n = cfg.info.beams as usize;
             let beams = &mut ranges[offset..offset + n];
             offset += n;
-            let m = &cfg.info.mount;
-            let (ox, oy) = pose.transform_point(m.x_m, m.y_m);
-            let origin = Vector::new(ox, oy);
-            let heading = pose.heading_rad + m.heading_rad;
+            cast_beams(world, &cfg.info, kernel.as_mut(), pose, beams);
             let max = cfg.info.max_range_m;
-            match kernel {
-                None => {
-                    let dir = Vector::new(heading.cos(), heading.sin());
-                    beams[0] = world.cast_ray(origin, dir, max);
-                }
-                Some(kernel) => kernel.scan(world, origin, heading, max, beams),
-            }
             for r in beams.iter_mut() {
                 if *r < max {
                     *r = r.max(cfg.info.min_range_m);
@@ -220,15 +235,8 @@ impl Simulator {
             .range_sensors
             .iter()
             .map(|s| {
-                let (angle_min_rad, increment_rad) = s.info.angle_min_and_increment();
                 let state = RangeState {
-                    kernel: (s.info.beams > 1).then(|| {
-                        ScanKernel::new(Fan {
-                            angle_min_rad,
-                            increment_rad,
-                            beams: s.info.beams as usize,
-                        })
-                    }),
+                    kernel: range_kernel(&s.info),
                     rng: stream(scenario.seed, named_stream(&s.info.name)),
                     next_ns: 0,
                     offset,
@@ -290,19 +298,11 @@ impl Simulator {
 
     /// Like [`Simulator::step`], with the wheel commands coming from `control`
     /// instead of the scenario's controller (plans, path trackers).
-    pub fn step_with(
-        &mut self,
-        out: &mut StepOutput,
-        control: &mut ExternalControl,
-    ) -> bool {
+    pub fn step_with(&mut self, out: &mut StepOutput, control: &mut ExternalControl) -> bool {
         self.step_inner(out, Some(control))
     }
 
-    fn step_inner(
-        &mut self,
-        out: &mut StepOutput,
-        external: Option<&mut ExternalControl>,
-    ) -> bool {
+    fn step_inner(&mut self, out: &mut StepOutput, external: Option<&mut ExternalControl>) -> bool {
         if self.finished() {
             return false;
         }
@@ -397,18 +397,8 @@ impl Simulator {
                 beams.fill(f64::NAN);
                 continue;
             }
-            let m = &cfg.info.mount;
-            let (ox, oy) = self.pose.transform_point(m.x_m, m.y_m);
-            let origin = Vector::new(ox, oy);
-            let heading = self.pose.heading_rad + m.heading_rad;
+            cast_beams(world, &cfg.info, st.kernel.as_mut(), &self.pose, beams);
             let max = cfg.info.max_range_m;
-            match &mut st.kernel {
-                None => {
-                    let dir = Vector::new(heading.cos(), heading.sin());
-                    beams[0] = world.cast_ray(origin, dir, max);
-                }
-                Some(kernel) => kernel.scan(world, origin, heading, max, beams),
-            }
             for r in beams.iter_mut() {
                 if *r < max {
                     let noise = if cfg.noise_std_m > 0.0 {

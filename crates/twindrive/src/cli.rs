@@ -146,6 +146,10 @@ pub struct PlanArgs {
     /// built-in scenario named in the log).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
+    /// Drive the plan as fast as the wheel limits allow (time-optimal
+    /// re-timing of the filtered path) instead of at the mission's own pace.
+    #[arg(long)]
+    pub time_optimal: bool,
     /// Output plan JSON; exports and figures go beside it.
     #[arg(long, default_value = "plan.json")]
     pub out: PathBuf,

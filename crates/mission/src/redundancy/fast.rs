@@ -15,7 +15,7 @@
 //! cells apart, in neighbouring cells.
 
 use super::geometry::{Point, distance, distance2, segments_meet};
-use super::grid::{Anchor, Entry, Grid, NO_CELL};
+use super::grid::{Anchor, Entry, Grid, NO_CELL, cell_of};
 use super::track::{Criteria, Track};
 use super::{Pinch, PinchKind};
 
@@ -81,6 +81,90 @@ pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
         });
     }
     out
+}
+
+/// What [`farthest_pinches`] finds on a path all of whose pinches involve
+/// one of the `junctions`: segments `(a, a+1)` that cuts made since the
+/// last complete search (after a round of cuts, only crossings through the
+/// new jumps can pinch; see `prune.rs`). Costs a pass over the samples and
+/// a grid of the junctions only.
+pub(super) fn farthest_pinches_at_junctions(
+    track: &Track,
+    crit: &Criteria,
+    junctions: &[usize],
+) -> Vec<Pinch> {
+    let n = track.len();
+    if n < 4 || junctions.is_empty() {
+        return Vec::new();
+    }
+    let pts = &track.points;
+    let cell_m = cell_size_m(track, crit.pinch_distance_m);
+    let anchors = Anchors::new(track, ANCHOR_SPACING_IN_CELLS * cell_m);
+    // Each junction anchor in the nine cells around it: a segment that
+    // meets a junction has an anchor in one of them.
+    let mut spread = Vec::new();
+    for &a in junctions {
+        for pos in anchors.positions(a) {
+            let (cx, cy) = cell_of(pos, cell_m);
+            for k in 0..9 {
+                let cell = (cx + k % 3 - 1, cy + k / 3 - 1);
+                let tag = a as u32;
+                spread.push((
+                    cell,
+                    Anchor {
+                        pos,
+                        tag,
+                        is_sample: false,
+                    },
+                ));
+            }
+        }
+    }
+    let (near_junctions, _) = Grid::build_in_cells(spread.len(), spread.into_iter());
+
+    let next_protected = track.next_protected();
+    let mut found: Vec<(usize, usize)> = Vec::new();
+    for b in 0..n - 1 {
+        for pos in anchors.positions(b) {
+            let c = near_junctions.cell_id(cell_of(pos, cell_m));
+            if c == NO_CELL {
+                continue;
+            }
+            for e in near_junctions.entries(c) {
+                let a = e.first as usize;
+                let (i, last) = match a.cmp(&b) {
+                    std::cmp::Ordering::Less => (a, b),
+                    _ => (b, a),
+                };
+                let j = last + 1;
+                if last >= i + 2
+                    && j <= next_protected[i] as usize
+                    && long_enough(track, crit, i, j)
+                    && segments_meet(pts[i], pts[i + 1], pts[last], pts[j])
+                {
+                    found.push((i, j));
+                }
+            }
+        }
+    }
+    found.sort_unstable_by(|x, y| x.0.cmp(&y.0).then(y.1.cmp(&x.1)));
+    found.dedup_by_key(|p| p.0);
+    found
+        .into_iter()
+        .map(|(i, j)| {
+            let d2 = distance2(pts[i], pts[j]);
+            Pinch {
+                i,
+                j,
+                distance_m: d2.sqrt(),
+                kind: if d2 < crit.pinch_distance2 {
+                    PinchKind::Near
+                } else {
+                    PinchKind::Crossing
+                },
+            }
+        })
+        .collect()
 }
 
 #[inline]
@@ -156,6 +240,21 @@ impl<'a> Anchors<'a> {
         self.starts.last().map_or(self.pts.len(), |&c| c as usize)
     }
 
+    /// Where segment `k` is anchored: sample `k`, then points along it.
+    fn positions(&self, k: usize) -> impl Iterator<Item = Point> + '_ {
+        let p = self.pts[k];
+        let q = self.pts.get(k + 1).copied().unwrap_or(p);
+        let pieces = self.extra(k) + 1;
+        (0..pieces).map(move |m| {
+            let f = m as f64 / pieces as f64;
+            if m == 0 {
+                p
+            } else {
+                [p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]
+            }
+        })
+    }
+
     fn iter(&self) -> impl Iterator<Item = Anchor> + '_ {
         let samples = self.starts.is_empty().then(|| {
             self.pts.iter().enumerate().map(|(k, &pos)| Anchor {
@@ -165,20 +264,11 @@ impl<'a> Anchors<'a> {
             })
         });
         let with_extra = (!self.starts.is_empty()).then(|| {
-            self.pts.iter().enumerate().flat_map(move |(k, &p)| {
-                let q = self.pts.get(k + 1).copied().unwrap_or(p);
-                let pieces = self.extra(k) + 1;
-                (0..pieces).map(move |m| {
-                    let f = m as f64 / pieces as f64;
-                    Anchor {
-                        pos: if m == 0 {
-                            p
-                        } else {
-                            [p[0] + f * (q[0] - p[0]), p[1] + f * (q[1] - p[1])]
-                        },
-                        tag: k as u32,
-                        is_sample: m == 0,
-                    }
+            (0..self.pts.len()).flat_map(move |k| {
+                self.positions(k).enumerate().map(move |(m, pos)| Anchor {
+                    pos,
+                    tag: k as u32,
+                    is_sample: m == 0,
                 })
             })
         });
@@ -218,7 +308,7 @@ fn farthest_near(
 ) -> Option<u32> {
     let mut best = None;
     for &c in grid.neighbours(cell) {
-        if c == NO_CELL || grid.latest_around(c) < lo {
+        if c == NO_CELL {
             continue;
         }
         for e in up_to(grid.entries(c), hi).iter().rev() {

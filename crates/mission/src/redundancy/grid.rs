@@ -36,6 +36,7 @@ pub(super) struct Grid {
     neighbours: Vec<[u32; 9]>,
     /// The largest tag in the 3×3 cells around each cell.
     latest_around: Vec<u32>,
+    ids: CellIds,
 }
 
 impl Grid {
@@ -46,6 +47,14 @@ impl Grid {
         capacity: usize,
         anchors: impl Iterator<Item = Anchor>,
     ) -> (Self, Vec<u32>) {
+        Self::build_in_cells(capacity, anchors.map(|a| (cell_of(a.pos, cell_m), a)))
+    }
+
+    /// [`Grid::build`] with each anchor's cell given.
+    pub fn build_in_cells(
+        capacity: usize,
+        anchors: impl Iterator<Item = ((i32, i32), Anchor)>,
+    ) -> (Self, Vec<u32>) {
         let lower = capacity;
         let mut ids = CellIds::default();
         let mut coords: Vec<(i32, i32)> = Vec::new();
@@ -53,8 +62,7 @@ impl Grid {
         let mut raw: Vec<(u32, Entry)> = Vec::with_capacity(lower);
         let mut last_is_sample = false;
         let mut last_cell = None;
-        for a in anchors {
-            let cell = cell_of(a.pos, cell_m);
+        for (cell, a) in anchors {
             // Paths move little from one anchor to the next.
             let id = match last_cell {
                 Some((c, id)) if c == cell => id,
@@ -129,6 +137,7 @@ impl Grid {
                 entries,
                 neighbours,
                 latest_around,
+                ids,
             },
             anchor_cell,
         )
@@ -146,6 +155,12 @@ impl Grid {
     #[inline]
     pub fn neighbours(&self, cell: u32) -> &[u32; 9] {
         &self.neighbours[cell as usize]
+    }
+
+    /// The id of the cell at these coordinates, `NO_CELL` if it holds
+    /// nothing.
+    pub fn cell_id(&self, cell: (i32, i32)) -> u32 {
+        self.ids.id(cell)
     }
 
     #[inline]
@@ -189,6 +204,14 @@ fn split((cx, cy): (i32, i32)) -> ((i32, i32), usize) {
 }
 
 impl CellIds {
+    fn id(&self, cell: (i32, i32)) -> u32 {
+        let (tile, slot) = split(cell);
+        match self.tiles.id(tile) {
+            NO_CELL => NO_CELL,
+            t => self.cells[t as usize][slot],
+        }
+    }
+
     fn id_or_insert(&mut self, cell: (i32, i32), new_id: impl FnOnce() -> u32) -> u32 {
         let (tile, slot) = split(cell);
         let t = match self.last_tile {

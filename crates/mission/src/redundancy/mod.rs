@@ -34,16 +34,25 @@
 //! that pinches it and whose cut deletes no protected sample: that is all
 //! the removal needs, and it keeps the output linear in the path length (a
 //! lap driven twice has a pinch for every sample pair along it).
-//! [`find_pinches`] uses a uniform grid hash with cells one pinch distance
-//! wide: a sample's partners lie in the 3×3 cells around it, stored in index
-//! order, so the farthest one is found by scanning each cell downwards from
-//! the protection limit. Crossings use the same kind of grid over segment
-//! anchors (long segments get extra anchors along them). Runs of samples at
-//! one position (standing still, turning in place) are one grid entry, so a
-//! long stop costs no more than one sample. [`find_pinches_reference`] is
-//! the paper's method: it materialises the full `n × n` matrix of squared
-//! distances and tests every segment pair, in `O(n²)` time and memory; the
-//! tests compare the two on random paths.
+//!
+//! [`find_pinches`] indexes the samples in a uniform grid hash with cells
+//! one pinch distance wide (a hand-written table of 8×8-cell tiles; each
+//! cell's entries in one flat array, in index order). A sample's partners
+//! lie in the 3×3 cells around it, so the farthest one is the first hit
+//! scanning each cell down from the protection limit, and the scan stops
+//! where the path from `i` is too short to be a loop; a sample whose 3×3
+//! cells hold nothing that far along is settled by one look-up. Segments are
+//! found through the same grid: segment `(b, b+1)` is anchored at sample `b`
+//! and, if longer than 0.45 cells, at points along it, so two segments that
+//! meet have anchors in neighbouring cells. Runs of samples at one position
+//! (standing still, turning in place) are one grid entry, so a long stop
+//! costs no more than one sample.
+//!
+//! [`find_pinches_reference`] is the paper's method: it materialises the
+//! full `n × n` matrix of squared distances and tests every segment pair, in
+//! `O(n²)` time and memory. The tests compare the two on random paths, and
+//! both share the two floating-point predicates (`geometry.rs`), so they
+//! agree to the bit.
 //!
 //! [`remove_redundancy`] then repeats, until nothing changes:
 //! 1. cut the kinks (when reversing is redundant);
@@ -51,13 +60,21 @@
 //!    the earliest pinch start, cut to its farthest end (so nested loops go
 //!    in one cut), go on from that end.
 //!
-//! A later round can only find crossings made by the jumps of earlier cuts
-//! (or kinks whose retraced stretch an earlier cut shortened), so paths
-//! settle in two rounds in practice. Each round is `O(n)` expected (plus a
-//! linear counting sort); the whole is far inside `O(n log n)` for ordinary
-//! paths. The worst case is a path that lingers for a long time at many
-//! distinct points between one and three pinch distances from another place
-//! it also lingers at: each sample there scans the other place's samples.
+//! A later round can only find crossings through the jumps that earlier
+//! cuts left (a pair of samples that pinches after a cut pinched before it,
+//! with more path in between, and the cut from the earlier one went to its
+//! farthest partner), so the fast removal searches only around those jumps
+//! after the first round, while the reference searches everything every
+//! round; the tests check that both cut the same. Paths settle in two
+//! rounds in practice, the second finding nothing.
+//!
+//! Each round is `O(n)` expected: building the grid is a hash insert per
+//! sample plus a counting sort, a query scans only entries between its
+//! window's ends, and a later round is one pass over the samples. The whole
+//! is within the `O(n log n)` asked for on ordinary paths. The worst case
+//! is a path that lingers at many *distinct* points between one and three
+//! pinch distances from another place where it also lingers, with a short
+//! `min_loop_length_m`: each sample there scans the other place's samples.
 //!
 //! Deletions are reported in input indices, disjoint and sorted; a later
 //! round's cut that swallows an earlier deletion replaces it.

@@ -62,9 +62,7 @@ pub fn remove_redundancy(
     path: &[PathSample],
     cfg: &RedundancyConfig,
 ) -> Result<Pruned, RedundancyError> {
-    prune(path, cfg, |track, crit| {
-        Ok(fast::farthest_pinches(track, crit))
-    })
+    prune(path, cfg, Finder::Fast)
 }
 
 /// [`remove_redundancy`] with the reference pinch finder in every round:
@@ -73,18 +71,33 @@ pub fn remove_redundancy_reference(
     path: &[PathSample],
     cfg: &RedundancyConfig,
 ) -> Result<Pruned, RedundancyError> {
-    prune(path, cfg, reference::farthest_pinches)
+    prune(path, cfg, Finder::Reference)
 }
 
-type Finder = fn(&Track, &Criteria) -> Result<Vec<Pinch>, RedundancyError>;
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Finder {
+    /// The grid hash; after the first round, only the new jumps are searched.
+    Fast,
+    /// The full distance matrix in every round.
+    Reference,
+}
 
 /// A cut `(i, j)` in current indices: samples strictly between go.
 type Cut = (usize, usize, DeletionReason);
 
+/// Rounds of kink cuts and pinch cuts until neither finds anything.
+///
+/// After the first pinch search, a pair of samples can pinch only through a
+/// segment that a cut has made since the last search (a "junction"): two
+/// samples that pinch now pinched then too, with no less path between them
+/// (cuts only shorten it); the search found the farthest partner of each,
+/// and the cut from the earlier sample went there, leaving them adjacent.
+/// So the fast finder searches only around the junctions after that; the
+/// reference searches everything every round, and the tests compare them.
 fn prune(
     path: &[PathSample],
     cfg: &RedundancyConfig,
-    find: Finder,
+    finder: Finder,
 ) -> Result<Pruned, RedundancyError> {
     let mut track = Track::new(path, cfg)?;
     let crit = Criteria::new(cfg);
@@ -105,8 +118,10 @@ fn prune(
         merge_nested(deletions);
     };
 
+    // Input indices of the samples whose outgoing segment is a junction.
+    let mut junctions: Vec<usize> = Vec::new();
     let mut deletions = Vec::new();
-    let mut first_pinches = None;
+    let mut first_pinches: Option<Vec<Pinch>> = None;
     let mut kinks_stale = cfg.reversing_is_redundant;
     let mut pinches_stale = true;
     while kinks_stale || pinches_stale {
@@ -121,13 +136,22 @@ fn prune(
             );
             if !cuts.is_empty() {
                 record(&mut deletions, &track, &cuts);
+                junctions.extend(cuts.iter().map(|c| track.input_index[c.0]));
                 track = track.without(&spans(&cuts));
                 pinches_stale = true;
             }
         }
         if pinches_stale {
             pinches_stale = false;
-            let pinches = find(&track, &crit)?;
+            let pinches = match (finder, &first_pinches) {
+                (Finder::Reference, _) => reference::farthest_pinches(&track, &crit)?,
+                (Finder::Fast, None) => fast::farthest_pinches(&track, &crit),
+                (Finder::Fast, Some(_)) => {
+                    let at = current_indices(&track, &junctions);
+                    fast::farthest_pinches_at_junctions(&track, &crit, &at)
+                }
+            };
+            junctions.clear();
             let cuts = outermost(
                 pinches
                     .iter()
@@ -154,6 +178,7 @@ fn prune(
             }
             if !cuts.is_empty() {
                 record(&mut deletions, &track, &cuts);
+                junctions.extend(cuts.iter().map(|c| track.input_index[c.0]));
                 track = track.without(&spans(&cuts));
                 pinches_stale = true;
                 kinks_stale = cfg.reversing_is_redundant;
@@ -165,6 +190,19 @@ fn prune(
         deletions,
         pinches: first_pinches.unwrap_or_default(),
     })
+}
+
+/// Where the given input samples are in the track, skipping those gone and
+/// the last sample (which starts no segment).
+fn current_indices(track: &Track, input: &[usize]) -> Vec<usize> {
+    let mut at: Vec<usize> = input
+        .iter()
+        .filter_map(|k| track.input_index.binary_search(k).ok())
+        .filter(|&i| i + 1 < track.len())
+        .collect();
+    at.sort_unstable();
+    at.dedup();
+    at
 }
 
 /// Outermost first: the earliest start, cut to its farthest end, go on

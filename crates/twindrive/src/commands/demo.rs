@@ -147,6 +147,7 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
             redundancy: RedundancyConfig::with_pinch_distance(DEMO_PINCH_DISTANCE_M),
             filter: Default::default(),
         },
+        time_optimal: false,
     };
     let (the_plan, stages) = plan::make_plan(&plan_job)?;
     let plan_path = out.join("plan").join("plan.json");

@@ -53,6 +53,8 @@ pub struct Job {
     /// The twin the plan's sensor predictions come from.
     pub scenario: Scenario,
     pub settings: PipelineSettings,
+    /// Use the time-optimal re-timing as the plan.
+    pub time_optimal: bool,
 }
 
 /// SHA-256 of a log directory's two files.
@@ -113,6 +115,7 @@ fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
             redundancy,
             filter: Default::default(),
         },
+        time_optimal: args.time_optimal,
     })
 }
 
@@ -126,11 +129,14 @@ pub fn make_plan(job: &Job) -> anyhow::Result<(MissionPlan, Stages)> {
     let stages = pipeline::run(&job.log, &job.params, &limits, &job.settings)?;
     let mut model = SensorModel::new(&job.scenario);
     let mut ranges = vec![0.0; model.beams()];
-    let f = &stages.filtered;
-    let samples: Vec<PlanSample> = f
-        .samples
+    let (path, commands) = if job.time_optimal {
+        (&stages.fastest, &stages.fastest_commands)
+    } else {
+        (&stages.filtered.samples, &stages.filtered.commands)
+    };
+    let samples: Vec<PlanSample> = path
         .iter()
-        .zip(&f.commands)
+        .zip(commands)
         .map(|(p, c)| {
             let bump = model.read(&p.pose, &mut ranges);
             PlanSample {
@@ -165,7 +171,10 @@ pub fn make_plan(job: &Job) -> anyhow::Result<(MissionPlan, Stages)> {
             time_step_s: stages.period_s,
             start: header.start,
             source_log_sha256: job.log_sha256.clone(),
-            settings: serde_json::to_value(&job.settings)?,
+            settings: serde_json::json!({
+                "pipeline": &job.settings,
+                "timing": if job.time_optimal { "time_optimal" } else { "mission_pace" },
+            }),
             summary: serde_json::to_value(stages.summary())?,
         },
         samples,
