@@ -106,9 +106,10 @@ pub enum Command {
     /// Run the paper's case study end to end into ./twindrive-out/.
     ///
     /// The built-in calibration drive on the twin (calibration_drive/), its
-    /// calibration (calibration/calib.json), the wall-following mission
-    /// (wall_following/) and the paper's Table 1 and Section 6
-    /// (evidence/evidence.md with figures).
+    /// calibration (calibration/calib.json), the paper's Table 1 and Section
+    /// 6 (evidence/), the wall-following mission (wall_following/), the plan
+    /// made from it (plan/), its verification on the twin (verification/),
+    /// and report.md / report.html that tell the story with the figures.
     Demo {
         /// Output directory.
         #[arg(long, default_value = "twindrive-out")]
