@@ -606,6 +606,31 @@ fn a_bump_and_back_up_kink_is_removed_when_reversing_is_redundant() {
 }
 
 #[test]
+fn a_turn_in_place_that_wobbles_around_zero_speed_is_not_a_kink() {
+    // Forward 1 m, a quarter turn in place whose smoothed speed wobbles
+    // around zero (the planner's output of a real turn), forward 1 m.
+    let mut path = Vec::new();
+    let mut t = 0.0;
+    for k in 0..50 {
+        path.push(sample(t, 0.02 * k as f64, 0.0, 0.0, 0.2));
+        t += 0.1;
+    }
+    for k in 0..30 {
+        let wobble = if k % 2 == 0 { -2e-4 } else { 2e-4 };
+        let heading = std::f64::consts::FRAC_PI_2 * k as f64 / 29.0;
+        path.push(sample(t, 1.0 + wobble * 0.1, 1e-5 * k as f64, heading, wobble));
+        t += 0.1;
+    }
+    for k in 1..50 {
+        path.push(sample(t, 1.0, 0.02 * k as f64, std::f64::consts::FRAC_PI_2, 0.2));
+        t += 0.1;
+    }
+    let pruned = remove_redundancy(&path, &cfg(0.1)).unwrap();
+    assert!(pruned.deletions.is_empty(), "{:?}", pruned.deletions);
+    assert_eq!(pruned.kept.len(), path.len());
+}
+
+#[test]
 fn a_bump_and_back_up_kink_stays_when_reversing_is_not_redundant() {
     let path = bump_and_back_up();
     let mut cfg = cfg(0.1);

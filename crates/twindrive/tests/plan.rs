@@ -90,7 +90,31 @@ fn the_case_study_plan_is_stable_and_verifies_without_collisions() {
     let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&a).unwrap()).unwrap();
     assert_eq!(doc["format"], "twindrive-mission-plan");
     assert_eq!(doc["sha256"].as_str().unwrap().len(), 64);
-    assert!(doc["header"]["summary"]["kinks_removed"].as_u64().unwrap() >= 5);
+    // Every bump of the mission lies in a deleted stretch: no bump-and-back-up
+    // survives into the plan.
+    let deletions = doc["header"]["summary"]["deletion_list"].as_array().unwrap();
+    assert!(doc["header"]["summary"]["kinks_removed"].as_u64().unwrap() >= 1);
+    let csv = std::fs::read_to_string(mission().1.join("log.csv")).unwrap();
+    let mut lines = csv.lines();
+    let cols: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let bump_col = cols.iter().position(|c| *c == "bump").unwrap();
+    let mut pressed = false;
+    let mut bumps = 0;
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        let now = f[bump_col] == "1";
+        if now && !pressed {
+            bumps += 1;
+            let t: f64 = f[0].parse().unwrap();
+            assert!(
+                deletions.iter().any(|d| d["t_start_s"].as_f64().unwrap() <= t
+                    && t <= d["t_end_s"].as_f64().unwrap()),
+                "the bump at t = {t} s survives: {deletions:?}"
+            );
+        }
+        pressed = now;
+    }
+    assert!(bumps >= 3, "{bumps} bumps");
 
     let vdir = tmp.path().join("verify");
     let out = twindrive(&["verify-plan", s(&a), "--out", s(&vdir)]);

@@ -12,6 +12,13 @@ use super::track::{Criteria, Track};
 /// one pinch distance (ties: the later sample, the smaller cut). A kink is
 /// cut only if `k` is closer to `e` than the pinch distance (the robot came
 /// back along its way) and no protected sample lies in between.
+///
+/// A run that reverses less than a quarter of the pinch distance is no back-up:
+/// a turn in place wobbles around zero speed (after smoothing, or with
+/// encoder noise) and must keep its heading change.
+/// Shortest back-up that makes a kink, in pinch distances.
+const MIN_BACKUP_IN_PINCH_DISTANCES: f64 = 0.25;
+
 pub(super) fn kinks(track: &Track, crit: &Criteria) -> Vec<(usize, usize)> {
     let n = track.len();
     let mut out = Vec::new();
@@ -40,6 +47,9 @@ pub(super) fn kinks(track: &Track, crit: &Criteria) -> Vec<(usize, usize)> {
             r += 1;
         }
         let e = r.min(n - 1);
+        if cum[e] - cum[r0] < MIN_BACKUP_IN_PINCH_DISTANCES * crit.pinch_distance_m {
+            continue;
+        }
         let first_allowed = last_protected[e - 1];
         if r0 == 0 || first_allowed >= r0 {
             continue;
