@@ -618,11 +618,23 @@ fn a_turn_in_place_that_wobbles_around_zero_speed_is_not_a_kink() {
     for k in 0..30 {
         let wobble = if k % 2 == 0 { -2e-4 } else { 2e-4 };
         let heading = std::f64::consts::FRAC_PI_2 * k as f64 / 29.0;
-        path.push(sample(t, 1.0 + wobble * 0.1, 1e-5 * k as f64, heading, wobble));
+        path.push(sample(
+            t,
+            1.0 + wobble * 0.1,
+            1e-5 * k as f64,
+            heading,
+            wobble,
+        ));
         t += 0.1;
     }
     for k in 1..50 {
-        path.push(sample(t, 1.0, 0.02 * k as f64, std::f64::consts::FRAC_PI_2, 0.2));
+        path.push(sample(
+            t,
+            1.0,
+            0.02 * k as f64,
+            std::f64::consts::FRAC_PI_2,
+            0.2,
+        ));
         t += 0.1;
     }
     let pruned = remove_redundancy(&path, &cfg(0.1)).unwrap();

@@ -92,7 +92,9 @@ fn the_case_study_plan_is_stable_and_verifies_without_collisions() {
     assert_eq!(doc["sha256"].as_str().unwrap().len(), 64);
     // Every bump of the mission lies in a deleted stretch: no bump-and-back-up
     // survives into the plan.
-    let deletions = doc["header"]["summary"]["deletion_list"].as_array().unwrap();
+    let deletions = doc["header"]["summary"]["deletion_list"]
+        .as_array()
+        .unwrap();
     assert!(doc["header"]["summary"]["kinks_removed"].as_u64().unwrap() >= 1);
     let csv = std::fs::read_to_string(mission().1.join("log.csv")).unwrap();
     let mut lines = csv.lines();
@@ -107,8 +109,10 @@ fn the_case_study_plan_is_stable_and_verifies_without_collisions() {
             bumps += 1;
             let t: f64 = f[0].parse().unwrap();
             assert!(
-                deletions.iter().any(|d| d["t_start_s"].as_f64().unwrap() <= t
-                    && t <= d["t_end_s"].as_f64().unwrap()),
+                deletions
+                    .iter()
+                    .any(|d| d["t_start_s"].as_f64().unwrap() <= t
+                        && t <= d["t_end_s"].as_f64().unwrap()),
                 "the bump at t = {t} s survives: {deletions:?}"
             );
         }
