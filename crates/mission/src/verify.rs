@@ -3,13 +3,16 @@
 //!
 //! - Open loop: the plan's wheel speeds, held sample by sample, as the real
 //!   robot would play them blind.
-//! - Closed loop: a regulated pure pursuit tracker (Macenski et al., 2023)
-//!   follows the plan's path with the robot's own odometry (its encoders and
-//!   the plan's calibrated parameters): lookahead on the path, curvature
-//!   `κ = 2 y / (x² + y²)` to the lookahead point in the body frame, the
-//!   plan's speed at the robot's progress, slowed on tight curves and near
-//!   the end; turns in place follow the plan's turn rate with a heading
-//!   correction.
+//! - Closed loop: the plan's trajectory tracked with the robot's own
+//!   odometry (its encoders and the plan's calibrated parameters) by
+//!   Kanayama's tracking law (Kanayama et al., 1990): with the reference pose
+//!   and velocities `(v_r, ω_r)` of the plan at the current time and the
+//!   error `(e_x, e_y, e_θ)` in the body frame,
+//!   `v = v_r cos e_θ + k_x e_x`, `ω = ω_r + v_r (k_y e_y + k_θ sin e_θ)`.
+//!   Following the plan's timing (not only its geometry) keeps reversals,
+//!   turns in place and stops, which a pure path follower cannot resolve
+//!   where the path doubles back on itself. The replay ends when the plan
+//!   has ended and the robot is within the goal tolerance (or the timeout).
 //!
 //! Deviation is the distance from the true position to the plan's path,
 //! searched near the robot's progress along it (so a path that passes a
@@ -47,12 +50,12 @@ pub struct Replay {
 /// Closed-loop tracker settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct TrackerSettings {
-    /// Lookahead distance (m).
-    pub lookahead_m: f64,
-    /// Below this radius of curvature the speed is scaled down (m).
-    pub regulate_radius_m: f64,
-    /// Heading gain for turns in place (1/s).
-    pub heading_gain: f64,
+    /// Along-track gain `k_x` (1/s).
+    pub gain_along_per_s: f64,
+    /// Cross-track gain `k_y` (1/m²).
+    pub gain_cross_per_m2: f64,
+    /// Heading gain `k_θ` (1/m).
+    pub gain_heading_per_m: f64,
     /// The replay ends this long after the plan's duration (s) at the latest.
     pub timeout_extra_s: f64,
     /// Within this distance of the last position the mission is complete (m).
@@ -62,11 +65,11 @@ pub struct TrackerSettings {
 impl Default for TrackerSettings {
     fn default() -> Self {
         Self {
-            lookahead_m: 0.2,
-            regulate_radius_m: 0.3,
-            heading_gain: 3.0,
+            gain_along_per_s: 2.0,
+            gain_cross_per_m2: 40.0,
+            gain_heading_per_m: 8.0,
             timeout_extra_s: 10.0,
-            goal_tolerance_m: 0.02,
+            goal_tolerance_m: 0.01,
         }
     }
 }
@@ -98,7 +101,9 @@ impl<'a> PathCursor<'a> {
     }
 
     /// Moves the cursor to the nearest segment within `window_m` of path
-    /// ahead (never backwards) and returns the distance to the path.
+    /// ahead (never backwards; the later one on ties, so standing-still
+    /// stretches of the plan are passed over) and returns the distance to
+    /// the path.
     fn advance(&mut self, p: (f64, f64), window_m: f64) -> f64 {
         let mut best = (self.segment_distance(self.index, p).0, self.index);
         let mut travelled = 0.0;
@@ -106,7 +111,7 @@ impl<'a> PathCursor<'a> {
         while k + 1 < self.samples.len() && travelled < window_m {
             k += 1;
             let d = self.segment_distance(k, p).0;
-            if d < best.0 {
+            if d <= best.0 {
                 best = (d, k);
             }
             let (a, b) = (&self.samples[k - 1], &self.samples[k]);
@@ -114,24 +119,6 @@ impl<'a> PathCursor<'a> {
         }
         self.index = best.1;
         best.0
-    }
-
-    /// The point `distance_m` further along the path from the cursor.
-    fn lookahead(&self, distance_m: f64) -> (f64, f64, usize) {
-        let mut left = distance_m;
-        let mut k = self.index;
-        while k + 1 < self.samples.len() {
-            let (a, b) = (&self.samples[k], &self.samples[k + 1]);
-            let len = (b.x_m - a.x_m).hypot(b.y_m - a.y_m);
-            if len >= left && len > 0.0 {
-                let u = left / len;
-                return (a.x_m + u * (b.x_m - a.x_m), a.y_m + u * (b.y_m - a.y_m), k);
-            }
-            left -= len;
-            k += 1;
-        }
-        let last = self.samples.last().expect("non-empty plan");
-        (last.x_m, last.y_m, self.samples.len() - 1)
     }
 }
 
@@ -263,27 +250,52 @@ pub fn open_loop(
     })
 }
 
-/// Tracks the plan's path closed loop with odometry from the encoders and
-/// `params` (the plan's calibrated parameters).
+/// The plan's reference at time `t` (pose interpolated, heading along the
+/// shorter arc; velocities of the segment in progress), and whether the plan
+/// has ended.
+fn reference_at(samples: &[PlanSample], t: f64, k: &mut usize) -> (Pose, f64, f64, bool) {
+    let last = samples.len() - 1;
+    while *k < last && samples[*k + 1].t_s <= t {
+        *k += 1;
+    }
+    if *k >= last {
+        let s = &samples[last];
+        return (s.pose(), 0.0, 0.0, true);
+    }
+    let (a, b) = (&samples[*k], &samples[*k + 1]);
+    let f = ((t - a.t_s) / (b.t_s - a.t_s)).clamp(0.0, 1.0);
+    let pose = Pose::new(
+        a.x_m + f * (b.x_m - a.x_m),
+        a.y_m + f * (b.y_m - a.y_m),
+        a.heading_rad + f * wrap_angle(b.heading_rad - a.heading_rad),
+    );
+    (pose, a.v_m_s, a.omega_rad_s, false)
+}
+
+/// Tracks the plan's trajectory closed loop with odometry from the encoders
+/// and `params` (the plan's calibrated parameters); see the module docs.
 pub fn closed_loop(
     samples: &[PlanSample],
     scenario: Scenario,
     params: &DiffDriveParams,
     settings: &TrackerSettings,
 ) -> Result<Replay, PipelineError> {
-    let rad_per_tick = std::f64::consts::TAU / f64::from(scenario.robot.encoder.ticks_per_rev);
-    let max_wheel = scenario.robot.max_wheel_speed_rad_s;
-    let duration = samples.last().map_or(0.0, |s| s.t_s) - samples.first().map_or(0.0, |s| s.t_s);
-    let mut estimate = samples.first().map_or(Pose::default(), |s| s.pose());
-    let mut last_ticks: Option<[i64; 2]> = None;
-    let Some(last) = samples.last().cloned() else {
+    let Some(first) = samples.first() else {
         return Err(PipelineError::Infeasible("the plan has no samples".into()));
     };
+    let rad_per_tick = std::f64::consts::TAU / f64::from(scenario.robot.encoder.ticks_per_rev);
+    let max_wheel = scenario.robot.max_wheel_speed_rad_s;
+    let t0 = first.t_s;
+    let duration = samples.last().map_or(0.0, |s| s.t_s) - t0;
+    let mut estimate = first.pose();
+    let mut last_ticks: Option<[i64; 2]> = None;
+    let mut k = 0;
+    let g = *settings;
     replay(
         samples,
         scenario,
         duration + settings.timeout_extra_s,
-        move |s, cursor| {
+        move |s, _| {
             if let Some(ticks) = s.encoder_ticks {
                 if let Some(prev) = last_ticks {
                     let dl = (ticks[0] - prev[0]) as f64 * rad_per_tick;
@@ -292,42 +304,23 @@ pub fn closed_loop(
                 }
                 last_ticks = Some(ticks);
             }
-            cursor.advance((estimate.x_m, estimate.y_m), 0.5);
-            let to_goal = (last.x_m - estimate.x_m).hypot(last.y_m - estimate.y_m);
-            if cursor.index + 2 >= cursor.samples.len() && to_goal < settings.goal_tolerance_m {
+            let (r, v_r, omega_r, ended) = reference_at(samples, s.t_ns as f64 * 1e-9 + t0, &mut k);
+            let (sn, cs) = estimate.heading_rad.sin_cos();
+            let (dx, dy) = (r.x_m - estimate.x_m, r.y_m - estimate.y_m);
+            let (e_x, e_y) = (cs * dx + sn * dy, -sn * dx + cs * dy);
+            let e_theta = wrap_angle(r.heading_rad - estimate.heading_rad);
+            if ended && dx.hypot(dy) < g.goal_tolerance_m {
                 return None;
             }
-            let here = &cursor.samples[cursor.index];
-            let (v_plan, omega_plan) = (here.v_m_s, here.omega_rad_s);
-            let (v, omega) = if v_plan.abs() < 0.02 && omega_plan.abs() > 0.05 {
-                // A turn in place: the plan's rate plus a heading correction.
-                let next = &cursor.samples[(cursor.index + 1).min(cursor.samples.len() - 1)];
-                let err = wrap_angle(next.heading_rad - estimate.heading_rad);
-                (0.0, omega_plan + settings.heading_gain * err)
-            } else {
-                let (lx, ly, _) = cursor.lookahead(settings.lookahead_m);
-                let (sn, cs) = estimate.heading_rad.sin_cos();
-                let (dx, dy) = (lx - estimate.x_m, ly - estimate.y_m);
-                let (bx, by) = (cs * dx + sn * dy, -sn * dx + cs * dy);
-                let d2 = bx * bx + by * by;
-                let curvature = if d2 > 1e-12 { 2.0 * by / d2 } else { 0.0 };
-                // Regulation: slow down on tight curves and for the final approach.
-                let mut speed = v_plan.abs().max(0.03);
-                let radius = 1.0 / curvature.abs().max(1e-9);
-                if radius < settings.regulate_radius_m {
-                    speed *= radius / settings.regulate_radius_m;
-                }
-                speed = speed.min(to_goal.max(0.02) * 2.0);
-                let direction = if bx < 0.0 && v_plan < 0.0 { -1.0 } else { 1.0 };
-                let v = direction * speed;
-                (v, v * curvature)
-            };
-            let (mut l, mut r) = wheel_speeds(params, v, omega);
-            let peak = l.abs().max(r.abs());
+            let v = v_r * e_theta.cos() + g.gain_along_per_s * e_x;
+            let omega =
+                omega_r + v_r * (g.gain_cross_per_m2 * e_y + g.gain_heading_per_m * e_theta.sin());
+            let (mut l, mut rw) = wheel_speeds(params, v, omega);
+            let peak = l.abs().max(rw.abs());
             if peak > max_wheel {
-                (l, r) = (l * max_wheel / peak, r * max_wheel / peak);
+                (l, rw) = (l * max_wheel / peak, rw * max_wheel / peak);
             }
-            Some([l, r])
+            Some([l, rw])
         },
     )
 }

@@ -164,3 +164,63 @@ fn bad_inputs_are_clear_errors() {
         "max_wheel_accel_rad_s2 must be a finite number > 0, got 0"
     );
 }
+
+/// Plan samples from a filtered path (no sensor predictions).
+fn plan_samples(
+    path: &[twindrive_mission::PathSample],
+    commands: &[twindrive_mission::control::WheelCommand],
+) -> Vec<twindrive_mission::plan::PlanSample> {
+    path.iter()
+        .zip(commands)
+        .map(|(p, c)| twindrive_mission::plan::PlanSample {
+            t_s: p.t_s,
+            x_m: p.pose.x_m,
+            y_m: p.pose.y_m,
+            heading_rad: p.pose.heading_rad,
+            v_m_s: c.v_m_s,
+            omega_rad_s: c.omega_rad_s,
+            left_rad_s: c.left_rad_s,
+            right_rad_s: c.right_rad_s,
+            expected_ranges_m: Vec::new(),
+            expected_bump: false,
+        })
+        .collect()
+}
+
+#[test]
+fn closed_loop_tracking_reaches_the_goal_even_when_the_plan_ends_standing_still() {
+    let log = wall_following();
+    let lim = limits(log);
+    let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
+    let f = filter_spikes(&path, &CALIBRATED, &lim, &FilterSettings::default()).unwrap();
+    let mut samples = plan_samples(&f.samples, &f.commands);
+    // Two seconds of standing still at the end (a manual drive's last stop).
+    let last = samples.last().unwrap().clone();
+    for k in 1..=200 {
+        samples.push(twindrive_mission::plan::PlanSample {
+            t_s: last.t_s + 0.01 * k as f64,
+            ..last.clone()
+        });
+    }
+    let scenario = twindrive_sim::Scenario::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios/wall_following.toml"),
+    )
+    .unwrap();
+    let settings = twindrive_mission::verify::TrackerSettings::default();
+    let r = twindrive_mission::verify::closed_loop(&samples, scenario, &CALIBRATED, &settings)
+        .unwrap()
+        .report;
+    let plan_duration = samples.last().unwrap().t_s - samples[0].t_s;
+    assert!(r.final_error_m < 0.03, "{r:?}");
+    assert!(
+        r.duration_s < plan_duration + 1.0,
+        "stopped at the goal, not at the timeout: {r:?}"
+    );
+    // This path still has its bump-and-back-ups (no redundancy removal):
+    // tracked faithfully, the bumper closes there as it did, but nothing
+    // drives into a wall.
+    assert_eq!(r.collisions, 0, "{r:?}");
+    assert!(r.mean_deviation_m < 0.01, "{r:?}");
+    assert!(r.max_deviation_m < 0.15, "{r:?}");
+}

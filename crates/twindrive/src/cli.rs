@@ -61,7 +61,7 @@ pub enum Command {
     ///
     /// Open loop (the plan's wheel speeds, and the same path's speeds through
     /// the operator's nominal parameters for comparison) and closed loop (a
-    /// regulated pure pursuit tracker on the robot's odometry). Writes
+    /// trajectory tracker on the robot's odometry). Writes
     /// report.json (collisions, bumps, max/mean deviation from the plan's
     /// path, duration, path length for each replay), the replayed tracks as
     /// TUM and an overlay figure into DIR.

@@ -368,7 +368,7 @@ fn case_study_report(c: &CaseStudy) -> Report {
     );
     r.heading(2, "4. Verification on the twin");
     r.paragraph(
-        "Before anything is uploaded, the plan is replayed on the twin's robot with its hidden true          parameters and noise: open loop (the wheel speeds as planned), closed loop (regulated pure          pursuit on the robot's own odometry), and, for comparison, open loop with the same path's wheel          speeds computed from the hand-measured parameters.",
+        "Before anything is uploaded, the plan is replayed on the twin's robot with its hidden true          parameters and noise: open loop (the wheel speeds as planned), closed loop (the plan's trajectory tracked on the robot's own odometry), and, for comparison, open loop with the same path's wheel          speeds computed from the hand-measured parameters.",
     );
     let v = c.verification;
     r.table(
@@ -383,7 +383,7 @@ fn case_study_report(c: &CaseStudy) -> Report {
         ],
         [
             ("open loop, calibrated plan", &v.open_loop),
-            ("closed loop (pure pursuit)", &v.closed_loop),
+            ("closed loop (trajectory tracking)", &v.closed_loop),
             ("open loop, hand-measured parameters", &v.open_loop_nominal),
         ]
         .iter()

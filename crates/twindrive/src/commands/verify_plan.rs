@@ -31,7 +31,7 @@ pub struct VerifyReport {
     pub path_length_m: f64,
     /// The plan's wheel speeds played blind.
     pub open_loop: ReplayReport,
-    /// Regulated pure pursuit on odometry with the calibrated parameters.
+    /// Trajectory tracking (Kanayama) on odometry with the calibrated parameters.
     pub closed_loop: ReplayReport,
     /// The same path's wheel speeds through the operator's nominal parameters.
     pub open_loop_nominal: ReplayReport,
@@ -161,7 +161,7 @@ pub fn write_outputs(
                 color: palette::TRUTH,
             },
             Series {
-                label: "closed loop (pure pursuit)",
+                label: "closed loop (trajectory tracking)",
                 points: &closed,
                 color: palette::GOOD,
             },
