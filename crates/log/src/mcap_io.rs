@@ -366,7 +366,6 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
     Ok(())
 }
 
-/// Object-safe JSON serialisation for the message structs above.
 /// One named pose track with optional wheel speeds, for [`write_tracks_mcap`].
 pub struct Track<'a> {
     /// Topic prefix, e.g. `/executed`.
@@ -468,6 +467,7 @@ pub fn write_tracks_mcap<W: Write + Seek>(
     Ok(())
 }
 
+/// Object-safe JSON serialisation for the message structs above.
 mod erased {
     pub trait Json {
         fn write_json(&self, out: &mut Vec<u8>);

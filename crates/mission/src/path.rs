@@ -25,5 +25,5 @@ pub fn path_length_m(samples: &[PathSample]) -> f64 {
     samples
         .windows(2)
         .map(|w| w[0].pose.distance_to(&w[1].pose))
-        .sum()
+        .fold(0.0, |a, d| a + d)
 }

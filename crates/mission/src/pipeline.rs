@@ -39,9 +39,8 @@ pub struct Stages {
     pub cleaned_spikes: Vec<Spike>,
     /// The plan: spikes filtered (Fig. 8b).
     pub filtered: Filtered,
-    /// The same path as fast as the limits allow.
-    pub fastest: Vec<PathSample>,
-    pub fastest_commands: Vec<WheelCommand>,
+    /// The same path as fast as the limits allow, or why not.
+    pub fastest: Result<(Vec<PathSample>, Vec<WheelCommand>), PipelineError>,
     /// The control period of the source (mean encoder period).
     pub period_s: f64,
 }
@@ -54,11 +53,18 @@ pub struct StageSummary {
     pub deletions: usize,
     pub loops_removed: usize,
     pub kinks_removed: usize,
+    /// The path with its redundant parts removed (jumps included).
     pub cleaned_length_m: f64,
     pub spikes_found: usize,
+    /// The plan's own path and duration.
+    pub filtered_length_m: f64,
     pub filtered_duration_s: f64,
     pub filter_windows: usize,
-    pub time_optimal_duration_s: f64,
+    /// The longest the plan holds one wheel command (s).
+    pub longest_hold_s: f64,
+    /// `None` when the time-optimal re-timing failed (`time_optimal_error`).
+    pub time_optimal_duration_s: Option<f64>,
+    pub time_optimal_error: Option<String>,
     /// Every deletion: time span and length on the executed path, and why.
     pub deletion_list: Vec<crate::redundancy::Deletion>,
 }
@@ -84,9 +90,12 @@ impl Stages {
             kinks_removed: kinks,
             cleaned_length_m: path_length_m(&self.cleaned),
             spikes_found: self.cleaned_spikes.len(),
+            filtered_length_m: path_length_m(&self.filtered.samples),
             filtered_duration_s: duration(&self.filtered.samples),
             filter_windows: self.filtered.windows.len(),
-            time_optimal_duration_s: duration(&self.fastest),
+            longest_hold_s: crate::spikes::longest_hold_s(&self.filtered.samples),
+            time_optimal_duration_s: self.fastest.as_ref().ok().map(|(p, _)| duration(p)),
+            time_optimal_error: self.fastest.as_ref().err().map(|e| e.to_string()),
             deletion_list: self.pruned.deletions.clone(),
         }
     }
@@ -129,8 +138,9 @@ pub fn run(
     let mut cleaned = close_gaps(&executed, &pruned.kept, period_s);
     let cleaned_commands = recompute(&mut cleaned, params);
     let cleaned_spikes = find_spikes(&cleaned, &cleaned_commands, limits);
-    let filtered = filter_spikes(&cleaned, params, limits, &settings.filter)?;
-    let (fastest, fastest_commands) = time_optimal(&filtered.samples, params, limits)?;
+    let filtered = filter_spikes(&cleaned, params, limits, period_s, &settings.filter)?;
+    // The alternative must not cost the plan: its failure is reported.
+    let fastest = time_optimal(&filtered.samples, params, limits, period_s);
     Ok(Stages {
         executed,
         pruned,
@@ -139,7 +149,6 @@ pub fn run(
         cleaned_spikes,
         filtered,
         fastest,
-        fastest_commands,
         period_s,
     })
 }

@@ -6,9 +6,11 @@
 //! velocities, each wheel's angular speed, and what the twin predicts the
 //! robot's sensors will read there (so the robot can tell when reality
 //! departs). `sha256` is the SHA-256 of the plan's canonical content: the
-//! document itself serialised compactly with the `sha256` field empty
-//! (fields in their declared order, floats in their shortest round-trip
-//! form, so any reader that keeps the numbers reproduces the bytes).
+//! document itself serialised compactly with the `sha256` field empty, as
+//! serde_json writes it (fields in their declared order, object keys of the
+//! free-form settings sorted, floats in their shortest round-trip form as
+//! `ryu` prints them). A reader in another language must print numbers the
+//! same way to reproduce the bytes; twindrive re-reads and re-hashes.
 //!
 //! CSV and TUM exports carry the samples for other tools.
 
@@ -135,6 +137,26 @@ impl MissionPlan {
                 "is `{}` version {}, expected `{PLAN_FORMAT}` version {PLAN_VERSION}",
                 self.format, self.version
             )));
+        }
+        let h = &self.header;
+        h.calibrated
+            .validate()
+            .map_err(|e| PipelineError::Infeasible(format!("header.calibrated: {e}")))?;
+        h.limits.validate()?;
+        if !(h.time_step_s.is_finite() && h.time_step_s > 0.0) {
+            return Err(PipelineError::BadSetting {
+                field: "header.time_step_s",
+                value: h.time_step_s,
+            });
+        }
+        if ![h.start.x_m, h.start.y_m, h.start.heading_rad]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(PipelineError::NonFinite {
+                what: "header.start",
+                index: 0,
+            });
         }
         let beams: usize = self
             .header
@@ -331,6 +353,15 @@ mod tests {
                 what: "v_m_s",
                 index: 3
             })
+        );
+        let mut d = plan();
+        d.header.calibrated.wheelbase_m = -0.2;
+        d.sha256 = d.content_hash();
+        assert!(
+            d.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("header.calibrated")
         );
         let mut c = plan();
         c.samples[5].t_s = c.samples[4].t_s;

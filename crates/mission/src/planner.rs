@@ -39,6 +39,8 @@ impl Default for PlannerSettings {
 /// `2 half + 1` samples, shrinking near the ends).
 pub fn savitzky_golay(values: &[f64], half: usize) -> Vec<f64> {
     let n = values.len();
+    // No window is wider than the data.
+    let half = half.min(n.saturating_sub(1) / 2);
     let coefficients = |m: usize| -> Vec<f64> {
         let mf = m as f64;
         let norm = (2.0 * mf - 1.0) * (2.0 * mf + 1.0) * (2.0 * mf + 3.0);
@@ -49,7 +51,9 @@ pub fn savitzky_golay(values: &[f64], half: usize) -> Vec<f64> {
             })
             .collect()
     };
-    let table: Vec<Vec<f64>> = (0..=half).map(coefficients).collect();
+    // Interior samples use the full width; only the ends need the narrower
+    // ones, which are made when first needed.
+    let mut table: Vec<Option<Vec<f64>>> = vec![None; half + 1];
     (0..n)
         .map(|k| {
             let m = half.min(k).min(n - 1 - k);
@@ -57,6 +61,7 @@ pub fn savitzky_golay(values: &[f64], half: usize) -> Vec<f64> {
                 return values[k];
             }
             table[m]
+                .get_or_insert_with(|| coefficients(m))
                 .iter()
                 .zip(&values[k - m..=k + m])
                 .map(|(c, v)| c * v)
@@ -94,6 +99,15 @@ pub fn executed_path(
             value: settings.smoothing_window_s,
         });
     }
+    for (k, w) in encoders.windows(2).enumerate() {
+        if w[1].0 <= w[0].0 || !w[1].0.is_finite() {
+            return Err(PipelineError::TimeNotIncreasing {
+                index: k + 1,
+                t_s: w[1].0,
+                previous_s: w[0].0,
+            });
+        }
+    }
     let span = encoders.last().expect("two at least").0 - encoders[0].0;
     let period = span / (encoders.len() - 1) as f64;
     let half = (0.5 * settings.smoothing_window_s / period).round() as usize;
@@ -109,15 +123,8 @@ pub fn executed_path(
         .collect();
     let mut out = Vec::with_capacity(encoders.len());
     let mut pose = log.header.start;
-    for (k, w) in encoders.windows(2).enumerate() {
+    for w in encoders.windows(2) {
         let ((t0, a0), (t1, a1)) = (w[0], w[1]);
-        if t1 <= t0 {
-            return Err(PipelineError::TimeNotIncreasing {
-                index: k + 1,
-                t_s: t1,
-                previous_s: t0,
-            });
-        }
         let (dl, dr) = (a1[0] - a0[0], a1[1] - a0[1]);
         let (left_m, right_m) = params.wheel_travel_from_angles(dl, dr);
         let (ds, dtheta) = body_increment(left_m, right_m, params.wheelbase_m);
@@ -137,4 +144,23 @@ pub fn executed_path(
         omega_rad_s: 0.0,
     });
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smoothing_keeps_quadratics_and_copes_with_short_and_dense_data() {
+        let q: Vec<f64> = (0..50)
+            .map(|k| 0.5 * (k as f64).powi(2) - 3.0 * k as f64)
+            .collect();
+        let s = savitzky_golay(&q, 7);
+        for (a, b) in q.iter().zip(&s) {
+            assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+        }
+        // A window far wider than the data (dense time stamps) costs nothing.
+        assert_eq!(savitzky_golay(&[1.0, 2.0], usize::MAX / 2), vec![1.0, 2.0]);
+        assert_eq!(savitzky_golay(&[], 10), Vec::<f64>::new());
+    }
 }

@@ -6,11 +6,14 @@
 //! `d_k = [left, right]` (radians); only its duration is free. With the
 //! segment's rate `r_k = 1/τ_k` and the state `u_k = r_k²`, the wheels turn
 //! at `d_k r_k`. The speed change between consecutive segments over the time
-//! between their centres, `(d_k+1 r_k+1 − d_k r_k) (r_k + r_k+1) / 2`, is
-//! linear in `(u_k, u_k+1)` once `r_k r_k+1` is replaced by its arithmetic
-//! mean `(u_k + u_k+1) / 2` (a second-order difference where rates change
-//! smoothly):
+//! between their centres is `(d_k+1 r_k+1 − d_k r_k) · 2 r_k r_k+1 /
+//! (r_k + r_k+1)`; approximating that factor by the arithmetic mean
+//! `(r_k + r_k+1) / 2` and the product `r_k r_k+1` by `(u_k + u_k+1) / 2`
+//! (both close where rates change smoothly) makes it linear in
+//! `(u_k, u_k+1)`:
 //! `u_k (d_k+1 − 3 d_k) / 4 + u_k+1 (3 d_k+1 − d_k) / 4`.
+//! Callers check the result per segment and lengthen the few segments where
+//! the approximation was optimistic.
 //! A backward pass finds for each segment the largest `u` from which the
 //! path can still be driven to a stop within the limits; a forward pass from
 //! rest then takes the largest `u` the previous segment and that bound

@@ -9,10 +9,12 @@
 //!   and velocities `(v_r, ω_r)` of the plan at the current time and the
 //!   error `(e_x, e_y, e_θ)` in the body frame,
 //!   `v = v_r cos e_θ + k_x e_x`, `ω = ω_r + v_r (k_y e_y + k_θ sin e_θ)`.
-//!   Following the plan's timing (not only its geometry) keeps reversals,
-//!   turns in place and stops, which a pure path follower cannot resolve
-//!   where the path doubles back on itself. The replay ends when the plan
-//!   has ended and the robot is within the goal tolerance (or the timeout).
+//!   plus a small heading correction that does not vanish with `v_r` (turns
+//!   in place, stops). Following the plan's timing (not only its geometry)
+//!   keeps reversals, turns in place and stops, which a pure path follower
+//!   cannot resolve where the path doubles back on itself. The replay ends
+//!   when the plan has ended and the robot is level with its goal (along-track
+//!   error within the goal tolerance), or at the timeout.
 //!
 //! Deviation is the distance from the true position to the plan's path,
 //! searched near the robot's progress along it (so a path that passes a
@@ -56,6 +58,9 @@ pub struct TrackerSettings {
     pub gain_cross_per_m2: f64,
     /// Heading gain `k_θ` (1/m).
     pub gain_heading_per_m: f64,
+    /// Heading gain that does not scale with the plan's speed (1/s), for
+    /// turns in place and stops.
+    pub gain_heading_still_per_s: f64,
     /// The replay ends this long after the plan's duration (s) at the latest.
     pub timeout_extra_s: f64,
     /// Within this distance of the last position the mission is complete (m).
@@ -68,6 +73,7 @@ impl Default for TrackerSettings {
             gain_along_per_s: 2.0,
             gain_cross_per_m2: 40.0,
             gain_heading_per_m: 8.0,
+            gain_heading_still_per_s: 2.0,
             timeout_extra_s: 10.0,
             goal_tolerance_m: 0.01,
         }
@@ -128,7 +134,7 @@ fn replay(
     samples: &[PlanSample],
     mut scenario: Scenario,
     max_duration_s: f64,
-    mut control: impl FnMut(&Sensed, &mut PathCursor) -> Option<[f64; 2]>,
+    mut control: impl FnMut(&Sensed) -> Option<[f64; 2]>,
 ) -> Result<Replay, PipelineError> {
     let first = samples
         .first()
@@ -140,7 +146,6 @@ fn replay(
     let dt_s = scenario.dt_s();
     let mut sim = Simulator::new(scenario);
     let mut out = StepOutput::new(sim.beams());
-    let mut cursor = PathCursor::new(samples);
     let mut deviation = PathCursor::new(samples);
     let (mut collisions, mut bumps, mut was_blocked, mut was_bumped) = (0, 0, false, false);
     let (mut max_dev, mut sum_dev, mut n) = (0.0f64, 0.0, 0usize);
@@ -150,7 +155,7 @@ fn replay(
     while done_at.is_none() {
         let mut finished = false;
         let stepped = sim.step_with(&mut out, &mut |s: &Sensed| {
-            control(s, &mut cursor).unwrap_or_else(|| {
+            control(s).unwrap_or_else(|| {
                 finished = true;
                 [0.0, 0.0]
             })
@@ -240,7 +245,7 @@ pub fn open_loop(
     };
     let dt_s = scenario.dt_s();
     let (mut k0, mut k1) = (0, 0);
-    replay(samples, scenario, end + 1.0, |s, _| {
+    replay(samples, scenario, end + 1.0, |s| {
         let t = s.t_ns as f64 * 1e-9 + t0;
         if t >= t0 + end {
             return None;
@@ -295,7 +300,7 @@ pub fn closed_loop(
         samples,
         scenario,
         duration + settings.timeout_extra_s,
-        move |s, _| {
+        move |s| {
             if let Some(ticks) = s.encoder_ticks {
                 if let Some(prev) = last_ticks {
                     let dl = (ticks[0] - prev[0]) as f64 * rad_per_tick;
@@ -309,12 +314,17 @@ pub fn closed_loop(
             let (dx, dy) = (r.x_m - estimate.x_m, r.y_m - estimate.y_m);
             let (e_x, e_y) = (cs * dx + sn * dy, -sn * dx + cs * dy);
             let e_theta = wrap_angle(r.heading_rad - estimate.heading_rad);
-            if ended && dx.hypot(dy) < g.goal_tolerance_m {
+            // Arrived once the plan has ended and the robot is level with
+            // its goal (a differential drive cannot step sideways).
+            if ended && e_x.abs() < g.goal_tolerance_m {
                 return None;
             }
             let v = v_r * e_theta.cos() + g.gain_along_per_s * e_x;
-            let omega =
-                omega_r + v_r * (g.gain_cross_per_m2 * e_y + g.gain_heading_per_m * e_theta.sin());
+            // Kanayama's heading and cross-track terms scale with v_r; turns
+            // in place and stops (v_r = 0) keep a plain heading correction.
+            let omega = omega_r
+                + v_r * (g.gain_cross_per_m2 * e_y + g.gain_heading_per_m * e_theta.sin())
+                + g.gain_heading_still_per_s * e_theta.sin();
             let (mut l, mut rw) = wheel_speeds(params, v, omega);
             let peak = l.abs().max(rw.abs());
             if peak > max_wheel {

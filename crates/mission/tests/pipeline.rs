@@ -18,6 +18,9 @@ const CALIBRATED: DiffDriveParams = DiffDriveParams {
     wheelbase_m: 0.2678,
 };
 
+/// The wall-following log's encoder period (the control period of its plans).
+const PERIOD_S: f64 = 0.01;
+
 fn wall_following() -> &'static MissionLog {
     static LOG: OnceLock<MissionLog> = OnceLock::new();
     LOG.get_or_init(|| {
@@ -91,9 +94,19 @@ fn filtering_leaves_no_speed_or_acceleration_above_the_limits() {
     let log = wall_following();
     let lim = limits(log);
     let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
-    let f = filter_spikes(&path, &CALIBRATED, &lim, &FilterSettings::default()).unwrap();
+    let f = filter_spikes(
+        &path,
+        &CALIBRATED,
+        &lim,
+        PERIOD_S,
+        &FilterSettings::default(),
+    )
+    .unwrap();
     assert!(!f.spikes.is_empty(), "the bumps make spikes to remove");
     assert!(find_spikes(&f.samples, &f.commands, &lim).is_empty());
+    // Executable at the control period: no command held much longer.
+    let longest = twindrive_mission::spikes::longest_hold_s(&f.samples);
+    assert!(longest <= 3.0 * PERIOD_S, "held {longest} s");
     // Every command within the limits, checked directly.
     let mut previous = ([0.0f64; 2], 0.0f64);
     for (k, c) in f.commands.iter().enumerate() {
@@ -127,9 +140,10 @@ fn filtering_leaves_no_speed_or_acceleration_above_the_limits() {
         .fold(0.0, f64::max);
     assert!(worst < 0.01, "filtered plan departs by {worst} m");
     // The time-optimal re-timing of the same path is no slower.
-    let (fastest, commands) = time_optimal(&f.samples, &CALIBRATED, &lim).unwrap();
+    let (fastest, commands) = time_optimal(&f.samples, &CALIBRATED, &lim, PERIOD_S).unwrap();
     assert!(find_spikes(&fastest, &commands, &lim).is_empty());
     let t2 = fastest.last().unwrap().t_s;
+    assert!(twindrive_mission::spikes::longest_hold_s(&fastest) <= 3.0 * PERIOD_S);
     eprintln!(
         "mission {t0:.2} s, filtered {t1:.2} s ({} spikes, {} windows), time-optimal {t2:.2} s",
         f.spikes.len(),
@@ -158,7 +172,14 @@ fn bad_inputs_are_clear_errors() {
         max_speed_rad_s: 12.0,
         max_accel_rad_s2: 0.0,
     };
-    let err = filter_spikes(&path, &CALIBRATED, &zero, &FilterSettings::default()).unwrap_err();
+    let err = filter_spikes(
+        &path,
+        &CALIBRATED,
+        &zero,
+        PERIOD_S,
+        &FilterSettings::default(),
+    )
+    .unwrap_err();
     assert_eq!(
         err.to_string(),
         "max_wheel_accel_rad_s2 must be a finite number > 0, got 0"
@@ -192,7 +213,14 @@ fn closed_loop_tracking_reaches_the_goal_even_when_the_plan_ends_standing_still(
     let log = wall_following();
     let lim = limits(log);
     let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
-    let f = filter_spikes(&path, &CALIBRATED, &lim, &FilterSettings::default()).unwrap();
+    let f = filter_spikes(
+        &path,
+        &CALIBRATED,
+        &lim,
+        PERIOD_S,
+        &FilterSettings::default(),
+    )
+    .unwrap();
     let mut samples = plan_samples(&f.samples, &f.commands);
     // Two seconds of standing still at the end (a manual drive's last stop).
     let last = samples.last().unwrap().clone();
@@ -223,4 +251,51 @@ fn closed_loop_tracking_reaches_the_goal_even_when_the_plan_ends_standing_still(
     assert_eq!(r.collisions, 0, "{r:?}");
     assert!(r.mean_deviation_m < 0.01, "{r:?}");
     assert!(r.max_deviation_m < 0.15, "{r:?}");
+}
+
+#[test]
+fn closed_loop_tracking_corrects_a_sideways_start_error() {
+    let log = wall_following();
+    let lim = limits(log);
+    let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
+    let f = filter_spikes(
+        &path,
+        &CALIBRATED,
+        &lim,
+        PERIOD_S,
+        &FilterSettings::default(),
+    )
+    .unwrap();
+    let mut samples = plan_samples(&f.samples, &f.commands);
+    samples.truncate(2000); // the first 20 s
+    // The robot starts where the plan starts; the rest of the plan lies
+    // 3 cm to the side (the robot heads along -x there, so y is sideways).
+    for s in &mut samples[1..] {
+        s.y_m += 0.03;
+    }
+    let scenario = twindrive_sim::Scenario::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios/wall_following.toml"),
+    )
+    .unwrap();
+    let replay = twindrive_mission::verify::closed_loop(
+        &samples,
+        scenario,
+        &CALIBRATED,
+        &twindrive_mission::verify::TrackerSettings::default(),
+    )
+    .unwrap();
+    // Converged within the first few seconds and on track to the end.
+    let late: Vec<f64> = replay
+        .track
+        .iter()
+        .filter(|(t, _)| (5.0..15.0).contains(t))
+        .map(|(t, p)| {
+            let k = samples.partition_point(|s| s.t_s <= *t).max(1) - 1;
+            (p.x_m - samples[k].x_m).hypot(p.y_m - samples[k].y_m)
+        })
+        .collect();
+    let worst_late = late.iter().cloned().fold(0.0, f64::max);
+    assert!(worst_late < 0.01, "still {worst_late} m off after 5 s");
+    assert!(replay.report.final_error_m < 0.02, "{:?}", replay.report);
 }

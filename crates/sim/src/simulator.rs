@@ -319,6 +319,7 @@ impl Simulator {
         });
         let tracker = self.sense_tracker(t_ns);
 
+        let external_control = external.is_some();
         let mut cmd = match external {
             Some(control) => control(&Sensed {
                 t_ns,
@@ -356,7 +357,11 @@ impl Simulator {
         let (reached, blocked) = self.advance(cmd);
         out.record.wheel_rad_s = reached;
         out.blocked = blocked;
-        out.wall_mode = self.controller.wall_mode();
+        out.wall_mode = if external_control {
+            None
+        } else {
+            self.controller.wall_mode()
+        };
         self.step += 1;
         true
     }

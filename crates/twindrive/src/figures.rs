@@ -1,6 +1,7 @@
-//! The mission figures of `simulate`: the world with the driven path and bump
-//! points (paper Figs. 4 and 6a), wheel speeds and side-range readings over
-//! time (Fig. 5).
+//! The figures: those of `simulate` (the world with the driven path and bump
+//! points, paper Figs. 4 and 6a; wheel speeds and side-range readings over
+//! time, Fig. 5), of `calibrate` (each parameter with its ±3σ band, the
+//! innovations) and of `plan` (Figs. 7, 8a, 8b and 9).
 
 use std::path::Path;
 
@@ -356,11 +357,11 @@ pub fn plan_figures(
     }
     .write(&dir.join(format!("{stem}_filtered")))?;
 
+    // Every segment: thinning could drop the one-segment spikes this
+    // figure exists to show.
     let wheel = |p: &[PathSample], c: &[twindrive_mission::control::WheelCommand], w: usize| {
-        let k = stride(p.len());
         p.iter()
             .zip(c)
-            .step_by(k)
             .map(|(s, c)| (s.t_s, c.wheels()[w]))
             .collect::<Vec<_>>()
     };

@@ -26,12 +26,15 @@ fn s(p: &Path) -> &str {
 }
 
 /// The wall-following mission and a calib.json with the twin's true
-/// parameters (what calibration recovers to 0.01 %), made once.
-fn mission() -> &'static (tempfile::TempDir, PathBuf, PathBuf) {
-    static M: OnceLock<(tempfile::TempDir, PathBuf, PathBuf)> = OnceLock::new();
+/// parameters (what calibration recovers to 0.01 %), made once per run in
+/// cargo's scratch directory for tests (under `target/`).
+fn mission() -> &'static (PathBuf, PathBuf) {
+    static M: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     M.get_or_init(|| {
-        let tmp = tempfile::tempdir().unwrap();
-        let log = tmp.path().join("wf");
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("plan-test-mission");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("wf");
         let out = twindrive(&[
             "simulate",
             s(&repo().join("scenarios/wall_following.toml")),
@@ -39,18 +42,18 @@ fn mission() -> &'static (tempfile::TempDir, PathBuf, PathBuf) {
             s(&log),
         ]);
         assert!(out.status.success(), "{}", text(&out.stderr));
-        let calib = tmp.path().join("calib.json");
+        let calib = dir.join("calib.json");
         std::fs::write(
             &calib,
             r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678, "method": "smoother"}"#,
         )
         .unwrap();
-        (tmp, log, calib)
+        (log, calib)
     })
 }
 
 fn plan(out: &Path, extra: &[&str]) -> Output {
-    let (_, log, calib) = mission();
+    let (log, calib) = mission();
     let mut args = vec!["plan", s(log), "--calibration", s(calib), "--out", s(out)];
     args.extend_from_slice(extra);
     twindrive(&args)
@@ -96,7 +99,7 @@ fn the_case_study_plan_is_stable_and_verifies_without_collisions() {
         .as_array()
         .unwrap();
     assert!(doc["header"]["summary"]["kinks_removed"].as_u64().unwrap() >= 1);
-    let csv = std::fs::read_to_string(mission().1.join("log.csv")).unwrap();
+    let csv = std::fs::read_to_string(mission().0.join("log.csv")).unwrap();
     let mut lines = csv.lines();
     let cols: Vec<&str> = lines.next().unwrap().split(',').collect();
     let bump_col = cols.iter().position(|c| *c == "bump").unwrap();
@@ -193,7 +196,7 @@ fn plan_inputs_that_cannot_work_are_clear_errors_and_leave_no_files() {
     assert!(!out_dir.exists() || std::fs::read_dir(&out_dir).unwrap().next().is_none());
 
     // A log with its header but no steps.
-    let (_, log, calib) = mission();
+    let (log, calib) = mission();
     let empty = tmp.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
     std::fs::copy(log.join("log.meta.json"), empty.join("log.meta.json")).unwrap();

@@ -57,12 +57,17 @@ pub struct Job {
     pub time_optimal: bool,
 }
 
-/// SHA-256 of a log directory's two files.
+/// SHA-256 of a log directory's two files: each file's name, length and
+/// bytes, in order (so no two different pairs hash alike).
 pub fn log_dir_sha256(dir: &Path) -> anyhow::Result<String> {
     let mut bytes = Vec::new();
     for name in ["log.meta.json", "log.csv"] {
         let path = dir.join(name);
-        bytes.extend(std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?);
+        let content =
+            std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        bytes.extend_from_slice(name.as_bytes());
+        bytes.extend_from_slice(&(content.len() as u64).to_le_bytes());
+        bytes.extend(content);
     }
     Ok(sha256_hex(&bytes))
 }
@@ -130,7 +135,10 @@ pub fn make_plan(job: &Job) -> anyhow::Result<(MissionPlan, Stages)> {
     let mut model = SensorModel::new(&job.scenario);
     let mut ranges = vec![0.0; model.beams()];
     let (path, commands) = if job.time_optimal {
-        (&stages.fastest, &stages.fastest_commands)
+        let (p, c) = stages.fastest.as_ref().map_err(|e| {
+            anyhow::anyhow!("--time-optimal: the time-optimal re-timing failed: {e}")
+        })?;
+        (p, c)
     } else {
         (&stages.filtered.samples, &stages.filtered.commands)
     };
@@ -220,12 +228,18 @@ pub fn write_outputs(
         poses(&stages.executed),
         poses(&stages.cleaned),
         poses(&stages.filtered.samples),
-        poses(&stages.fastest),
+        stages
+            .fastest
+            .as_ref()
+            .map_or(Vec::new(), |(p, _)| poses(p)),
     );
     let (cleaned_w, filtered_w, fastest_w) = (
         wheels(&stages.cleaned, &stages.cleaned_commands),
         wheels(&stages.filtered.samples, &stages.filtered.commands),
-        wheels(&stages.fastest, &stages.fastest_commands),
+        stages
+            .fastest
+            .as_ref()
+            .map_or(Vec::new(), |(p, c)| wheels(p, c)),
     );
     staging.write_with(&format!("{stem}_stages.mcap"), |w| {
         twindrive_log::write_tracks_mcap(
@@ -279,10 +293,15 @@ pub fn print_summary(s: &StageSummary, plan: &MissionPlan, out: &Path) -> anyhow
         s.kinks_removed,
         s.cleaned_length_m
     )?;
+    let fastest = match (&s.time_optimal_duration_s, &s.time_optimal_error) {
+        (Some(t), _) => format!("time-optimal re-timing {t:.1} s"),
+        (None, Some(e)) => format!("no time-optimal re-timing: {e}"),
+        (None, None) => "no time-optimal re-timing".into(),
+    };
     writeln!(
         o,
-        "{} control spike(s) filtered in {} window(s): mission {:.1} s (time-optimal re-timing {:.1} s)",
-        s.spikes_found, s.filter_windows, s.filtered_duration_s, s.time_optimal_duration_s
+        "{} control spike(s) filtered in {} window(s): plan {:.2} m in {:.1} s ({fastest})",
+        s.spikes_found, s.filter_windows, s.filtered_length_m, s.filtered_duration_s
     )?;
     writeln!(
         o,

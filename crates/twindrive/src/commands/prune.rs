@@ -15,16 +15,20 @@ use crate::output::Staging;
 pub fn read_path(path: &Path) -> anyhow::Result<Vec<PathSample>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let first = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("");
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .skip_while(|(_, l)| l.trim().is_empty());
+    let first = lines.clone().next().map_or("", |(_, l)| l);
     let mut samples: Vec<PathSample> = Vec::new();
     if first.trim_start().starts_with('t') {
-        let mut lines = text.lines().enumerate();
-        let (_, header) = lines.next().expect("non-empty");
+        let (header_line, header) = lines.next().expect("a first line");
         let cols: Vec<&str> = header.split(',').map(str::trim).collect();
         if cols.len() < 4 || cols[..4] != ["t", "x", "y", "theta"] {
             bail!(
-                "{}, line 1: expected the header `t,x,y,theta`, found `{header}`",
-                path.display()
+                "{}, line {}: expected the header `t,x,y,theta`, found `{header}`",
+                path.display(),
+                header_line + 1
             );
         }
         for (i, line) in lines {
@@ -83,7 +87,8 @@ pub fn read_path(path: &Path) -> anyhow::Result<Vec<PathSample>> {
         let (s, c) = a.pose.heading_rad.sin_cos();
         let along = (b.pose.x_m - a.pose.x_m) * c + (b.pose.y_m - a.pose.y_m) * s;
         samples[k].v_m_s = along / dt;
-        samples[k].omega_rad_s = (b.pose.heading_rad - a.pose.heading_rad) / dt;
+        samples[k].omega_rad_s =
+            twindrive_kinematics::wrap_angle(b.pose.heading_rad - a.pose.heading_rad) / dt;
     }
     Ok(samples)
 }
@@ -124,7 +129,8 @@ pub fn run(
     })?;
     staging.commit()?;
     let count = |r: DeletionReason| pruned.deletions.iter().filter(|d| d.reason == r).count();
-    let removed_m: f64 = pruned.deletions.iter().map(|d| d.length_m).sum();
+    // `+ 0.0`: an empty sum is -0.0, which would print as "-0.00".
+    let removed_m: f64 = pruned.deletions.iter().map(|d| d.length_m).sum::<f64>() + 0.0;
     writeln!(
         std::io::stdout().lock(),
         "removed {} loop(s), {} crossing loop(s) and {} reversal kink(s) ({:.2} m of {:.2} m); kept {} of {} samples -> {}",
