@@ -150,6 +150,74 @@ fn object_schema(title: &str, props: serde_json::Value) -> Vec<u8> {
         .expect("static schema serialises")
 }
 
+/// A writer with the project's options: zstd chunks, no profile, the
+/// library named; no wall-clock time recorded.
+fn writer<W: Write + Seek>(out: W) -> mcap::McapResult<mcap::Writer<W>> {
+    mcap::WriteOptions::new()
+        .profile("")
+        .library(concat!("twindrive-log ", env!("CARGO_PKG_VERSION")))
+        .compression(Some(mcap::Compression::Zstd))
+        .create(out)
+}
+
+/// Writes a JSON metadata record `name` holding `{"json": json}`.
+fn write_json_metadata<W: Write + Seek>(
+    w: &mut mcap::Writer<W>,
+    name: &str,
+    json: String,
+) -> mcap::McapResult<()> {
+    w.write_metadata(&mcap::records::Metadata {
+        name: name.into(),
+        metadata: BTreeMap::from([("json".to_string(), json)]),
+    })
+}
+
+/// The `foxglove.PoseInFrame` schema (plus an exact `heading_rad`).
+fn add_pose_in_frame_schema<W: Write + Seek>(w: &mut mcap::Writer<W>) -> mcap::McapResult<u16> {
+    w.add_schema(
+        "foxglove.PoseInFrame",
+        "jsonschema",
+        &object_schema(
+            "foxglove.PoseInFrame",
+            json!({"frame_id": {"type": "string"}, "pose": pose_schema(), "heading_rad": {"type": "number"}}),
+        ),
+    )
+}
+
+/// Writes JSON messages with one running sequence number and one reused buffer.
+struct Emitter {
+    sequence: u32,
+    buf: Vec<u8>,
+}
+
+impl Emitter {
+    fn new() -> Self {
+        Self {
+            sequence: 0,
+            buf: Vec::with_capacity(1024),
+        }
+    }
+
+    fn emit<W: Write + Seek>(
+        &mut self,
+        w: &mut mcap::Writer<W>,
+        channel_id: u16,
+        t_ns: u64,
+        msg: &dyn erased::Json,
+    ) -> mcap::McapResult<()> {
+        self.buf.clear();
+        msg.write_json(&mut self.buf);
+        self.sequence = self.sequence.wrapping_add(1);
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: self.sequence,
+            log_time: t_ns,
+            publish_time: t_ns,
+        };
+        w.write_to_known_channel(&header, &self.buf)
+    }
+}
+
 struct Channels {
     ground_truth: u16,
     tracker: u16,
@@ -165,14 +233,7 @@ fn add_channels<W: Write + Seek>(
     header: &LogHeader,
 ) -> mcap::McapResult<Channels> {
     let none = BTreeMap::new();
-    let pose_in_frame = w.add_schema(
-        "foxglove.PoseInFrame",
-        "jsonschema",
-        &object_schema(
-            "foxglove.PoseInFrame",
-            json!({"frame_id": {"type": "string"}, "pose": pose_schema(), "heading_rad": {"type": "number"}}),
-        ),
-    )?;
+    let pose_in_frame = add_pose_in_frame_schema(w)?;
     let frame_transform = w.add_schema(
         "foxglove.FrameTransform",
         "jsonschema",
@@ -234,39 +295,19 @@ fn add_channels<W: Write + Seek>(
 /// Writes the log as MCAP (zstd-compressed chunks). No wall-clock time is
 /// recorded, so the same log gives the same bytes.
 pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap::McapError> {
-    let mut w = mcap::WriteOptions::new()
-        .profile("")
-        .library(concat!("twindrive-log ", env!("CARGO_PKG_VERSION")))
-        .compression(Some(mcap::Compression::Zstd))
-        .create(out)?;
+    let mut w = writer(out)?;
     let header_json = serde_json::to_string(&log.header).expect("header serialises");
-    w.write_metadata(&mcap::records::Metadata {
-        name: HEADER_METADATA.into(),
-        metadata: BTreeMap::from([("json".to_string(), header_json)]),
-    })?;
+    write_json_metadata(&mut w, HEADER_METADATA, header_json)?;
     let ch = add_channels(&mut w, &log.header)?;
     let per_step = log.beams_per_step();
     let offsets = log.beam_offsets();
-    let mut sequence = 0u32;
-    let mut buf = Vec::with_capacity(1024);
-    let mut emit = |w: &mut mcap::Writer<W>, channel_id: u16, t_ns: u64, msg: &dyn erased::Json| {
-        buf.clear();
-        msg.write_json(&mut buf);
-        sequence = sequence.wrapping_add(1);
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence,
-            log_time: t_ns,
-            publish_time: t_ns,
-        };
-        w.write_to_known_channel(&header, &buf)
-    };
+    let mut emitter = Emitter::new();
 
     for (k, s) in log.steps.iter().enumerate() {
         let t = s.t_ns;
         let stamp = Stamp::new(t);
         let gt = &s.ground_truth;
-        emit(
+        emitter.emit(
             &mut w,
             ch.ground_truth,
             t,
@@ -277,7 +318,7 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
                 heading_rad: gt.heading_rad,
             },
         )?;
-        emit(
+        emitter.emit(
             &mut w,
             ch.tf,
             t,
@@ -293,7 +334,7 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
                 rotation: yaw_quat(gt.heading_rad),
             },
         )?;
-        emit(
+        emitter.emit(
             &mut w,
             ch.wheels,
             t,
@@ -305,7 +346,7 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
                 right_rad_s: s.wheel_rad_s[1],
             },
         )?;
-        emit(
+        emitter.emit(
             &mut w,
             ch.bump,
             t,
@@ -315,7 +356,7 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
             },
         )?;
         if let Some([l, r]) = s.encoder_ticks {
-            emit(
+            emitter.emit(
                 &mut w,
                 ch.encoders,
                 t,
@@ -327,7 +368,7 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
             )?;
         }
         if let Some(p) = &s.tracker {
-            emit(
+            emitter.emit(
                 &mut w,
                 ch.tracker,
                 t,
@@ -346,7 +387,7 @@ pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap:
                 continue;
             }
             let (angle_min, inc) = sensor.angle_min_and_increment();
-            emit(
+            emitter.emit(
                 &mut w,
                 ch.ranges[i],
                 t,
@@ -385,26 +426,12 @@ pub fn write_tracks_mcap<W: Write + Seek>(
     metadata: &[(&str, String)],
     out: W,
 ) -> Result<(), mcap::McapError> {
-    let mut w = mcap::WriteOptions::new()
-        .profile("")
-        .library(concat!("twindrive-log ", env!("CARGO_PKG_VERSION")))
-        .compression(Some(mcap::Compression::Zstd))
-        .create(out)?;
+    let mut w = writer(out)?;
     for (name, json) in metadata {
-        w.write_metadata(&mcap::records::Metadata {
-            name: (*name).into(),
-            metadata: BTreeMap::from([("json".to_string(), json.clone())]),
-        })?;
+        write_json_metadata(&mut w, name, json.clone())?;
     }
     let none = BTreeMap::new();
-    let pose_in_frame = w.add_schema(
-        "foxglove.PoseInFrame",
-        "jsonschema",
-        &object_schema(
-            "foxglove.PoseInFrame",
-            json!({"frame_id": {"type": "string"}, "pose": pose_schema(), "heading_rad": {"type": "number"}}),
-        ),
-    )?;
+    let pose_in_frame = add_pose_in_frame_schema(&mut w)?;
     let num = json!({"type": "number"});
     let wheel_speeds = w.add_schema(
         "twindrive.WheelSpeeds",
@@ -420,20 +447,7 @@ pub fn write_tracks_mcap<W: Write + Seek>(
         left_rad_s: f64,
         right_rad_s: f64,
     }
-    let mut sequence = 0u32;
-    let mut buf = Vec::with_capacity(512);
-    let mut emit = |w: &mut mcap::Writer<W>, channel_id: u16, t_ns: u64, msg: &dyn erased::Json| {
-        buf.clear();
-        msg.write_json(&mut buf);
-        sequence = sequence.wrapping_add(1);
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence,
-            log_time: t_ns,
-            publish_time: t_ns,
-        };
-        w.write_to_known_channel(&header, &buf)
-    };
+    let mut emitter = Emitter::new();
     for track in tracks {
         let poses = w.add_channel(pose_in_frame, track.topic, "json", &none)?;
         for (t, p) in track.poses {
@@ -443,7 +457,7 @@ pub fn write_tracks_mcap<W: Write + Seek>(
                 pose: PoseMsg::planar(p),
                 heading_rad: p.heading_rad,
             };
-            emit(&mut w, poses, *t, &msg)?;
+            emitter.emit(&mut w, poses, *t, &msg)?;
         }
         if track.wheels.is_empty() {
             continue;
@@ -460,7 +474,7 @@ pub fn write_tracks_mcap<W: Write + Seek>(
                 left_rad_s: *l,
                 right_rad_s: *r,
             };
-            emit(&mut w, wheels, *t, &msg)?;
+            emitter.emit(&mut w, wheels, *t, &msg)?;
         }
     }
     w.finish()?;
