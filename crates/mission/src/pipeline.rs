@@ -12,7 +12,7 @@ use crate::path::{PathSample, path_length_m};
 use crate::planner::{PlannerSettings, executed_path};
 use crate::redundancy::{Pruned, RedundancyConfig, remove_redundancy};
 use crate::retime::WheelLimits;
-use crate::spikes::{FilterSettings, Filtered, Spike, filter_spikes, find_spikes, time_optimal};
+use crate::spikes::{FilterSettings, Filtered, filter_spikes, time_optimal};
 
 /// Every setting of the pipeline (the plan records them).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,9 +35,8 @@ pub struct Stages {
     /// one control period, as the deletion leaves it.
     pub cleaned: Vec<PathSample>,
     pub cleaned_commands: Vec<WheelCommand>,
-    /// The spikes of the cleaned path (the paper's Fig. 8a).
-    pub cleaned_spikes: Vec<Spike>,
-    /// The plan: spikes filtered (Fig. 8b).
+    /// The plan: spikes filtered (Fig. 8b); its `spikes` are those of the
+    /// cleaned path (Fig. 8a).
     pub filtered: Filtered,
     /// The same path as fast as the limits allow, or why not.
     pub fastest: Result<(Vec<PathSample>, Vec<WheelCommand>), PipelineError>,
@@ -89,7 +88,7 @@ impl Stages {
             loops_removed: self.pruned.deletions.len() - kinks,
             kinks_removed: kinks,
             cleaned_length_m: path_length_m(&self.cleaned),
-            spikes_found: self.cleaned_spikes.len(),
+            spikes_found: self.filtered.spikes.len(),
             filtered_length_m: path_length_m(&self.filtered.samples),
             filtered_duration_s: duration(&self.filtered.samples),
             filter_windows: self.filtered.windows.len(),
@@ -137,7 +136,6 @@ pub fn run(
     let pruned = remove_redundancy(&executed, &settings.redundancy)?;
     let mut cleaned = close_gaps(&executed, &pruned.kept, period_s);
     let cleaned_commands = recompute(&mut cleaned, params);
-    let cleaned_spikes = find_spikes(&cleaned, &cleaned_commands, limits);
     let filtered = filter_spikes(&cleaned, params, limits, period_s, &settings.filter)?;
     // The alternative must not cost the plan: its failure is reported.
     let fastest = time_optimal(&filtered.samples, params, limits, period_s);
@@ -146,7 +144,6 @@ pub fn run(
         pruned,
         cleaned,
         cleaned_commands,
-        cleaned_spikes,
         filtered,
         fastest,
         period_s,

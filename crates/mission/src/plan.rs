@@ -78,6 +78,28 @@ pub struct PlanSample {
 }
 
 impl PlanSample {
+    /// The step at a path sample driven with `command`, with the sensor
+    /// readings expected there.
+    pub fn new(
+        at: &crate::PathSample,
+        command: &crate::control::WheelCommand,
+        expected_ranges_m: Vec<f64>,
+        expected_bump: bool,
+    ) -> Self {
+        Self {
+            t_s: at.t_s,
+            x_m: at.pose.x_m,
+            y_m: at.pose.y_m,
+            heading_rad: at.pose.heading_rad,
+            v_m_s: command.v_m_s,
+            omega_rad_s: command.omega_rad_s,
+            left_rad_s: command.left_rad_s,
+            right_rad_s: command.right_rad_s,
+            expected_ranges_m,
+            expected_bump,
+        }
+    }
+
     pub fn pose(&self) -> Pose {
         Pose::new(self.x_m, self.y_m, self.heading_rad)
     }

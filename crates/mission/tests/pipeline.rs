@@ -21,14 +21,29 @@ const CALIBRATED: DiffDriveParams = DiffDriveParams {
 /// The wall-following log's encoder period (the control period of its plans).
 const PERIOD_S: f64 = 0.01;
 
+fn scenario() -> twindrive_sim::Scenario {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenarios/wall_following.toml");
+    twindrive_sim::Scenario::load(&path).expect("scenario loads")
+}
+
 fn wall_following() -> &'static MissionLog {
     static LOG: OnceLock<MissionLog> = OnceLock::new();
-    LOG.get_or_init(|| {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../scenarios/wall_following.toml");
-        let scenario = twindrive_sim::Scenario::load(&path).expect("scenario loads");
-        twindrive_sim::Simulator::new(scenario).run(|_, _| {})
-    })
+    LOG.get_or_init(|| twindrive_sim::Simulator::new(scenario()).run(|_, _| {}))
+}
+
+/// The mission's executed path with its spikes filtered (no redundancy removal).
+fn filtered() -> twindrive_mission::spikes::Filtered {
+    let log = wall_following();
+    let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
+    filter_spikes(
+        &path,
+        &CALIBRATED,
+        &limits(log),
+        PERIOD_S,
+        &FilterSettings::default(),
+    )
+    .unwrap()
 }
 
 fn limits(log: &MissionLog) -> WheelLimits {
@@ -94,14 +109,7 @@ fn filtering_leaves_no_speed_or_acceleration_above_the_limits() {
     let log = wall_following();
     let lim = limits(log);
     let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
-    let f = filter_spikes(
-        &path,
-        &CALIBRATED,
-        &lim,
-        PERIOD_S,
-        &FilterSettings::default(),
-    )
-    .unwrap();
+    let f = filtered();
     assert!(!f.spikes.is_empty(), "the bumps make spikes to remove");
     assert!(find_spikes(&f.samples, &f.commands, &lim).is_empty());
     // Executable at the control period: no command held much longer.
@@ -186,42 +194,19 @@ fn bad_inputs_are_clear_errors() {
     );
 }
 
-/// Plan samples from a filtered path (no sensor predictions).
-fn plan_samples(
-    path: &[twindrive_mission::PathSample],
-    commands: &[twindrive_mission::control::WheelCommand],
-) -> Vec<twindrive_mission::plan::PlanSample> {
-    path.iter()
-        .zip(commands)
-        .map(|(p, c)| twindrive_mission::plan::PlanSample {
-            t_s: p.t_s,
-            x_m: p.pose.x_m,
-            y_m: p.pose.y_m,
-            heading_rad: p.pose.heading_rad,
-            v_m_s: c.v_m_s,
-            omega_rad_s: c.omega_rad_s,
-            left_rad_s: c.left_rad_s,
-            right_rad_s: c.right_rad_s,
-            expected_ranges_m: Vec::new(),
-            expected_bump: false,
-        })
+/// Plan samples of the filtered mission (no sensor predictions).
+fn plan_samples() -> Vec<twindrive_mission::plan::PlanSample> {
+    let f = filtered();
+    f.samples
+        .iter()
+        .zip(&f.commands)
+        .map(|(p, c)| twindrive_mission::plan::PlanSample::new(p, c, Vec::new(), false))
         .collect()
 }
 
 #[test]
 fn closed_loop_tracking_reaches_the_goal_even_when_the_plan_ends_standing_still() {
-    let log = wall_following();
-    let lim = limits(log);
-    let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
-    let f = filter_spikes(
-        &path,
-        &CALIBRATED,
-        &lim,
-        PERIOD_S,
-        &FilterSettings::default(),
-    )
-    .unwrap();
-    let mut samples = plan_samples(&f.samples, &f.commands);
+    let mut samples = plan_samples();
     // Two seconds of standing still at the end (a manual drive's last stop).
     let last = samples.last().unwrap().clone();
     for k in 1..=200 {
@@ -230,13 +215,8 @@ fn closed_loop_tracking_reaches_the_goal_even_when_the_plan_ends_standing_still(
             ..last.clone()
         });
     }
-    let scenario = twindrive_sim::Scenario::load(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../scenarios/wall_following.toml"),
-    )
-    .unwrap();
     let settings = twindrive_mission::verify::TrackerSettings::default();
-    let r = twindrive_mission::verify::closed_loop(&samples, scenario, &CALIBRATED, &settings)
+    let r = twindrive_mission::verify::closed_loop(&samples, scenario(), &CALIBRATED, &settings)
         .unwrap()
         .report;
     let plan_duration = samples.last().unwrap().t_s - samples[0].t_s;
@@ -255,32 +235,16 @@ fn closed_loop_tracking_reaches_the_goal_even_when_the_plan_ends_standing_still(
 
 #[test]
 fn closed_loop_tracking_corrects_a_sideways_start_error() {
-    let log = wall_following();
-    let lim = limits(log);
-    let path = executed_path(log, &CALIBRATED, &PlannerSettings::default()).unwrap();
-    let f = filter_spikes(
-        &path,
-        &CALIBRATED,
-        &lim,
-        PERIOD_S,
-        &FilterSettings::default(),
-    )
-    .unwrap();
-    let mut samples = plan_samples(&f.samples, &f.commands);
+    let mut samples = plan_samples();
     samples.truncate(2000); // the first 20 s
     // The robot starts where the plan starts; the rest of the plan lies
     // 3 cm to the side (the robot heads along -x there, so y is sideways).
     for s in &mut samples[1..] {
         s.y_m += 0.03;
     }
-    let scenario = twindrive_sim::Scenario::load(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../scenarios/wall_following.toml"),
-    )
-    .unwrap();
     let replay = twindrive_mission::verify::closed_loop(
         &samples,
-        scenario,
+        scenario(),
         &CALIBRATED,
         &twindrive_mission::verify::TrackerSettings::default(),
     )

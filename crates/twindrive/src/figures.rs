@@ -317,7 +317,8 @@ pub fn plan_figures(
 
     let cleaned = xy(&stages.cleaned);
     let spikes: Vec<(f64, f64)> = stages
-        .cleaned_spikes
+        .filtered
+        .spikes
         .iter()
         .map(|s| cleaned[s.segment.min(cleaned.len() - 1)])
         .collect();

@@ -147,18 +147,7 @@ pub fn make_plan(job: &Job) -> anyhow::Result<(MissionPlan, Stages)> {
         .zip(commands)
         .map(|(p, c)| {
             let bump = model.read(&p.pose, &mut ranges);
-            PlanSample {
-                t_s: p.t_s,
-                x_m: p.pose.x_m,
-                y_m: p.pose.y_m,
-                heading_rad: p.pose.heading_rad,
-                v_m_s: c.v_m_s,
-                omega_rad_s: c.omega_rad_s,
-                left_rad_s: c.left_rad_s,
-                right_rad_s: c.right_rad_s,
-                expected_ranges_m: ranges.clone(),
-                expected_bump: bump,
-            }
+            PlanSample::new(p, c, ranges.clone(), bump)
         })
         .collect();
     let plan = MissionPlan::new(
