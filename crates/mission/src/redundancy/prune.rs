@@ -103,7 +103,11 @@ fn prune(
     let crit = Criteria::new(cfg);
     let input_length_m = track.cum_length_m.clone();
     let input_t_s = track.t_s.clone();
-    let record = |deletions: &mut Vec<Deletion>, track: &Track, cuts: &[Cut]| {
+    // Records the cuts, remembers their junctions and takes them out of the track.
+    let apply = |deletions: &mut Vec<Deletion>,
+                 junctions: &mut Vec<usize>,
+                 track: &mut Track,
+                 cuts: &[Cut]| {
         for &(i, j, reason) in cuts {
             let (a, b) = (track.input_index[i], track.input_index[j]);
             deletions.push(Deletion {
@@ -116,6 +120,8 @@ fn prune(
             });
         }
         merge_nested(deletions);
+        junctions.extend(cuts.iter().map(|c| track.input_index[c.0]));
+        *track = track.without(&spans(cuts));
     };
 
     // Input indices of the samples whose outgoing segment is a junction.
@@ -135,9 +141,7 @@ fn prune(
                     .collect(),
             );
             if !cuts.is_empty() {
-                record(&mut deletions, &track, &cuts);
-                junctions.extend(cuts.iter().map(|c| track.input_index[c.0]));
-                track = track.without(&spans(&cuts));
+                apply(&mut deletions, &mut junctions, &mut track, &cuts);
                 pinches_stale = true;
             }
         }
@@ -177,9 +181,7 @@ fn prune(
                 );
             }
             if !cuts.is_empty() {
-                record(&mut deletions, &track, &cuts);
-                junctions.extend(cuts.iter().map(|c| track.input_index[c.0]));
-                track = track.without(&spans(&cuts));
+                apply(&mut deletions, &mut junctions, &mut track, &cuts);
                 pinches_stale = true;
                 kinks_stale = cfg.reversing_is_redundant;
             }
