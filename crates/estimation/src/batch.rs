@@ -10,9 +10,9 @@
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
-use twindrive_kinematics::{StateVec, step_with_jacobian, wrap_angle};
+use twindrive_kinematics::{StateVec, Transition, step_with_jacobian, wrap_angle};
 
-use crate::covariance::Transition;
+use crate::covariance::chain;
 use crate::dead_reckoning::wheel_angles_at;
 use crate::ekf::NoiseModel;
 use crate::online::{CalibrationError, PoseSample, WheelSample};
@@ -216,8 +216,8 @@ fn window_terms(
         at = next;
         let (stepped, step) = step_with_jacobian(&state, l, r);
         state = stepped;
-        jac = jac.then(&Transition::from_step(&step));
-        let (a, b) = (step.heading_to_x, step.heading_to_y);
+        jac = chain(&jac, &step.state);
+        let (a, b) = (step.state.heading_to_x, step.state.heading_to_y);
         // A C Aᵀ: rows/columns 0 and 1 pick up a, b times row/column 2.
         let c = odo_cov;
         let c02 = c[0][2] + a * c[2][2];

@@ -14,7 +14,7 @@
 
 use std::ops::Index;
 
-use twindrive_kinematics::{Mat6, StateVec, StepJacobian};
+use twindrive_kinematics::{Mat6, StateVec, Transition};
 use wide::{f64x2, f64x4};
 
 use crate::ekf::StateAndCovariance;
@@ -128,75 +128,36 @@ pub(crate) fn mirror_lower(c: &mut [Col; 6]) {
     c[5][4] = c[4][5];
 }
 
-/// The Jacobian of one arc step or of a chain of them with respect to the
-/// state: `[[A, B], [0, I]]` with `A = [[1, 0, heading_to_x], [0, 1,
-/// heading_to_y], [0, 0, 1]]` and `B = params` (rows x, y, θ; columns dL, dR,
-/// b). Products of such matrices keep the form, so a chain is 11 numbers.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Transition {
-    pub heading_to_x: f64,
-    pub heading_to_y: f64,
-    pub params: [[f64; 3]; 3],
+/// The Jacobian of a chain followed by `next`: `F_next · F_first` (both
+/// [`Transition`]s, the product one too).
+#[inline]
+pub fn chain(first: &Transition, next: &Transition) -> Transition {
+    // [[An, Bn], [0, I]] [[As, Bs], [0, I]] = [[An As, An Bs + Bn], [0, I]];
+    // the heading couplings of An As add up.
+    let (s, n) = (&first.params, &next.params);
+    let row = |i: usize, coupling: f64| -> [f64; 3] {
+        std::array::from_fn(|k| fma(coupling, s[2][k], s[i][k]) + n[i][k])
+    };
+    Transition {
+        heading_to_x: first.heading_to_x + next.heading_to_x,
+        heading_to_y: first.heading_to_y + next.heading_to_y,
+        params: [
+            row(0, next.heading_to_x),
+            row(1, next.heading_to_y),
+            row(2, 0.0),
+        ],
+    }
 }
 
-impl Transition {
-    pub const IDENTITY: Transition = Transition {
-        heading_to_x: 0.0,
-        heading_to_y: 0.0,
-        params: [[0.0; 3]; 3],
-    };
-
-    pub fn from_step(j: &StepJacobian) -> Self {
-        Self {
-            heading_to_x: j.heading_to_x,
-            heading_to_y: j.heading_to_y,
-            params: j.params,
-        }
-    }
-
-    /// The Jacobian of this chain followed by `next`: `F_next · F_self`.
-    #[inline]
-    pub fn then(&self, next: &Transition) -> Transition {
-        // [[An, Bn], [0, I]] [[As, Bs], [0, I]] = [[An As, An Bs + Bn], [0, I]];
-        // the heading couplings of An As add up.
-        let (s, n) = (&self.params, &next.params);
-        let row = |i: usize, coupling: f64| -> [f64; 3] {
-            std::array::from_fn(|k| fma(coupling, s[2][k], s[i][k]) + n[i][k])
-        };
-        Transition {
-            heading_to_x: self.heading_to_x + next.heading_to_x,
-            heading_to_y: self.heading_to_y + next.heading_to_y,
-            params: [
-                row(0, next.heading_to_x),
-                row(1, next.heading_to_y),
-                row(2, 0.0),
-            ],
-        }
-    }
-
-    /// The dense 6x6 matrix.
-    pub fn state_matrix(&self) -> Mat6 {
-        let mut f = Mat6::identity();
-        f[(0, 2)] = self.heading_to_x;
-        f[(1, 2)] = self.heading_to_y;
-        for (i, row) in self.params.iter().enumerate() {
-            for (k, v) in row.iter().enumerate() {
-                f[(i, 3 + k)] = *v;
-            }
-        }
-        f
-    }
-
-    /// Pose row `i` of `F` applied to the column `v`: `(F v)_i`.
-    #[inline(always)]
-    fn pose_row_times(&self, i: usize, v: &Col) -> f64 {
-        let coupling = [self.heading_to_x, self.heading_to_y, 0.0][i];
-        let b = &self.params[i];
-        let mut acc = fma(coupling, v[2], v[i]);
-        acc = fma(b[0], v[3], acc);
-        acc = fma(b[1], v[4], acc);
-        fma(b[2], v[5], acc)
-    }
+/// Pose row `i` of `F` applied to the column `v`: `(F v)_i`.
+#[inline(always)]
+fn pose_row_times(f: &Transition, i: usize, v: &Col) -> f64 {
+    let coupling = [f.heading_to_x, f.heading_to_y, 0.0][i];
+    let b = &f.params[i];
+    let mut acc = fma(coupling, v[2], v[i]);
+    acc = fma(b[0], v[3], acc);
+    acc = fma(b[1], v[4], acc);
+    fma(b[2], v[5], acc)
 }
 
 /// Columns 0..3 of `P Fᵀ`; for symmetric `P` these are also the pose rows
@@ -222,7 +183,7 @@ pub(crate) fn propagate(p: &mut Mat6, f: &Transition) {
     // With W = P Fᵀ, F P Fᵀ = F W. Rows 3..6 of F are [0 I], so the
     // parameter rows of F W are those of W; by symmetry its pose-parameter
     // block is Wᵀ's; only the pose block needs the pose rows of F.
-    let row = |i: usize, j: usize| f.pose_row_times(i, &w[j]);
+    let row = |i: usize, j: usize| pose_row_times(f, i, &w[j]);
     let (b00, b10, b20) = (row(0, 0), row(1, 0), row(2, 0));
     let (b11, b21, b22) = (row(1, 1), row(2, 1), row(2, 2));
     let block = [[b00, b10, b20], [b10, b11, b21], [b20, b21, b22]];
@@ -423,7 +384,7 @@ mod tests {
     use nalgebra::SMatrix;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use twindrive_kinematics::step_with_jacobian;
+    use twindrive_kinematics::{StepJacobian, step_with_jacobian};
 
     fn random_spd(rng: &mut ChaCha8Rng) -> Mat6 {
         let m = Mat6::from_fn(|_, _| rng.random_range(-1.0..1.0));
@@ -457,7 +418,7 @@ mod tests {
             let j = random_step(&mut rng);
             let f = j.state_matrix();
             let mut fast = p;
-            propagate(&mut fast, &Transition::from_step(&j));
+            propagate(&mut fast, &j.state);
             assert!((fast - f * p * f.transpose()).abs().max() < 1e-12);
             assert_symmetric(&fast);
 
@@ -473,13 +434,13 @@ mod tests {
     #[test]
     fn chained_transitions_are_matrix_products() {
         let mut rng = ChaCha8Rng::seed_from_u64(2);
-        let mut chain = Transition::IDENTITY;
+        let mut chained = Transition::IDENTITY;
         let mut dense = Mat6::identity();
         for _ in 0..20 {
-            let step = Transition::from_step(&random_step(&mut rng));
-            chain = chain.then(&step);
+            let step = random_step(&mut rng).state;
+            chained = chain(&chained, &step);
             dense = step.state_matrix() * dense;
-            assert!((chain.state_matrix() - dense).abs().max() < 1e-12);
+            assert!((chained.state_matrix() - dense).abs().max() < 1e-12);
         }
     }
 

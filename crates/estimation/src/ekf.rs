@@ -12,10 +12,10 @@
 
 use nalgebra::SMatrix;
 use serde::{Deserialize, Serialize};
-use twindrive_kinematics::{Mat6, StateVec, step_with_jacobian, wrap_angle};
+use twindrive_kinematics::{Mat6, StateVec, Transition, step_with_jacobian, wrap_angle};
 
 use crate::covariance::{
-    Col, Lanes, Transition, add_wheel_noise, gain, joseph_update, propagate, symmetric_inverse,
+    Col, Lanes, add_wheel_noise, gain, joseph_update, propagate, symmetric_inverse,
 };
 
 /// The estimate: mean and covariance (the filter's contract).
@@ -192,7 +192,7 @@ impl AugmentedEkf {
         self.est.state = next;
         let q_left = self.noise.wheel_rad2_per_rad * left_rad.abs() + self.noise.wheel_floor_rad2;
         let q_right = self.noise.wheel_rad2_per_rad * right_rad.abs() + self.noise.wheel_floor_rad2;
-        let f = Transition::from_step(&jac);
+        let f = jac.state;
         let p = &mut self.est.covariance;
         propagate(p, &f);
         add_wheel_noise(p, &jac.wheels, [q_left, q_right]);

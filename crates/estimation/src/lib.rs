@@ -23,7 +23,7 @@ mod offline;
 mod online;
 mod smoother;
 
-pub use covariance::{PackedCovariance, PackedEstimate, Transition};
+pub use covariance::{PackedCovariance, PackedEstimate, chain};
 pub use ekf::{
     AugmentedEkf, FilterError, FilterStats, GateConfig, NoiseModel, StateAndCovariance,
     UpdateOutcome, chi2_quantile, nees,
@@ -34,4 +34,4 @@ pub use online::{
     PoseSample, WheelSample, initial_estimate,
 };
 pub use smoother::rts_smooth;
-pub use twindrive_kinematics::{AugmentedState, Mat6, StateVec};
+pub use twindrive_kinematics::{AugmentedState, Mat6, StateVec, Transition};

@@ -11,7 +11,9 @@ use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 use twindrive_kinematics::{Mat6, StateVec};
 
-use crate::covariance::{PackedEstimate, Transition};
+use twindrive_kinematics::Transition;
+
+use crate::covariance::{PackedEstimate, chain};
 use crate::ekf::{
     AugmentedEkf, FilterError, FilterStats, GateConfig, NoiseModel, StateAndCovariance,
     UpdateOutcome,
@@ -269,7 +271,7 @@ impl OnlineCalibrator {
             dt,
         );
         if self.history.is_some() {
-            self.transition = self.transition.then(&f);
+            self.transition = chain(&self.transition, &f);
         }
         self.t_s = to.t_s;
     }

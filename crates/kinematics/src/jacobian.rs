@@ -63,27 +63,29 @@ pub fn step_augmented(state: &StateVec, left_rad: f64, right_rad: f64) -> StateV
     next
 }
 
-/// The Jacobians of one arc step, by blocks (rows x, y, θ).
-///
-/// With respect to the state, `∂f/∂[x, y, θ, dL, dR, b] = [[A, B], [0, I]]`
-/// with `A = [[1, 0, heading_to_x], [0, 1, heading_to_y], [0, 0, 1]]` and
-/// `B = params`. With respect to the wheel rotations only the pose rows are
-/// non-zero: `wheels`. Filters use the blocks directly; the dense matrices
-/// are there for reference and tests.
+/// The state Jacobian of one arc step or of a chain of them, by blocks:
+/// `[[A, B], [0, I]]` with `A = [[1, 0, heading_to_x], [0, 1,
+/// heading_to_y], [0, 0, 1]]` and `B = params` (rows x, y, θ; columns dL,
+/// dR, b). Products of such matrices keep the form, so a chain is these 11
+/// numbers too.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StepJacobian {
+pub struct Transition {
     /// ∂x'/∂θ.
     pub heading_to_x: f64,
     /// ∂y'/∂θ.
     pub heading_to_y: f64,
     /// ∂(x', y', θ')/∂(dL, dR, b).
     pub params: [[f64; 3]; 3],
-    /// ∂(x', y', θ')/∂(left_rad, right_rad).
-    pub wheels: [[f64; 2]; 3],
 }
 
-impl StepJacobian {
-    /// The dense 6x6 state Jacobian.
+impl Transition {
+    pub const IDENTITY: Transition = Transition {
+        heading_to_x: 0.0,
+        heading_to_y: 0.0,
+        params: [[0.0; 3]; 3],
+    };
+
+    /// The dense 6x6 matrix.
     pub fn state_matrix(&self) -> Mat6 {
         let mut f = Mat6::identity();
         f[(0, 2)] = self.heading_to_x;
@@ -94,6 +96,24 @@ impl StepJacobian {
             }
         }
         f
+    }
+}
+
+/// The Jacobians of one arc step, by blocks (rows x, y, θ): with respect to
+/// the state, `state`; with respect to the wheel rotations only the pose rows
+/// are non-zero, `wheels`. Filters use the blocks directly; the dense
+/// matrices are there for reference and tests.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepJacobian {
+    pub state: Transition,
+    /// ∂(x', y', θ')/∂(left_rad, right_rad).
+    pub wheels: [[f64; 2]; 3],
+}
+
+impl StepJacobian {
+    /// The dense 6x6 state Jacobian.
+    pub fn state_matrix(&self) -> Mat6 {
+        self.state.state_matrix()
     }
 
     /// The dense 6x2 wheel-rotation Jacobian.
@@ -172,9 +192,11 @@ fn jacobian_from_terms(
         column(0.25 * dr, 0.25 * dr * inv_b),
     ];
     StepJacobian {
-        heading_to_x: -t.chord * t.sin_mid,
-        heading_to_y: t.chord * t.cos_mid,
-        params: std::array::from_fn(|i| [p[0][i], p[1][i], p[2][i]]),
+        state: Transition {
+            heading_to_x: -t.chord * t.sin_mid,
+            heading_to_y: t.chord * t.cos_mid,
+            params: std::array::from_fn(|i| [p[0][i], p[1][i], p[2][i]]),
+        },
         wheels: std::array::from_fn(|i| [w[0][i], w[1][i]]),
     }
 }

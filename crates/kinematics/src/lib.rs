@@ -17,8 +17,8 @@ pub use arc::{
 };
 pub use inverse::{body_velocity, wheel_speeds};
 pub use jacobian::{
-    AugmentedState, Mat6, Mat6x2, StateVec, StepJacobian, step_augmented, step_jacobians,
-    step_with_jacobian, step_with_jacobians,
+    AugmentedState, Mat6, Mat6x2, StateVec, StepJacobian, Transition, step_augmented,
+    step_jacobians, step_with_jacobian, step_with_jacobians,
 };
 pub use params::{DiffDriveParams, EncoderSpec, ParamError};
 
