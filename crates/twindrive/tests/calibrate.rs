@@ -1,8 +1,12 @@
 //! `twindrive calibrate` end to end: simulator logs, generic CSVs with an
 //! unknown clock offset, the degenerate-drive warning and bad input.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::{repo, text, twindrive};
 
 const TRUTH: [f64; 3] = [0.0652, 0.0665, 0.2678];
 const SIM_NOISE: [&str; 6] = [
@@ -13,22 +17,6 @@ const SIM_NOISE: [&str; 6] = [
     "--wheel-noise",
     "1e-6",
 ];
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn twindrive(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twindrive"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("runs")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 fn simulate(scenario: &Path, out: &Path, duration: &str) {
     let o = twindrive(&[

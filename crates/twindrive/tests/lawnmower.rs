@@ -6,8 +6,9 @@
 //! `cargo test --release -p twindrive --test lawnmower -- --nocapture` prints
 //! the tables in README. Skips (with a message) if `../shared/data` is absent.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use twindrive_estimation::evaluation::{
     WindowError, dead_reckoning_windows, mean, reference_track,
@@ -78,15 +79,8 @@ fn calibrate(enc: &Path, pose: &Path, out: &Path, extra: &[&str]) -> serde_json:
     ];
     args.extend_from_slice(&FILTER_ARGS);
     args.extend_from_slice(extra);
-    let run = Command::new(env!("CARGO_BIN_EXE_twindrive"))
-        .args(&args)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let run = common::twindrive(&args);
+    assert!(run.status.success(), "{}", common::text(&run.stderr));
     serde_json::from_slice(&std::fs::read(out).unwrap()).unwrap()
 }
 

@@ -1,25 +1,13 @@
 //! `plan`, `verify-plan` and `prune` end to end: the case study, determinism
 //! and bad input.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::{repo, text, twindrive};
 use std::sync::OnceLock;
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn twindrive(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twindrive"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("twindrive runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
