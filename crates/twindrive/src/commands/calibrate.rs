@@ -10,8 +10,8 @@ use serde::Serialize;
 use twindrive_estimation::batch::{self, BatchConfig, Identifiability};
 use twindrive_estimation::dead_reckoning::dead_reckon;
 use twindrive_estimation::{
-    FilterConfig, FilterHistory, PackedEstimate, PoseSample, StateAndCovariance, WheelSample,
-    clock, run_filter, smooth,
+    FilterConfig, FilterHistory, PackedEstimate, PoseSample, StateVec, WheelSample, clock,
+    run_filter, smooth,
 };
 use twindrive_kinematics::{DiffDriveParams, Pose};
 
@@ -132,7 +132,7 @@ impl Artefacts {
             .iter()
             .zip(&h.filtered)
             .map(|(t, s)| {
-                let (v, sd) = params_of(s);
+                let (v, sd) = params_of(&s.state, |i| s.std(i));
                 (*t, v, sd)
             })
             .collect()
@@ -157,11 +157,10 @@ impl Artefacts {
     }
 }
 
-fn params_of(s: &PackedEstimate) -> ([f64; 3], [f64; 3]) {
-    (
-        [s.state[3], s.state[4], s.state[5]],
-        [3, 4, 5].map(|i| s.std(i)),
-    )
+/// [dL, dR, b] and their standard deviations from a state and the
+/// standard deviation of each of its components.
+fn params_of(state: &StateVec, std: impl Fn(usize) -> f64) -> ([f64; 3], [f64; 3]) {
+    ([state[3], state[4], state[5]], [3, 4, 5].map(std))
 }
 
 /// Runs a calibration. `progress(done, total)` follows the filter.
@@ -271,14 +270,14 @@ pub fn calibrate(
         batch_iterations = b.iterations,
         "filter, smoother and batch"
     );
-    let (ekf, ekf_std) = params_of(&PackedEstimate::pack(&StateAndCovariance {
-        state: run.estimate.state,
-        covariance: run.estimate.covariance,
-    }));
+    let (ekf, ekf_std) = params_of(&run.estimate.state, |i| run.estimate.std(i));
 
     let (params, std) = match job.method {
         Method::Batch => (b.params, b.std),
-        _ => params_of(nodes.last().expect("one node at least")),
+        _ => {
+            let last = nodes.last().expect("one node at least");
+            params_of(&last.state, |i| last.std(i))
+        }
     };
     let max_relative_difference = (0..3)
         .map(|i| (ekf[i] / b.params[i] - 1.0).abs())

@@ -129,8 +129,8 @@ pub fn run(
     })?;
     staging.commit()?;
     let count = |r: DeletionReason| pruned.deletions.iter().filter(|d| d.reason == r).count();
-    // `+ 0.0`: an empty sum is -0.0, which would print as "-0.00".
-    let removed_m: f64 = pruned.deletions.iter().map(|d| d.length_m).sum::<f64>() + 0.0;
+    // From +0.0: an empty float sum is -0.0, which would print as "-0.00".
+    let removed_m = pruned.deletions.iter().fold(0.0, |a, d| a + d.length_m);
     writeln!(
         std::io::stdout().lock(),
         "removed {} loop(s), {} crossing loop(s) and {} reversal kink(s) ({:.2} m of {:.2} m); kept {} of {} samples -> {}",
