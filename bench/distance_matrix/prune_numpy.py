@@ -12,15 +12,24 @@ floating-point operations so that both sides agree to the bit:
   (j-1, j) meet (closed segments, bounding boxes first, then orientations);
   cum[j] - cum[i] >= min loop length (cum: running sum of
   sqrt(dx^2 + dy^2)), t[j] - t[i] >= min loop duration, and no protected
-  sample strictly between (protected: first, last, keep regions and windows,
-  reversing samples when reversing is not redundant). Only the farthest j of
-  each i is reported; Near wins ties.
+  sample strictly between (protected: first, last with keep_end, keep
+  regions and windows, reversing samples when reversing is not redundant).
+  Only the farthest j of each i is reported; Near wins ties.
 - kinks: a maximal run of v < 0 samples; e = the sample after it (the last
   if the path ends reversing); k = the sample before the run nearest to e,
   looking back over the reversed length plus the pinch distance, not before
   the last protected sample; cut (k, e) if closer than the pinch distance.
-- removal: rounds of (kinks, then pinches), each cut outermost first
-  (earliest start, farthest end, go on from there), until nothing changes.
+- coverage: a sample is covered by a piece of path (segment or point) when
+  its squared distance to it, computed as geometry::segment_distance2 does,
+  is at most the squared coverage radius (default: the pinch distance).
+- removal: one sweep. At each kept sample i: past the last new ground and
+  the last protected sample (and without keep_end), if the kept path up to
+  i covers every later sample, the rest goes; else the kink from i, or the
+  farthest pinch from i, is cut if the kept path up to i covers every
+  sample it deletes, or else the farthest cut that ends at or before the
+  first sample it would not cover; a pinch that is little more than a kink
+  (the path it cuts around the kink is shorter than the min loop length)
+  waits for the kink. Then on from the cut's end.
 
 The matrix is computed in blocks of rows (all columns; 64 rows was the
 fastest here): the same n x n distances, in a bounded working set (the
@@ -82,6 +91,8 @@ def criteria(cfg):
         "L": 3.0 * d if loop is None else float(loop),
         "D": float(cfg.get("min_loop_duration_s", 0.0)),
         "reversing_is_redundant": bool(cfg.get("reversing_is_redundant", True)),
+        "r2": (d if cfg.get("coverage_radius_m") is None else float(cfg["coverage_radius_m"])) ** 2,
+        "keep_end": bool(cfg.get("keep_end", False)),
     }
 
 
@@ -106,7 +117,8 @@ def track_from(samples, cfg, crit):
     if not crit["reversing_is_redundant"]:
         protected |= reversing
     if n:
-        protected[0] = protected[-1] = True
+        protected[0] = True
+        protected[-1] |= crit["keep_end"]
     return Track(x, y, t, reversing, protected, np.arange(n))
 
 
@@ -257,34 +269,181 @@ def kinks(tr, crit):
     return out
 
 
-def outermost(candidates):
-    candidates.sort(key=lambda c: (c[0], -c[1]))
-    cuts, start = [], 0
-    for c in candidates:
-        if c[0] >= start:
-            start = c[1]
-            cuts.append(c)
-    return cuts
+def segment_distance2(sx, sy, px, py, qx, qy):
+    """Vectorised twin of geometry::segment_distance2 (same operations)."""
+    sx, sy, px, py, qx, qy = (np.asarray(v, dtype=np.float64) for v in (sx, sy, px, py, qx, qy))
+    dx, dy = qx - px, qy - py
+    ex, ey = sx - px, sy - py
+    dot = ex * dx + ey * dy
+    length2 = dx * dx + dy * dy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = dot / length2
+        fx, fy = ex - t * dx, ey - t * dy
+        middle = fx * fx + fy * fy
+    gx, gy = sx - qx, sy - qy
+    return np.where(dot <= 0.0, ex * ex + ey * ey, np.where(dot >= length2, gx * gx + gy * gy, middle))
+
+
+class Sweep:
+    """The removal sweep over the whole path, testing coverage against every piece."""
+
+    def __init__(self, tr, crit, block_rows, clock):
+        self.tr, self.crit, self.block_rows, self.clock = tr, crit, block_rows, clock
+        n = len(tr)
+        self.kept = np.ones(n, dtype=bool)
+        self.lo, self.hi = loop_starts(tr, crit), next_protected(tr)
+        self.sx0 = np.concatenate([[tr.x[0]], tr.x[:-1]]) if n else tr.x
+        self.sy0 = np.concatenate([[tr.y[0]], tr.y[:-1]]) if n else tr.y
+
+    # -- pieces of path
+    def kept_pieces(self, i):
+        """Segments (a, a+1) and points a of the kept path up to i: (p, q) arrays."""
+        x, y, kept = self.tr.x, self.tr.y, self.kept
+        a = np.nonzero(kept[: i + 1])[0]
+        seg = np.zeros(len(a), dtype=bool)
+        inner = a < i
+        seg[inner] = kept[a[inner] + 1]
+        b = np.where(seg, a + 1, a)
+        return x[a], y[a], x[b], y[b]
+
+    def prefix_pieces(self, lo, hi, last):
+        """Pieces a in lo..=hi of the whole path, segments up to `last`."""
+        x, y = self.tr.x, self.tr.y
+        a = np.arange(lo, hi + 1)
+        b = np.where(a < last, a + 1, a)
+        return x[a], y[a], x[b], y[b]
+
+    def within(self, s, pieces):
+        px, py, qx, qy = pieces
+        if len(px) == 0:
+            return False
+        d2 = segment_distance2(self.tr.x[s], self.tr.y[s], px, py, qx, qy)
+        return bool((d2 <= self.crit["r2"]).any())
+
+    def first_uncovered(self, i, end):
+        pieces = self.kept_pieces(i)
+        for s in range(i + 1, end):
+            if not self.within(s, pieces):
+                return s
+        return None
+
+    def would_drop_m(self, i, j):
+        n = len(self.tr)
+        before, after = self.kept_pieces(i), self.prefix_pieces(j, n - 1, n - 1)
+        flags = [s != i and s != j and not (self.within(s, before) or self.within(s, after)) for s in range(i, j + 1)]
+        cum, total = self.tr.cum, 0.0
+        for a in range(1, len(flags)):
+            ends = int(flags[a - 1]) + int(flags[a])
+            if ends:
+                total += 0.5 * ends * (cum[i + a] - cum[i + a - 1])
+        return total
+
+    def last_new_sample(self):
+        x, y, r2 = self.tr.x, self.tr.y, self.crit["r2"]
+        n = len(self.tr)
+        s = n
+        while s > 0:
+            s -= 1
+            if s + 1 < n and x[s] == x[s + 1] and y[s] == y[s + 1]:
+                continue
+            before = s
+            left = None
+            while before > 0:
+                before -= 1
+                dx, dy = x[before] - x[s], y[before] - y[s]
+                if dx * dx + dy * dy > r2:
+                    left = before
+                    break
+            if left is None or not self.within(s, self.prefix_pieces(0, left, left)):
+                return s
+        return 0
+
+    # -- the finder, one sample at a time (one row of the matrix)
+    def farthest(self, i, hi):
+        tr, crit = self.tr, self.crit
+        n = len(tr)
+        lo = int(self.lo[i])
+        hi = min(hi, n - 1)
+        if i + 2 >= n or lo > hi:
+            return None
+        x, y = tr.x, tr.y
+        start = time.perf_counter()
+        J = np.arange(lo, hi + 1)
+        dx, dy = x[i] - x[J], y[i] - y[J]
+        near = J[dx * dx + dy * dy < crit["d2"]]
+        near_j = int(near.max()) if len(near) else -1
+        middle = time.perf_counter()
+        C = J[(J >= i + 3) & (J > near_j)]
+        cross_j = -1
+        if len(C):
+            a = i + 1
+            box = boxes_overlap(x[i], y[i], x[a], y[a], self.sx0[C], self.sy0[C], x[C], y[C])
+            C = C[box]
+            meet = segments_meet(x[i], y[i], x[a], y[a], self.sx0[C], self.sy0[C], x[C], y[C])
+            if meet.any():
+                cross_j = int(C[meet].max())
+        self.clock["distance_s"] += middle - start
+        self.clock["crossing_s"] += time.perf_counter() - middle
+        if cross_j > near_j:
+            return cross_j, "crossing"
+        if near_j >= 0:
+            return near_j, "loop"
+        return None
+
+    def run(self):
+        tr, crit = self.tr, self.crit
+        n = len(tr)
+        if n < 3:
+            return list(range(n))
+        kink_end = [0] * n
+        if crit["reversing_is_redundant"]:
+            for k, e in kinks(tr, crit):
+                kink_end[k] = max(kink_end[k], e)
+        next_kink = [n] * n
+        for k in range(n - 2, -1, -1):
+            next_kink[k] = k + 1 if kink_end[k + 1] else next_kink[k + 1]
+        cum = tr.cum.tolist()
+
+        def candidate(i, hi):
+            if kink_end[i] and kink_end[i] <= hi:
+                return kink_end[i], "reversal"
+            return self.farthest(i, hi)
+
+        def swallows_a_kink(i, j):
+            k = next_kink[i]
+            return k < j and kink_end[k] <= j and (cum[k] - cum[i]) + (cum[j] - cum[kink_end[k]]) < crit["L"]
+
+        truncate_from = None
+        if not crit["keep_end"]:
+            last_protected = int(np.nonzero(tr.protected)[0].max())
+            truncate_from = max(self.last_new_sample(), last_protected)
+        i = 0
+        while i + 1 < n:
+            if truncate_from is not None and i >= truncate_from and self.first_uncovered(i, n) is None:
+                self.kept[i + 1 :] = False
+                break
+            hi = int(self.hi[i])
+            chosen = None
+            c = candidate(i, hi)
+            if c is not None:
+                u = self.first_uncovered(i, c[0])
+                if u is None:
+                    chosen = c
+                else:
+                    chosen = candidate(i, min(hi, u))
+            if chosen is not None and chosen[1] != "reversal" and swallows_a_kink(i, chosen[0]):
+                i += 1
+            elif chosen is not None:
+                self.kept[i + 1 : chosen[0]] = False
+                i = chosen[0]
+            else:
+                i += 1
+        return np.nonzero(self.kept)[0].tolist()
 
 
 def remove_redundancy(tr, crit, block_rows, clock):
-    """Indices of the samples kept; every round searches the whole path."""
-    kinks_stale, pinches_stale = crit["reversing_is_redundant"], True
-    while kinks_stale or pinches_stale:
-        if kinks_stale:
-            kinks_stale = False
-            cuts = outermost([(k, e, "reversal") for k, e in kinks(tr, crit)])
-            if cuts:
-                tr = tr.without(cuts)
-                pinches_stale = True
-        if pinches_stale:
-            pinches_stale = False
-            cuts = outermost(farthest_pinches(tr, crit, block_rows, clock))
-            if cuts:
-                tr = tr.without(cuts)
-                pinches_stale = True
-                kinks_stale = crit["reversing_is_redundant"]
-    return tr.index.tolist()
+    """Indices of the samples kept (`Sweep`)."""
+    return Sweep(tr, crit, block_rows, clock).run()
 
 
 def read_path(path):
@@ -318,6 +477,10 @@ def self_test():
         total += math.sqrt((x[k] - x[k - 1]) ** 2 + (y[k] - y[k - 1]) ** 2)
         cum.append(total)
     assert cumulative_length(x, y).tolist() == cum, "running sum differs"
+    # Coverage: a segment, its ends, a point.
+    d2 = segment_distance2(np.array([1.0, -3.0, 5.0, 1.0]), np.array([3.0, 4.0, 4.0, 0.0]), 0.0, 0.0, 2.0, 0.0)
+    assert d2.tolist() == [9.0, 25.0, 25.0, 0.0], d2
+    assert segment_distance2(3.0, 4.0, 0.0, 0.0, 0.0, 0.0) == 25.0
     print("self-test passed", file=sys.stderr)
 
 

@@ -10,7 +10,10 @@ use crate::control::{WheelCommand, recompute};
 use crate::error::PipelineError;
 use crate::path::{PathSample, path_length_m};
 use crate::planner::{PlannerSettings, executed_path};
-use crate::redundancy::{Pruned, RedundancyConfig, remove_redundancy};
+use crate::redundancy::{
+    Deletion, DeletionReason, Pruned, RedundancyConfig, RefusedCut, RouteCoverage,
+    remove_redundancy, route_coverage,
+};
 use crate::retime::WheelLimits;
 use crate::spikes::{FilterSettings, Filtered, filter_spikes, time_optimal};
 
@@ -42,6 +45,9 @@ pub struct Stages {
     pub fastest: Result<(Vec<PathSample>, Vec<WheelCommand>), PipelineError>,
     /// The control period of the source (mean encoder period).
     pub period_s: f64,
+    /// How much of the executed route the plan passes within the coverage
+    /// radius.
+    pub coverage: RouteCoverage,
 }
 
 /// Numbers for people.
@@ -50,54 +56,84 @@ pub struct StageSummary {
     pub executed_length_m: f64,
     pub executed_duration_s: f64,
     pub deletions: usize,
+    /// Loops and self-crossings cut.
     pub loops_removed: usize,
     pub kinks_removed: usize,
+    /// Length of the trailing retrace cut from the end (0 if none).
+    pub trailing_retrace_m: f64,
     /// The path with its redundant parts removed (jumps included).
     pub cleaned_length_m: f64,
     pub spikes_found: usize,
     /// The plan's own path and duration.
     pub filtered_length_m: f64,
     pub filtered_duration_s: f64,
+    /// How far the plan drives backwards in all.
+    pub reversing_m: f64,
     pub filter_windows: usize,
     /// The longest the plan holds one wheel command (s).
     pub longest_hold_s: f64,
     /// `None` when the time-optimal re-timing failed (`time_optimal_error`).
     pub time_optimal_duration_s: Option<f64>,
     pub time_optimal_error: Option<String>,
-    /// Every deletion: time span and length on the executed path, and why.
-    pub deletion_list: Vec<crate::redundancy::Deletion>,
+    /// The executed route's coverage by the plan: radius, lengths, percent
+    /// within the radius, uncovered metres and stretches.
+    pub coverage: RouteCoverage,
+    /// Every deletion: time span and length on the executed path, why, and
+    /// the coverage it lost (zero).
+    pub deletion_list: Vec<Deletion>,
+    /// Cuts refused because they would have dropped explored ground.
+    pub refused_cuts: Vec<RefusedCut>,
 }
 
 impl Stages {
     pub fn summary(&self) -> StageSummary {
-        use crate::redundancy::DeletionReason;
         let duration = |p: &[PathSample]| match (p.first(), p.last()) {
             (Some(a), Some(b)) => b.t_s - a.t_s,
             _ => 0.0,
         };
-        let kinks = self
-            .pruned
-            .deletions
-            .iter()
-            .filter(|d| d.reason == DeletionReason::Reversal)
-            .count();
+        let deletions = &self.pruned.deletions;
+        let count =
+            |r: &[DeletionReason]| deletions.iter().filter(|d| r.contains(&d.reason)).count();
         StageSummary {
             executed_length_m: path_length_m(&self.executed),
             executed_duration_s: duration(&self.executed),
-            deletions: self.pruned.deletions.len(),
-            loops_removed: self.pruned.deletions.len() - kinks,
-            kinks_removed: kinks,
+            deletions: deletions.len(),
+            loops_removed: count(&[DeletionReason::Loop, DeletionReason::Crossing]),
+            kinks_removed: count(&[DeletionReason::Reversal]),
+            trailing_retrace_m: deletions
+                .iter()
+                .filter(|d| d.reason == DeletionReason::TrailingRetrace)
+                .fold(0.0, |a, d| a + d.length_m),
             cleaned_length_m: path_length_m(&self.cleaned),
             spikes_found: self.filtered.spikes.len(),
             filtered_length_m: path_length_m(&self.filtered.samples),
             filtered_duration_s: duration(&self.filtered.samples),
+            reversing_m: reversing_m(&self.filtered.samples),
             filter_windows: self.filtered.windows.len(),
             longest_hold_s: crate::spikes::longest_hold_s(&self.filtered.samples),
             time_optimal_duration_s: self.fastest.as_ref().ok().map(|(p, _)| duration(p)),
             time_optimal_error: self.fastest.as_ref().err().map(|e| e.to_string()),
-            deletion_list: self.pruned.deletions.clone(),
+            coverage: self.coverage.clone(),
+            deletion_list: deletions.clone(),
+            refused_cuts: self.pruned.refused.clone(),
         }
     }
+}
+
+/// Length of the path driven backwards: segments whose displacement points
+/// against the heading at their start.
+pub fn reversing_m(path: &[PathSample]) -> f64 {
+    path.windows(2)
+        .map(|w| {
+            let (dx, dy) = (w[1].pose.x_m - w[0].pose.x_m, w[1].pose.y_m - w[0].pose.y_m);
+            let (s, c) = w[0].pose.heading_rad.sin_cos();
+            if dx * c + dy * s < 0.0 {
+                dx.hypot(dy)
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0, |a, d| a + d)
 }
 
 /// Re-times kept samples: each kept stretch keeps its durations, and each
@@ -139,6 +175,11 @@ pub fn run(
     let filtered = filter_spikes(&cleaned, params, limits, period_s, &settings.filter)?;
     // The alternative must not cost the plan: its failure is reported.
     let fastest = time_optimal(&filtered.samples, params, limits, period_s);
+    let coverage = route_coverage(
+        &executed,
+        &filtered.samples,
+        settings.redundancy.effective_coverage_radius_m(),
+    )?;
     Ok(Stages {
         executed,
         pruned,
@@ -147,5 +188,6 @@ pub fn run(
         filtered,
         fastest,
         period_s,
+        coverage,
     })
 }

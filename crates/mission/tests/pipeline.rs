@@ -263,3 +263,100 @@ fn closed_loop_tracking_corrects_a_sideways_start_error() {
     assert!(worst_late < 0.01, "still {worst_late} m off after 5 s");
     assert!(replay.report.final_error_m < 0.02, "{:?}", replay.report);
 }
+
+/// The whole pipeline at the robot's own size: pinch distance and coverage
+/// radius one footprint radius (0.15 m).
+fn case_study_settings() -> twindrive_mission::pipeline::PipelineSettings {
+    twindrive_mission::pipeline::PipelineSettings {
+        planner: PlannerSettings::default(),
+        redundancy: twindrive_mission::redundancy::RedundancyConfig::with_pinch_distance(
+            scenario().robot.footprint_radius_m,
+        ),
+        filter: FilterSettings::default(),
+    }
+}
+
+#[test]
+fn the_case_study_plan_keeps_the_explored_route_and_drops_the_second_lap() {
+    let log = wall_following();
+    let stages =
+        twindrive_mission::pipeline::run(log, &CALIBRATED, &limits(log), &case_study_settings())
+            .unwrap();
+    let s = stages.summary();
+    // Coverage of the route as driven, at 0.15 m, by the plan itself.
+    let c = twindrive_mission::redundancy::route_coverage(
+        &stages.executed,
+        &stages.filtered.samples,
+        0.15,
+    )
+    .unwrap();
+    assert!(c.covered_percent >= 99.0, "{c:?}");
+    assert_eq!(s.coverage, stages.coverage);
+    assert!(
+        c.plan_length_m <= 0.65 * c.route_length_m,
+        "the second lap is gone: plan {} m of {} m",
+        c.plan_length_m,
+        c.route_length_m
+    );
+    assert!(s.reversing_m < 0.05, "backwards {} m", s.reversing_m);
+    assert!(s.kinks_removed >= 2 && s.trailing_retrace_m > 5.0, "{s:?}");
+    assert!(s.deletion_list.iter().all(|d| d.uncovered_m == 0.0));
+    // The refused cut is the old answer: the first lap, with the ~3.5 m
+    // of route only it explored.
+    assert!(
+        s.refused_cuts
+            .iter()
+            .any(|r| r.length_m > 12.0 && (2.5..4.5).contains(&r.would_drop_m)),
+        "{:?}",
+        s.refused_cuts
+    );
+
+    // Replayed on the twin's true robot: no wall touched.
+    let samples: Vec<_> = stages
+        .filtered
+        .samples
+        .iter()
+        .zip(&stages.filtered.commands)
+        .map(|(p, c)| twindrive_mission::plan::PlanSample::new(p, c, Vec::new(), false))
+        .collect();
+    let open = twindrive_mission::verify::open_loop(&samples, scenario(), None).unwrap();
+    let closed = twindrive_mission::verify::closed_loop(
+        &samples,
+        scenario(),
+        &CALIBRATED,
+        &twindrive_mission::verify::TrackerSettings::default(),
+    )
+    .unwrap();
+    for r in [&open.report, &closed.report] {
+        assert_eq!((r.collisions, r.bumps), (0, 0), "{r:?}");
+    }
+}
+
+#[test]
+fn a_two_lap_mission_stopped_anywhere_in_its_second_lap_keeps_its_coverage() {
+    // The wall follower's lap takes about 70 s: stop early, half way and
+    // nearly at the end of the second lap.
+    for duration_s in [80.0, 100.0, 120.0, 135.0] {
+        let mut sc = scenario();
+        sc.steps = (duration_s * 1e9 / sc.dt_ns as f64).round() as u64;
+        let log = twindrive_sim::Simulator::new(sc).run(|_, _| {});
+        let stages = twindrive_mission::pipeline::run(
+            &log,
+            &CALIBRATED,
+            &limits(&log),
+            &case_study_settings(),
+        )
+        .unwrap();
+        let c = &stages.coverage;
+        assert!(
+            c.covered_percent >= 99.0,
+            "stopped at {duration_s} s: {c:?}"
+        );
+        assert!(
+            c.plan_length_m < 0.9 * c.route_length_m,
+            "stopped at {duration_s} s: the retrace is cut ({} of {} m)",
+            c.plan_length_m,
+            c.route_length_m
+        );
+    }
+}

@@ -11,6 +11,7 @@ use twindrive_mission::PathSample;
 use twindrive_mission::redundancy::{
     DeletionReason, KeepRegion, PinchKind, Pruned, RedundancyConfig, RedundancyError, TimeWindow,
     find_pinches, find_pinches_reference, remove_redundancy, remove_redundancy_reference,
+    route_coverage,
 };
 
 // ---------------------------------------------------------------- helpers
@@ -150,7 +151,9 @@ fn check_invariants(path: &[PathSample], cfg: &RedundancyConfig, pruned: &Pruned
     );
     if n > 0 {
         assert_eq!(kept.first(), Some(&0), "{what}: first sample lost");
-        assert_eq!(kept.last(), Some(&(n - 1)), "{what}: last sample lost");
+        if cfg.keep_end {
+            assert_eq!(kept.last(), Some(&(n - 1)), "{what}: last sample lost");
+        }
     }
     let gone = deleted(pruned, n);
     for (k, s) in path.iter().enumerate() {
@@ -162,7 +165,7 @@ fn check_invariants(path: &[PathSample], cfg: &RedundancyConfig, pruned: &Pruned
         );
     }
     // Deletions: sorted, disjoint, and exactly the samples not kept.
-    let mut covered = vec![false; n];
+    let mut in_deletion = vec![false; n];
     let cum = cumulative(path);
     for (a, d) in pruned.deletions.iter().enumerate() {
         assert!(
@@ -175,28 +178,81 @@ fn check_invariants(path: &[PathSample], cfg: &RedundancyConfig, pruned: &Pruned
                 "{what}: overlap"
             );
         }
-        for c in &mut covered[d.first_removed..=d.last_removed] {
+        for c in &mut in_deletion[d.first_removed..=d.last_removed] {
             *c = true;
         }
+        assert_eq!(d.uncovered_m, 0.0, "{what}: {d:?}");
         assert_eq!(d.t_start_s, path[d.first_removed - 1].t_s, "{what}");
-        assert_eq!(d.t_end_s, path[d.last_removed + 1].t_s, "{what}");
-        let length = cum[d.last_removed + 1] - cum[d.first_removed - 1];
+        let end = if d.reason == DeletionReason::TrailingRetrace {
+            assert_eq!(
+                d.last_removed,
+                n - 1,
+                "{what}: a trailing retrace ends the path"
+            );
+            assert!(!cfg.keep_end, "{what}: trailing retrace with keep_end");
+            n - 1
+        } else {
+            d.last_removed + 1
+        };
+        assert_eq!(d.t_end_s, path[end].t_s, "{what}");
+        let length = cum[end] - cum[d.first_removed - 1];
         assert!(
             (d.length_m - length).abs() <= 1e-9 * (1.0 + length),
             "{what}: {d:?}"
         );
     }
     assert_eq!(
-        covered, gone,
+        in_deletion, gone,
         "{what}: deletions do not match the kept samples"
     );
-    // Nothing cuttable is left.
-    let out = pruned.apply(path);
-    assert_eq!(
-        find_pinches(&out, cfg).unwrap(),
-        vec![],
-        "{what}: pinches left"
-    );
+    // Coverage: every deleted sample within the radius of the kept path
+    // (segments between samples kept side by side, and kept samples).
+    let r = cfg.effective_coverage_radius_m();
+    assert_eq!(pruned.coverage_radius_m, r, "{what}");
+    let pieces: Vec<([f64; 2], [f64; 2])> = kept
+        .iter()
+        .map(|&k| {
+            let p = path[k].position();
+            match kept.binary_search(&(k + 1)) {
+                Ok(_) => (p, path[k + 1].position()),
+                Err(_) => (p, p),
+            }
+        })
+        .collect();
+    for k in (0..n).filter(|&k| gone[k]) {
+        let s = path[k].position();
+        let nearest = pieces
+            .iter()
+            .map(|&(p, q)| point_segment_distance(s, p, q))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            nearest <= r * (1.0 + 1e-9),
+            "{what}: deleted sample {k} at {s:?} is {nearest} m from the kept path (radius {r})"
+        );
+    }
+    for c in &pruned.refused {
+        assert!(c.would_drop_m > 0.0 && c.i < c.j, "{what}: {c:?}");
+    }
+}
+
+/// Distance from `s` to the segment `p q`, written independently of the
+/// library's predicate.
+fn point_segment_distance(s: [f64; 2], p: [f64; 2], q: [f64; 2]) -> f64 {
+    let d = [q[0] - p[0], q[1] - p[1]];
+    let len2 = d[0] * d[0] + d[1] * d[1];
+    let t = if len2 > 0.0 {
+        (((s[0] - p[0]) * d[0] + (s[1] - p[1]) * d[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (s[0] - p[0] - t * d[0]).hypot(s[1] - p[1] - t * d[1])
+}
+
+/// Percent of the path's length within the radius of what was kept.
+fn coverage_percent(path: &[PathSample], pruned: &Pruned) -> f64 {
+    route_coverage(path, &pruned.apply(path), pruned.coverage_radius_m)
+        .unwrap()
+        .covered_percent
 }
 
 fn cumulative(path: &[PathSample]) -> Vec<f64> {
@@ -345,6 +401,11 @@ fn random_config(rng: &mut ChaCha8Rng, path: &[PathSample], lattice: bool) -> Re
         cfg.min_loop_duration_s = path.last().unwrap().t_s * rng.random_range(0.0..0.3);
     }
     cfg.reversing_is_redundant = rng.random_range(0..3) > 0;
+    cfg.coverage_radius_m = match rng.random_range(0..3) {
+        0 => None,
+        _ => Some(pinch * rng.random_range(0.3..4.0)),
+    };
+    cfg.keep_end = rng.random_range(0..3) == 0;
     for _ in 0..rng.random_range(0..3) {
         let c = [
             rng.random_range(lo[0]..=hi[0]),
@@ -427,39 +488,72 @@ fn lemniscate(s: f64) -> [f64; 2] {
     [s.sin(), s.sin() * s.cos()]
 }
 
-#[test]
-fn a_figure_eight_loses_the_lobe_between_its_two_passes() {
-    // From the far left, through the centre, round the right lobe, back
-    // through the centre, and half way round the left lobe.
-    let n = 2_000;
-    let (s0, s1) = (-FRAC_PI_2, 1.25 * PI);
+/// From the far left, through the centre, round the right lobe, back
+/// through the centre, and on round the left lobe to `s1`.
+fn figure_eight(n: usize, s1: f64) -> Vec<PathSample> {
+    let s0 = -FRAC_PI_2;
     let s = |k: usize| s0 + (s1 - s0) * k as f64 / (n - 1) as f64;
-    let path = through(&(0..n).map(|k| lemniscate(s(k))).collect::<Vec<_>>(), 0.01);
+    through(&(0..n).map(|k| lemniscate(s(k))).collect::<Vec<_>>(), 0.01)
+}
+
+#[test]
+fn a_figure_eight_driven_once_keeps_both_lobes() {
+    // The centre pinches the right lobe off, but the lobe is ground no
+    // other pass covers: the cut is refused, with what it would drop.
+    let path = figure_eight(2_000, 1.25 * PI);
     let cfg = cfg(0.05);
+    assert!(!find_pinches(&path, &cfg).unwrap().is_empty());
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     check_invariants(&path, &cfg, &pruned, "figure-eight");
-
-    assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
-    assert_eq!(pruned.deletions[0].reason, DeletionReason::Loop);
-    let gone = deleted(&pruned, n);
-    for (k, p) in path.iter().enumerate() {
-        let x = p.pose.x_m;
-        assert!(x <= 0.1 || gone[k], "right lobe sample {k} kept");
-        assert!(x >= -0.1 || !gone[k], "left lobe sample {k} deleted");
-    }
+    assert!(pruned.deletions.is_empty(), "{:?}", pruned.deletions);
+    assert_eq!(pruned.kept.len(), path.len());
+    assert_eq!(pruned.refused.len(), 1, "{:?}", pruned.refused);
     // The lobe is about half the curve's 6.1 m length.
-    assert!((2.8..3.3).contains(&pruned.deletions[0].length_m));
+    assert!((2.7..3.3).contains(&pruned.refused[0].would_drop_m));
+    assert!(coverage_percent(&path, &pruned) > 99.999);
+}
+
+#[test]
+fn a_figure_eight_driven_twice_keeps_its_first_pass() {
+    // One and a half times round: the second pass retraces the first, so
+    // the plan ends where the first pass closed.
+    let n = 3_000;
+    let path = figure_eight(n, -FRAC_PI_2 + 3.0 * PI);
+    let cfg = cfg(0.05);
+    let pruned = remove_redundancy(&path, &cfg).unwrap();
+    check_invariants(&path, &cfg, &pruned, "figure-eight twice");
+    assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
+    let tail = pruned.deletions[0];
+    assert_eq!(tail.reason, DeletionReason::TrailingRetrace);
+    // The first pass is 2π of the curve's 3π: two thirds of the samples;
+    // its last 5 cm (16 samples) come within the coverage radius of its start.
+    let first_pass_end = 2 * n / 3;
+    assert!(
+        (first_pass_end - 20..first_pass_end + 5).contains(&tail.first_removed),
+        "{tail:?}"
+    );
+    assert!(coverage_percent(&path, &pruned) >= 99.9);
+
+    let mut keep_end = cfg.clone();
+    keep_end.keep_end = true;
+    let pruned = remove_redundancy(&path, &keep_end).unwrap();
+    check_invariants(&path, &keep_end, &pruned, "figure-eight twice, keep end");
+    assert_eq!(pruned.kept.last(), Some(&(n - 1)));
+    assert_eq!(coverage_percent(&path, &pruned), 100.0);
 }
 
 #[test]
 fn a_sparse_figure_eight_is_cut_at_its_self_crossing() {
     // Samples 0.15 m apart and a 5 cm pinch distance: no two samples are
-    // near, only the segments through the centre cross.
+    // near, only the segments through the centre cross. With a coverage
+    // radius as large as the figure, the lobe is redundant.
     let n = 40;
     let (s0, s1) = (-FRAC_PI_2 + 0.03, 1.25 * PI);
     let s = |k: usize| s0 + (s1 - s0) * k as f64 / (n - 1) as f64;
     let path = through(&(0..n).map(|k| lemniscate(s(k))).collect::<Vec<_>>(), 0.1);
-    let cfg = cfg(0.05);
+    let mut cfg = cfg(0.05);
+    cfg.coverage_radius_m = Some(1.5);
+    cfg.keep_end = true;
     let pinches = find_pinches(&path, &cfg).unwrap();
     assert!(
         pinches.iter().all(|p| p.kind == PinchKind::Crossing),
@@ -478,6 +572,12 @@ fn a_sparse_figure_eight_is_cut_at_its_self_crossing() {
             "sample {k}"
         );
     }
+
+    // At a coverage radius of 5 cm the lobe is ground of its own.
+    cfg.coverage_radius_m = None;
+    let pruned = remove_redundancy(&path, &cfg).unwrap();
+    check_invariants(&path, &cfg, &pruned, "sparse figure-eight, 5 cm");
+    assert!(pruned.deletions.is_empty());
 }
 
 /// Along +x to the origin, `laps` times round a circle of 0.5 m to the
@@ -494,55 +594,51 @@ fn circle_laps(laps: usize) -> (Vec<PathSample>, Vec<usize>) {
     (d.path(), bounds)
 }
 
-/// The circles touch the x axis, so the samples where they come within a
-/// pinch distance of it pinch the way in or out and may stay; all others go.
-fn assert_lifted_samples_deleted(path: &[PathSample], pruned: &Pruned, pinch_distance_m: f64) {
-    let gone = deleted(pruned, path.len());
-    for (k, s) in path.iter().enumerate() {
-        assert!(
-            s.pose.y_m < pinch_distance_m || gone[k],
-            "sample {k} at {:?} kept",
-            s.position()
-        );
-    }
-}
-
 #[test]
-fn a_circle_driven_twice_loses_the_second_lap_when_the_first_is_kept() {
+fn a_circle_driven_twice_loses_its_second_lap() {
     let (path, laps) = circle_laps(2);
-    let mut cfg = cfg(0.05);
-    cfg.keep_windows.push(TimeWindow {
-        start_s: path[laps[0]].t_s,
-        end_s: path[laps[1]].t_s,
-    });
+    let cfg = cfg(0.05);
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     check_invariants(&path, &cfg, &pruned, "circle twice");
 
     assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
     let cut = pruned.deletions[0];
     assert_eq!(cut.reason, DeletionReason::Loop);
-    assert_eq!(
-        cut.first_removed,
-        laps[1] + 1,
-        "the cut starts where lap 1 ends"
+    // The cut starts where lap 1 closes: where it comes within the 5 cm
+    // coverage radius of the way in, which the circle touches (0.22 m
+    // before it closes) and ends where lap 2 does.
+    assert!(
+        (laps[1] - 30..=laps[1] - 15).contains(&cut.first_removed),
+        "{cut:?}, laps {laps:?}"
     );
-    assert!(cut.last_removed >= laps[2] - 1 && cut.last_removed <= laps[2] + 5);
-    assert!((cut.length_m - PI).abs() < 0.06, "{}", cut.length_m);
+    // Its partner is where lap 2 passes the same place.
+    assert!(cut.last_removed >= laps[2] - 30 && cut.last_removed <= laps[2] - 15);
+    assert!((cut.length_m - PI).abs() < 0.05, "{}", cut.length_m);
+    // Lap 1 is whole but for what the way in covers.
+    assert!((laps[0]..laps[1] - 30).all(|k| pruned.kept.binary_search(&k).is_ok()));
+    assert_eq!(coverage_percent(&path, &pruned), 100.0);
 }
 
 #[test]
-fn nested_loops_go_in_one_cut() {
-    // Twice round the circle: every sample of lap 1 pinches one of lap 2;
-    // the outermost pinch takes both laps.
-    let (path, laps) = circle_laps(2);
+fn a_loop_circled_three_times_loses_two_circles() {
+    let (path, laps) = circle_laps(3);
     let cfg = cfg(0.05);
     let pruned = remove_redundancy(&path, &cfg).unwrap();
-    check_invariants(&path, &cfg, &pruned, "two laps");
+    check_invariants(&path, &cfg, &pruned, "three circles");
     assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
-    assert!(pruned.deletions[0].first_removed <= laps[0] + 1);
-    assert_lifted_samples_deleted(&path, &pruned, cfg.pinch_distance_m);
+    let cut = pruned.deletions[0];
+    assert!((laps[1] - 30..=laps[1] - 15).contains(&cut.first_removed));
+    assert!(cut.last_removed >= laps[3] - 30 && cut.last_removed <= laps[3] - 15);
+    assert!((cut.length_m - TAU).abs() < 0.05, "{}", cut.length_m);
+    assert_eq!(coverage_percent(&path, &pruned), 100.0);
+    // The way out, after the circles, is kept.
+    assert_eq!(pruned.kept.last(), Some(&(path.len() - 1)));
+}
 
-    // A small loop inside a big one.
+#[test]
+fn loops_over_new_ground_stay() {
+    // Straight, half a big circle, a small loop, the other half, straight:
+    // the small loop pinches, but nothing is driven twice.
     let mut d = Drive::start(-1.0, 0.0, 0.0);
     d.straight(1.0, 0.01).arc(1.0, PI, 0.01);
     let small = d.samples.len();
@@ -550,6 +646,7 @@ fn nested_loops_go_in_one_cut() {
     let small_end = d.samples.len() - 1;
     d.arc(1.0, PI, 0.01).straight(1.0, 0.01);
     let path = d.path();
+    let cfg = cfg(0.05);
     let pinches = find_pinches(&path, &cfg).unwrap();
     assert!(
         pinches
@@ -558,20 +655,120 @@ fn nested_loops_go_in_one_cut() {
         "the small loop pinches on its own: {pinches:?}"
     );
     let pruned = remove_redundancy(&path, &cfg).unwrap();
-    check_invariants(&path, &cfg, &pruned, "nested loops");
-    assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
-    let cut = pruned.deletions[0];
-    assert!(
-        cut.first_removed < small && cut.last_removed > small_end,
-        "{cut:?}"
-    );
+    check_invariants(&path, &cfg, &pruned, "loops over new ground");
+    assert!(pruned.deletions.is_empty(), "{:?}", pruned.deletions);
+    assert!(!pruned.refused.is_empty());
 }
 
-/// Forward 2 m along +x, back 0.3 m, a quarter turn left in place, 1 m up.
-fn bump_and_back_up() -> Vec<PathSample> {
+#[test]
+fn a_spiral_that_never_retraces_is_not_cut() {
+    // Turns 8 cm apart: closer than the 10 cm pinch distance, so every
+    // sample pinches the next turn, but farther than a 5 cm coverage
+    // radius, so no turn covers another.
+    let mut points = Vec::new();
+    let mut a: f64 = 0.0;
+    loop {
+        let r = 0.2 + 0.08 * a / TAU;
+        if r > 1.0 {
+            break;
+        }
+        points.push([r * a.cos(), r * a.sin()]);
+        a += 0.01 / r;
+    }
+    let path = through(&points, 0.01);
+    let mut cfg = cfg(0.1);
+    cfg.coverage_radius_m = Some(0.05);
+    assert!(find_pinches(&path, &cfg).unwrap().len() > path.len() / 2);
+    let pruned = remove_redundancy(&path, &cfg).unwrap();
+    check_invariants(&path, &cfg, &pruned, "spiral");
+    assert!(pruned.deletions.is_empty(), "{:?}", pruned.deletions);
+    assert_eq!(pruned.kept.len(), path.len());
+    assert!(!pruned.refused.is_empty());
+}
+
+/// A rounded-rectangle route driven twice with a wall follower's wobble
+/// (the second lap a few centimetres off the first), stopping after
+/// `second_lap` of the second lap.
+fn two_laps(second_lap: f64) -> Vec<PathSample> {
+    let lap_steps = 1_200;
+    let total = lap_steps + (second_lap * lap_steps as f64) as usize;
+    let route = |u: f64| -> [f64; 2] {
+        // A 4 m x 2 m rectangle with rounded corners, by arc length.
+        let (w, h, r) = (4.0, 2.0, 0.4);
+        let straight = [w - 2.0 * r, h - 2.0 * r, w - 2.0 * r, h - 2.0 * r];
+        let quarter = FRAC_PI_2 * r;
+        let perimeter: f64 = straight.iter().sum::<f64>() + 4.0 * quarter;
+        let mut s = u.rem_euclid(1.0) * perimeter;
+        let corners = [[w - r, r], [w - r, h - r], [r, h - r], [r, r]];
+        let mut heading = 0.0;
+        let mut p = [r, 0.0];
+        for side in 0..4 {
+            let (c, sn) = (f64::cos(heading), f64::sin(heading));
+            if s <= straight[side] {
+                return [p[0] + s * c, p[1] + s * sn];
+            }
+            s -= straight[side];
+            let centre = corners[side];
+            if s <= quarter {
+                let a = heading - FRAC_PI_2 + s / r;
+                return [centre[0] + r * a.cos(), centre[1] + r * a.sin()];
+            }
+            s -= quarter;
+            heading += FRAC_PI_2;
+            let a = heading - FRAC_PI_2;
+            p = [centre[0] + r * a.cos(), centre[1] + r * a.sin()];
+        }
+        p
+    };
+    let points: Vec<[f64; 2]> = (0..total)
+        .map(|k| {
+            let u = k as f64 / lap_steps as f64;
+            let [x, y] = route(u);
+            // Wobble, and a lap-dependent offset of up to 4 cm.
+            let wobble = 0.01 * (7.0 * TAU * u).sin() + 0.04 * (u / 2.0).min(1.0);
+            [x + wobble * 0.3, y - wobble]
+        })
+        .collect();
+    through(&points, 0.05)
+}
+
+#[test]
+fn a_two_lap_mission_keeps_its_first_lap_wherever_it_stops() {
+    let cfg = cfg(0.15);
+    for (name, second_lap) in [
+        ("early", 0.1),
+        ("middle", 0.5),
+        ("nearly complete", 0.95),
+        ("a little past", 1.08),
+    ] {
+        let path = two_laps(second_lap);
+        let pruned = remove_redundancy(&path, &cfg).unwrap();
+        let what = format!("two laps, stopped {name}");
+        check_invariants(&path, &cfg, &pruned, &what);
+        let covered = coverage_percent(&path, &pruned);
+        assert!(covered >= 99.0, "{what}: {covered} %");
+        // The first lap is kept (its last coverage radius may be cut).
+        assert!(
+            (0..1_150).all(|k| pruned.kept.binary_search(&k).is_ok()),
+            "{what}: {:?}",
+            pruned.deletions
+        );
+        let kept_length = twindrive_mission::path_length_m(&pruned.apply(&path));
+        let length = twindrive_mission::path_length_m(&path);
+        if second_lap < 1.0 {
+            assert!(
+                kept_length < length / (1.0 + second_lap) + 0.2,
+                "{what}: kept {kept_length} of {length} m"
+            );
+        }
+    }
+}
+
+/// Forward 2 m along +x, back `back_m`, a quarter turn left in place, 1 m up.
+fn bump_and_back_up(back_m: f64) -> Vec<PathSample> {
     let mut d = Drive::start(0.0, 0.0, 0.0);
     d.straight(2.0, 0.01)
-        .straight(-0.3, 0.01)
+        .straight(-back_m, 0.01)
         .turn(FRAC_PI_2, 10)
         .straight(1.0, 0.01);
     d.path()
@@ -579,8 +776,11 @@ fn bump_and_back_up() -> Vec<PathSample> {
 
 #[test]
 fn a_bump_and_back_up_kink_is_removed_when_reversing_is_redundant() {
-    let path = bump_and_back_up();
-    let cfg = cfg(0.1);
+    // Backing up 0.3 m: the kink's far end is 0.3 m from the path that
+    // remains, so at a coverage radius of 0.35 m it goes.
+    let path = bump_and_back_up(0.3);
+    let mut cfg = cfg(0.1);
+    cfg.coverage_radius_m = Some(0.35);
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     check_invariants(&path, &cfg, &pruned, "bump and back up");
 
@@ -603,6 +803,41 @@ fn a_bump_and_back_up_kink_is_removed_when_reversing_is_redundant() {
     }
     // About 0.3 m there and 0.3 m back.
     assert!((pruned.deletions[0].length_m - 0.6).abs() < 0.03);
+
+    // A back-up shorter than the pinch distance goes at the default radius.
+    let path = bump_and_back_up(0.08);
+    let cfg = RedundancyConfig::with_pinch_distance(0.1);
+    let pruned = remove_redundancy(&path, &cfg).unwrap();
+    check_invariants(&path, &cfg, &pruned, "short back-up");
+    assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
+    assert!(
+        path.iter()
+            .enumerate()
+            .all(|(k, s)| s.v_m_s >= 0.0 || pruned.kept.binary_search(&k).is_err())
+    );
+}
+
+#[test]
+fn a_kink_that_would_drop_ground_is_kept_and_reported() {
+    // 0.3 m back at a 0.1 m radius: cutting would drop the last 0.2 m
+    // before the bump.
+    let path = bump_and_back_up(0.3);
+    let cfg = cfg(0.1);
+    let pruned = remove_redundancy(&path, &cfg).unwrap();
+    check_invariants(&path, &cfg, &pruned, "long back-up");
+    assert!(pruned.deletions.is_empty(), "{:?}", pruned.deletions);
+    assert_eq!(pruned.refused.len(), 1, "{:?}", pruned.refused);
+    let refused = pruned.refused[0];
+    // The farthest cut from the sample before the back-up: the kink, or a
+    // loop that also takes the turn in place.
+    assert!(matches!(
+        refused.reason,
+        DeletionReason::Reversal | DeletionReason::Loop
+    ));
+    assert!(
+        (refused.would_drop_m - 0.4).abs() < 0.03,
+        "0.2 m there and back: {refused:?}"
+    );
 }
 
 #[test]
@@ -644,7 +879,7 @@ fn a_turn_in_place_that_wobbles_around_zero_speed_is_not_a_kink() {
 
 #[test]
 fn a_bump_and_back_up_kink_stays_when_reversing_is_not_redundant() {
-    let path = bump_and_back_up();
+    let path = bump_and_back_up(0.08);
     let mut cfg = cfg(0.1);
     cfg.reversing_is_redundant = false;
     let pruned = remove_redundancy(&path, &cfg).unwrap();
@@ -653,27 +888,17 @@ fn a_bump_and_back_up_kink_stays_when_reversing_is_not_redundant() {
     assert!(pruned.deletions.is_empty());
 }
 
-/// Along +x to the origin, once round a circle of 0.5 m, on along +x.
-fn one_loop() -> (Vec<PathSample>, std::ops::Range<usize>) {
-    let (path, laps) = circle_laps(1);
-    (path, laps[0] + 1..laps[1])
-}
-
 #[test]
-fn a_loop_inside_a_keep_region_survives() {
-    let (path, lap) = one_loop();
+fn a_retrace_inside_a_keep_region_or_window_survives() {
+    let (path, laps) = circle_laps(2);
+    let n = path.len();
     let cfg_plain = cfg(0.05);
     let plain = remove_redundancy(&path, &cfg_plain).unwrap();
-    assert_eq!(
-        plain.deletions.len(),
-        1,
-        "without a keep region the loop goes"
-    );
-    assert!(plain.deletions[0].first_removed <= lap.start);
-    assert_lifted_samples_deleted(&path, &plain, cfg_plain.pinch_distance_m);
+    assert_eq!(plain.deletions.len(), 1, "without a keep region lap 2 goes");
 
+    // Around the top of the circle (centre (0, 0.5), top (0, 1)): the
+    // second lap's pass there must stay, so no cut can take the lap.
     let mut cfg = cfg_plain.clone();
-    // Around the top of the circle (centre (0, 0.5), top (0, 1)).
     cfg.keep_regions.push(KeepRegion::Circle {
         x_m: 0.0,
         y_m: 1.0,
@@ -681,23 +906,25 @@ fn a_loop_inside_a_keep_region_survives() {
     });
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     check_invariants(&path, &cfg, &pruned, "keep region");
-    assert_eq!(pruned.kept, (0..path.len()).collect::<Vec<_>>());
-    assert!(pruned.deletions.is_empty());
+    let top_of_lap_2 = laps[1] + (laps[2] - laps[1]) / 2;
+    assert!(pruned.kept.binary_search(&top_of_lap_2).is_ok());
+    assert_eq!(pruned.kept.len(), n, "{:?}", pruned.deletions);
 
     let mut cfg = cfg_plain;
-    let top = lap.start + lap.len() / 2;
     cfg.keep_windows.push(TimeWindow {
-        start_s: path[top].t_s,
-        end_s: path[top + 3].t_s,
+        start_s: path[top_of_lap_2].t_s,
+        end_s: path[top_of_lap_2 + 3].t_s,
     });
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     check_invariants(&path, &cfg, &pruned, "keep window");
-    assert!(pruned.deletions.is_empty());
+    assert!(pruned.kept.binary_search(&top_of_lap_2).is_ok());
 }
 
 #[test]
-fn a_path_back_at_its_start_keeps_its_end_and_its_kept_regions() {
-    // A 4 m square, ending exactly where it began.
+fn a_path_back_at_its_start_keeps_its_round() {
+    // A 4 m square, ending exactly where it began. The closing pinch would
+    // delete the whole round; at most the last coverage radius, which the
+    // start covers, goes.
     let mut d = Drive::start(0.0, 0.0, 0.0);
     for _ in 0..4 {
         d.straight(4.0, 0.02).turn(FRAC_PI_2, 5);
@@ -707,26 +934,31 @@ fn a_path_back_at_its_start_keeps_its_end_and_its_kept_regions() {
     path.last_mut().unwrap().pose.y_m = 0.0;
     let n = path.len();
 
-    let cfg_plain = cfg(0.1);
-    let pruned = remove_redundancy(&path, &cfg_plain).unwrap();
-    check_invariants(&path, &cfg_plain, &pruned, "closed square");
-    assert_eq!(pruned.kept, vec![0, n - 1], "start and end survive");
-
-    let mut cfg = cfg_plain;
-    cfg.keep_regions.push(KeepRegion::Rectangle {
-        min_x_m: 3.5,
-        min_y_m: 3.5,
-        max_x_m: 4.5,
-        max_y_m: 4.5,
-    });
+    let cfg = cfg(0.1);
     let pruned = remove_redundancy(&path, &cfg).unwrap();
-    check_invariants(&path, &cfg, &pruned, "closed square with a kept corner");
-    let corner: Vec<usize> = (0..n)
-        .filter(|&k| cfg.keep_regions[0].contains(path[k].position()))
-        .collect();
-    assert!(corner.len() > 40);
-    assert!(corner.iter().all(|k| pruned.kept.contains(k)));
-    assert_eq!(pruned.kept.last(), Some(&(n - 1)));
+    check_invariants(&path, &cfg, &pruned, "closed square");
+    assert_eq!(coverage_percent(&path, &pruned), 100.0);
+    // Measured from the last kept sample, one 2 cm step farther out.
+    let removed: f64 = pruned.deletions.iter().map(|d| d.length_m).sum();
+    assert!(removed <= 0.12 + 1e-9, "{:?}", pruned.deletions);
+    assert!(
+        pruned
+            .deletions
+            .iter()
+            .all(|d| d.reason == DeletionReason::TrailingRetrace)
+    );
+    assert!(
+        pruned
+            .refused
+            .iter()
+            .any(|r| r.i == 0 && r.would_drop_m > 15.0)
+    );
+
+    let mut keep_end = cfg.clone();
+    keep_end.keep_end = true;
+    let pruned = remove_redundancy(&path, &keep_end).unwrap();
+    check_invariants(&path, &keep_end, &pruned, "closed square, keep end");
+    assert_eq!(pruned.kept, (0..n).collect::<Vec<_>>());
 }
 
 #[test]
@@ -743,7 +975,7 @@ fn a_path_without_loops_passes_through_unchanged() {
     assert!(find_pinches(&path, &cfg).unwrap().is_empty());
     let pruned = remove_redundancy(&path, &cfg).unwrap();
     assert_eq!(pruned.kept, (0..path.len()).collect::<Vec<_>>());
-    assert!(pruned.deletions.is_empty() && pruned.pinches.is_empty());
+    assert!(pruned.deletions.is_empty() && pruned.refused.is_empty());
 
     for short in [vec![], path[..1].to_vec(), path[..2].to_vec()] {
         let pruned = remove_redundancy(&short, &cfg).unwrap();
@@ -752,8 +984,43 @@ fn a_path_without_loops_passes_through_unchanged() {
 }
 
 #[test]
+fn route_coverage_measures_the_ground_a_plan_leaves_out() {
+    // A 3 m line; the "plan" drives only its first metre and its last.
+    let route = through(
+        &(0..=300)
+            .map(|k| [0.01 * k as f64, 0.0])
+            .collect::<Vec<_>>(),
+        0.1,
+    );
+    let plan: Vec<PathSample> = route
+        .iter()
+        .filter(|s| s.pose.x_m <= 1.0 || s.pose.x_m >= 2.0)
+        .copied()
+        .collect();
+    // The plan's jump from x = 1 to x = 2 is part of its polyline: drop it
+    // by measuring against the first metre and the last separately.
+    let first = &plan[..101];
+    let c = route_coverage(&route, first, 0.1).unwrap();
+    assert!((c.route_length_m - 3.0).abs() < 1e-9);
+    assert!((c.uncovered_m - 1.9).abs() < 0.011, "{c:?}");
+    assert!((c.covered_percent - 100.0 * 1.1 / 3.0).abs() < 0.4, "{c:?}");
+    assert_eq!(c.uncovered_stretches.len(), 1);
+    // x = 1.1 is 0.1 m from the plan, give or take a rounding.
+    assert!((110..=111).contains(&c.uncovered_stretches[0].first));
+    assert_eq!(c.uncovered_stretches[0].last, 300);
+    assert!((c.plan_length_m - 1.0).abs() < 1e-9);
+    let whole = route_coverage(&route, &plan, 0.1).unwrap();
+    assert_eq!(whole.covered_percent, 100.0);
+    assert!(route_coverage(&route, &plan, 0.0).is_err());
+    assert_eq!(
+        route_coverage(&route, &[], 0.1).unwrap().covered_percent,
+        0.0
+    );
+}
+
+#[test]
 fn bad_settings_and_samples_are_named() {
-    let (path, _) = one_loop();
+    let (path, _) = circle_laps(1);
     let err = remove_redundancy(&path, &cfg(0.0)).unwrap_err();
     assert_eq!(err.to_string(), "pinch_distance_m must be > 0, got 0");
     let err = find_pinches(&path, &cfg(-1.0)).unwrap_err();
@@ -838,4 +1105,8 @@ fn a_toml_file_with_only_the_pinch_distance_is_complete() {
     assert_eq!(cfg.min_loop_length_m, Some(0.5));
     assert!(!cfg.reversing_is_redundant);
     assert!(toml::from_str::<RedundancyConfig>("pinch_distance_m = 0.1\nloop = 1").is_err());
+    let cfg: RedundancyConfig =
+        toml::from_str("pinch_distance_m = 0.1\ncoverage_radius_m = 0.2\nkeep_end = true").unwrap();
+    assert_eq!(cfg.effective_coverage_radius_m(), 0.2);
+    assert!(cfg.keep_end);
 }

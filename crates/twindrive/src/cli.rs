@@ -49,7 +49,8 @@ pub enum Command {
     /// Turn a mission run on the twin into a plan for the real robot.
     ///
     /// The executed path from the log's encoders and the calibrated
-    /// parameters; redundancy (loops, bump-and-back-up kinks) removed; wheel
+    /// parameters; redundancy (retraced loops, bump-and-back-up kinks, a
+    /// trailing retrace) removed without dropping explored ground; wheel
     /// speeds re-computed; control spikes filtered within the robot's wheel
     /// limits; the twin's predicted sensor readings along it. Writes --out
     /// (versioned JSON with a SHA-256 over its content) and beside it
@@ -75,34 +76,15 @@ pub enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Remove loops and kinks from any path file and write the rest.
+    /// Remove retraced loops, kinks and a trailing retrace from any path
+    /// file and write the rest.
     ///
-    /// PATH is a CSV with header `t,x,y,theta` or a TUM file. Prints how many
-    /// loops and kinks were removed; --out is a CSV in the same columns.
-    Prune {
-        /// The path file (CSV `t,x,y,theta` or TUM).
-        path: PathBuf,
-        /// Samples closer than this (metres) pinch the path.
-        #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
-        pinch_distance: f64,
-        /// Shortest loop (metres of path) worth cutting; default 3 pinch distances.
-        #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
-        min_loop_length: Option<f64>,
-        /// Shortest loop (seconds) worth cutting.
-        #[arg(
-            long,
-            value_name = "SECONDS",
-            default_value_t = 0.0,
-            allow_negative_numbers = true
-        )]
-        min_loop_duration: f64,
-        /// Keep reversing stretches (bump and back up) instead of cutting them.
-        #[arg(long)]
-        keep_reversals: bool,
-        /// Output CSV (`t,x,y,theta`).
-        #[arg(long)]
-        out: PathBuf,
-    },
+    /// PATH is a CSV with header `t,x,y,theta` or a TUM file. A cut may only
+    /// delete samples within the coverage radius of the path that remains;
+    /// where two passes cover the same ground the first is kept. Prints what
+    /// was removed, the cuts refused for coverage, and the coverage of the
+    /// input by the output; --out is a CSV in the same columns.
+    Prune(PruneArgs),
     /// Run the paper's case study end to end into ./twindrive-out/.
     ///
     /// The built-in calibration drive on the twin (calibration_drive/), its
@@ -123,6 +105,65 @@ pub enum Command {
     },
 }
 
+/// The redundancy flags `plan` and `prune` share (for `plan` they
+/// override the --redundancy file).
+#[derive(Debug, clap::Args)]
+pub struct RedundancyFlags {
+    /// Shortest loop worth cutting, metres of path (default: 3 pinch
+    /// distances).
+    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    pub min_loop_length: Option<f64>,
+    /// Shortest loop worth cutting, seconds (default: 0).
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub min_loop_duration: Option<f64>,
+    /// Keep reversing stretches (bump and back up) instead of cutting them.
+    #[arg(long)]
+    pub keep_reversals: bool,
+    /// A cut may delete only samples within this distance (metres) of the
+    /// path that remains (default: the pinch distance).
+    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    pub coverage_radius: Option<f64>,
+    /// Let the path reach its final pose along the recorded route (default:
+    /// it ends where the last new ground was covered).
+    #[arg(long)]
+    pub keep_end: bool,
+}
+
+impl RedundancyFlags {
+    /// Sets the fields these flags give.
+    pub fn apply(&self, cfg: &mut twindrive_mission::redundancy::RedundancyConfig) {
+        if let Some(l) = self.min_loop_length {
+            cfg.min_loop_length_m = Some(l);
+        }
+        if let Some(d) = self.min_loop_duration {
+            cfg.min_loop_duration_s = d;
+        }
+        if self.keep_reversals {
+            cfg.reversing_is_redundant = false;
+        }
+        if let Some(r) = self.coverage_radius {
+            cfg.coverage_radius_m = Some(r);
+        }
+        if self.keep_end {
+            cfg.keep_end = true;
+        }
+    }
+}
+
+#[derive(Debug, clap::Args)]
+pub struct PruneArgs {
+    /// The path file (CSV `t,x,y,theta` or TUM).
+    pub path: PathBuf,
+    /// Samples closer than this (metres) pinch the path.
+    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    pub pinch_distance: f64,
+    #[command(flatten)]
+    pub redundancy: RedundancyFlags,
+    /// Output CSV (`t,x,y,theta`).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
 #[derive(Debug, clap::Args)]
 pub struct PlanArgs {
     /// Simulator output directory of the mission (log.csv + log.meta.json).
@@ -131,18 +172,16 @@ pub struct PlanArgs {
     #[arg(long)]
     pub calibration: PathBuf,
     /// Redundancy definition (TOML: pinch_distance_m, min_loop_length_m,
-    /// min_loop_duration_s, reversing_is_redundant, keep_regions, keep_windows).
+    /// min_loop_duration_s, reversing_is_redundant, keep_regions,
+    /// keep_windows, coverage_radius_m, keep_end).
     #[arg(long, value_name = "R.toml")]
     pub redundancy: Option<PathBuf>,
-    /// Pinch distance in metres (overrides the file; default 0.1).
+    /// Pinch distance in metres (overrides the file; default: the robot's
+    /// footprint radius from the log).
     #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
     pub pinch_distance: Option<f64>,
-    /// Shortest loop worth cutting, metres of path (overrides the file).
-    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
-    pub min_loop_length: Option<f64>,
-    /// Keep reversing stretches (bump and back up).
-    #[arg(long)]
-    pub keep_reversals: bool,
+    #[command(flatten)]
+    pub flags: RedundancyFlags,
     /// The twin's scenario TOML for the sensor predictions (default: the
     /// built-in scenario named in the log).
     #[arg(long)]

@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use twindrive_log::MissionLog;
+use twindrive_mission::redundancy::DeletionReason;
 use twindrive_plot::{Markers, Series, TimeFigure, WorldFigure, palette};
 use twindrive_sim::World;
 
@@ -271,11 +272,30 @@ pub fn plan_figures(
             executed[from..=to].to_vec()
         })
         .collect();
-    let mut paths = vec![Series {
-        label: "executed path (encoders, calibrated)",
-        points: &executed,
-        color: palette::TRUTH,
-    }];
+    // Kept runs: between deletions, each joined to the next across its jump.
+    let mut kept: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut from = 0;
+    for d in &stages.pruned.deletions {
+        let last_kept = d.first_removed.saturating_sub(1);
+        let mut run = executed[from..=last_kept].to_vec();
+        if let Some(&next) = executed.get(d.last_removed + 1) {
+            run.push(next);
+        }
+        kept.push(run);
+        from = d.last_removed + 1;
+    }
+    if from < executed.len() {
+        kept.push(executed[from..].to_vec());
+    }
+    let uncovered: Vec<Vec<(f64, f64)>> = stages
+        .coverage
+        .uncovered_stretches
+        .iter()
+        .map(|u| {
+            executed[u.first.saturating_sub(1)..=(u.last + 1).min(executed.len() - 1)].to_vec()
+        })
+        .collect();
+    let mut paths = Vec::new();
     for (k, d) in deleted.iter().enumerate() {
         paths.push(Series {
             label: if k == 0 { "redundant (deleted)" } else { "" },
@@ -283,11 +303,34 @@ pub fn plan_figures(
             color: palette::BAD,
         });
     }
+    for (k, run) in kept.iter().enumerate() {
+        paths.push(Series {
+            label: if k == 0 {
+                "kept (the plan's route)"
+            } else {
+                ""
+            },
+            points: run,
+            color: palette::TRUTH,
+        });
+    }
+    for (k, u) in uncovered.iter().enumerate() {
+        paths.push(Series {
+            label: if k == 0 {
+                "explored but not covered by the plan"
+            } else {
+                ""
+            },
+            points: u,
+            color: palette::ALT,
+        });
+    }
     // The pinch points each cut joined (the kept samples either side).
     let pinches: Vec<(f64, f64)> = stages
         .pruned
         .deletions
         .iter()
+        .filter(|d| d.reason != DeletionReason::TrailingRetrace)
         .flat_map(|d| {
             [
                 executed[d.first_removed.saturating_sub(1)],
@@ -296,22 +339,41 @@ pub fn plan_figures(
         })
         .collect();
     let start = [executed[0]];
+    let plan_end = [stages
+        .pruned
+        .kept
+        .last()
+        .map_or(executed[0], |&k| executed[k])];
+    let mission_end = [*executed.last().expect("an executed path")];
+    let mut markers = vec![
+        Markers {
+            label: "start",
+            points: &start,
+            color: palette::GOOD,
+        },
+        Markers {
+            label: "pinch points",
+            points: &pinches,
+            color: palette::PURPLE,
+        },
+    ];
+    if plan_end != mission_end {
+        markers.push(Markers {
+            label: "plan ends (last new ground)",
+            points: &plan_end,
+            color: palette::TRUTH,
+        });
+        markers.push(Markers {
+            label: "mission ended",
+            points: &mission_end,
+            color: palette::BAD,
+        });
+    }
     WorldFigure {
-        title: "Mission planner: executed path, redundant parts and pinch points (Fig. 7)",
+        title: "Mission planner: executed path, kept and redundant parts, pinch points (Fig. 7)",
         walls,
         paths: &paths,
-        markers: &[
-            Markers {
-                label: "start",
-                points: &start,
-                color: palette::GOOD,
-            },
-            Markers {
-                label: "pinch points",
-                points: &pinches,
-                color: palette::PURPLE,
-            },
-        ],
+        markers: &markers,
     }
     .write(&dir.join(format!("{stem}_executed")))?;
 

@@ -58,6 +58,11 @@ fn the_case_study_plan_is_stable_and_verifies_without_collisions() {
         let out = plan(p, &[]);
         assert!(out.status.success(), "{}", text(&out.stderr));
         assert!(text(&out.stdout).contains("bump-and-back-up kink"));
+        assert!(
+            text(&out.stdout).contains("coverage: the plan passes within 0.15 m of"),
+            "{}",
+            text(&out.stdout)
+        );
     }
     let dir = a.parent().unwrap();
     for name in [
@@ -87,6 +92,22 @@ fn the_case_study_plan_is_stable_and_verifies_without_collisions() {
         .as_array()
         .unwrap();
     assert!(doc["header"]["summary"]["kinks_removed"].as_u64().unwrap() >= 1);
+    // The plan covers the route as driven (at the footprint radius, the
+    // default) and drops the second lap, backing up nowhere.
+    let summary = &doc["header"]["summary"];
+    let coverage = &summary["coverage"];
+    assert_eq!(coverage["radius_m"], 0.15);
+    assert!(
+        coverage["covered_percent"].as_f64().unwrap() >= 99.0,
+        "{coverage}"
+    );
+    assert!(
+        coverage["plan_length_m"].as_f64().unwrap()
+            <= 0.65 * coverage["route_length_m"].as_f64().unwrap(),
+        "{coverage}"
+    );
+    assert!(summary["reversing_m"].as_f64().unwrap() < 0.05, "{summary}");
+    assert!(coverage["uncovered_m"].as_f64().is_some());
     let csv = std::fs::read_to_string(mission().0.join("log.csv")).unwrap();
     let mut lines = csv.lines();
     let cols: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -229,8 +250,9 @@ fn plan_inputs_that_cannot_work_are_clear_errors_and_leave_no_files() {
     );
 }
 
-/// A path along x with one loop (radius 0.3 m) in the middle, at 1 cm steps.
-fn looped_path_csv() -> String {
+/// A path along x with `laps` loops (radius 0.3 m) in the middle, at 1 cm
+/// steps.
+fn looped_path_csv(laps: usize) -> String {
     let mut rows = vec!["t,x,y,theta".to_string()];
     let mut t = 0.0;
     let mut push = |x: f64, y: f64, th: f64| {
@@ -241,7 +263,7 @@ fn looped_path_csv() -> String {
         push(k as f64 * 0.01, 0.0, 0.0);
     }
     let n = 188; // 2π · 0.3 m at 1 cm
-    for k in 0..n {
+    for k in 0..laps * n {
         let a = std::f64::consts::TAU * k as f64 / n as f64;
         push(1.0 + 0.3 * a.sin(), 0.3 - 0.3 * a.cos(), a);
     }
@@ -252,33 +274,68 @@ fn looped_path_csv() -> String {
 }
 
 #[test]
-fn prune_removes_a_loop_from_a_csv_path() {
+fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
     let tmp = tempfile::tempdir().unwrap();
     let input = tmp.path().join("path.csv");
-    std::fs::write(&input, looped_path_csv()).unwrap();
     let out_csv = tmp.path().join("pruned.csv");
-    let out = twindrive(&[
-        "prune",
-        s(&input),
-        "--pinch-distance",
-        "0.05",
-        "--out",
-        s(&out_csv),
-    ]);
+    let prune = |extra: &[&str]| {
+        let mut args = vec![
+            "prune",
+            s(&input),
+            "--pinch-distance",
+            "0.05",
+            "--out",
+            s(&out_csv),
+        ];
+        args.extend_from_slice(extra);
+        twindrive(&args)
+    };
+
+    // Twice round the loop: the second lap goes, the first stays whole.
+    std::fs::write(&input, looped_path_csv(2)).unwrap();
+    let out = prune(&[]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("removed 1 loop"), "{stdout}");
+    assert!(
+        stdout.contains("coverage within 0.05 m: 100.00 %"),
+        "{stdout}"
+    );
+    let kept = std::fs::read_to_string(&out_csv).unwrap();
+    let rows = kept.lines().count() - 1;
+    assert!((360..=390).contains(&rows), "{rows} rows kept of 576");
+    // The loop's far side (y > 0.55) is driven once.
+    let far = kept
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(2).unwrap().parse::<f64>().unwrap() > 0.55)
+        .count();
+    assert!((20..40).contains(&far), "{far} samples on the far side");
+
+    // Once round: the loop is ground of its own, kept, and the cut that
+    // would have dropped it is reported.
+    std::fs::write(&input, looped_path_csv(1)).unwrap();
+    let out = prune(&[]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("removed 0 loop"), "{stdout}");
+    assert!(stdout.contains("kept 388 of 388"), "{stdout}");
+    assert!(stdout.contains("refused: Loop cut"), "{stdout}");
+
+    // A coverage radius as large as the loop lets it go.
+    let out = prune(&["--coverage-radius", "0.7", "--keep-end"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert!(
         text(&out.stdout).contains("removed 1 loop"),
         "{}",
         text(&out.stdout)
     );
-    let kept = std::fs::read_to_string(&out_csv).unwrap();
-    let rows = kept.lines().count() - 1;
-    assert!(rows < 220 && rows > 190, "{rows} rows kept of 388");
-    // No point of the loop's far side (y > 0.1) survives.
+    let out = prune(&["--coverage-radius", "-1"]);
+    assert!(!out.status.success());
     assert!(
-        kept.lines()
-            .skip(1)
-            .all(|l| l.split(',').nth(2).unwrap().parse::<f64>().unwrap() < 0.1)
+        text(&out.stderr).contains("coverage_radius_m must be > 0"),
+        "{}",
+        text(&out.stderr)
     );
 
     let out = twindrive(&[

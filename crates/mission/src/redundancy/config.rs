@@ -31,6 +31,15 @@ pub struct RedundancyConfig {
     /// Times worth keeping: samples inside are never deleted.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub keep_windows: Vec<TimeWindow>,
+    /// A deleted sample must stay within this distance of the path that
+    /// remains (the route's coverage); `None`: the pinch distance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage_radius_m: Option<f64>,
+    /// Whether the plan also reaches the mission's final pose (along the
+    /// recorded route); by default it ends where the last new ground was
+    /// covered.
+    #[serde(default)]
+    pub keep_end: bool,
 }
 
 fn yes() -> bool {
@@ -72,7 +81,14 @@ impl RedundancyConfig {
             reversing_is_redundant: true,
             keep_regions: Vec::new(),
             keep_windows: Vec::new(),
+            coverage_radius_m: None,
+            keep_end: false,
         }
+    }
+
+    /// `coverage_radius_m`, or its default (the pinch distance).
+    pub fn effective_coverage_radius_m(&self) -> f64 {
+        self.coverage_radius_m.unwrap_or(self.pinch_distance_m)
     }
 
     /// `min_loop_length_m`, or its default.
@@ -88,6 +104,9 @@ impl RedundancyConfig {
             non_negative("min_loop_length_m", l)?;
         }
         non_negative("min_loop_duration_s", self.min_loop_duration_s)?;
+        if let Some(r) = self.coverage_radius_m {
+            positive("coverage_radius_m", r)?;
+        }
         for (k, region) in self.keep_regions.iter().enumerate() {
             region.validate(&format!("keep_regions[{k}]"))?;
         }
@@ -255,5 +274,8 @@ mod tests {
             msg(cfg),
             "keep_windows[0] must have end_s > start_s, got start_s = 5, end_s = 3"
         );
+        let mut cfg = RedundancyConfig::with_pinch_distance(0.1);
+        cfg.coverage_radius_m = Some(0.0);
+        assert_eq!(msg(cfg), "coverage_radius_m must be > 0, got 0");
     }
 }

@@ -15,48 +15,69 @@
 //! cells apart, in neighbouring cells.
 
 use super::geometry::{Point, distance, distance2, segments_meet};
-use super::grid::{Anchor, Entry, Grid, NO_CELL, cell_of};
+use super::grid::{Anchor, Entry, Grid, NO_CELL};
 use super::track::{Criteria, Track};
-use super::{Pinch, PinchKind};
+use super::{Pinch, PinchFinder, PinchKind};
 
 /// Largest spacing of segment anchors, in cells.
 const ANCHOR_SPACING_IN_CELLS: f64 = 0.45;
 
-pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
-    let n = track.len();
-    let mut out = Vec::new();
-    if n < 3 {
-        return out;
-    }
-    let pts = &track.points;
-    let cell_m = cell_size_m(track, crit.pinch_distance_m);
-    let anchors = Anchors::new(track, ANCHOR_SPACING_IN_CELLS * cell_m);
-    let (grid, anchor_cell) = Grid::build(cell_m, anchors.len(), anchors.iter());
-    let next_protected = track.next_protected();
+/// The farthest partner of one sample at a time, for samples in
+/// increasing order (the sweep's and [`farthest_pinches`]'s question).
+pub(super) struct FastFinder<'a> {
+    track: &'a Track,
+    crit: Criteria,
+    anchors: Anchors<'a>,
+    grid: Grid,
+    anchor_cell: Vec<u32>,
+    /// The first sample far enough along from the last one asked about.
+    lo: usize,
+}
 
-    let mut lo = 0;
-    for i in 0..n - 2 {
-        lo = lo.max(i + 2);
-        while lo < n && !long_enough(track, crit, i, lo) {
-            lo += 1;
+impl<'a> FastFinder<'a> {
+    pub fn new(track: &'a Track, crit: &Criteria) -> Self {
+        let cell_m = cell_size_m(track, crit.pinch_distance_m);
+        let anchors = Anchors::new(track, ANCHOR_SPACING_IN_CELLS * cell_m);
+        let (grid, anchor_cell) = Grid::build(cell_m, anchors.len(), anchors.iter());
+        Self {
+            track,
+            crit: *crit,
+            anchors,
+            grid,
+            anchor_cell,
+            lo: 0,
         }
-        if lo == n {
-            break; // lo(i) never decreases: no later sample pinches either
+    }
+}
+
+impl PinchFinder for FastFinder<'_> {
+    fn farthest(&mut self, i: usize, hi: usize) -> Option<Pinch> {
+        let (track, crit) = (self.track, &self.crit);
+        let n = track.len();
+        if i + 2 >= n {
+            return None;
         }
-        let hi = next_protected[i] as usize;
-        if lo > hi {
-            continue;
+        let pts = &track.points;
+        // lo(i) never decreases with i: a two-pointer sweep.
+        self.lo = self.lo.max(i + 2);
+        while self.lo < n && !long_enough(track, crit, i, self.lo) {
+            self.lo += 1;
         }
+        let lo = self.lo;
+        if lo >= n || lo > hi {
+            return None;
+        }
+        let grid = &self.grid;
         // Segment b ends at j = b + 1, so segments from lo - 1 count.
-        let cells = anchors.of_segment(i, &anchor_cell);
+        let cells = self.anchors.of_segment(i, &self.anchor_cell);
         if cells
             .iter()
             .all(|&c| (grid.latest_around(c) as usize) < lo - 1)
         {
-            continue;
+            return None;
         }
         let near = farthest_near(
-            &grid,
+            grid,
             cells[0],
             pts[i],
             crit.pinch_distance2,
@@ -66,104 +87,32 @@ pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
         // A crossing only matters if it reaches beyond the nearest pinch.
         let b_lo = (lo - 1).max(i + 2).max(near.map_or(0, |j| j as usize));
         let crossing = (b_lo < hi)
-            .then(|| farthest_meeting(&grid, cells, pts, i, b_lo as u32, (hi - 1) as u32))
+            .then(|| farthest_meeting(grid, cells, pts, i, b_lo as u32, (hi - 1) as u32))
             .flatten();
         let (j, kind) = match (near, crossing) {
             (_, Some(b)) => (b as usize + 1, PinchKind::Crossing),
             (Some(j), None) => (j as usize, PinchKind::Near),
-            (None, None) => continue,
+            (None, None) => return None,
         };
-        out.push(Pinch {
+        Some(Pinch {
             i,
             j,
             distance_m: distance(pts[i], pts[j]),
             kind,
-        });
+        })
     }
-    out
 }
 
-/// What [`farthest_pinches`] finds on a path all of whose pinches involve
-/// one of the `junctions`: segments `(a, a+1)` that cuts made since the
-/// last complete search (after a round of cuts, only crossings through the
-/// new jumps can pinch; see `prune.rs`). Costs a pass over the samples and
-/// a grid of the junctions only.
-pub(super) fn farthest_pinches_at_junctions(
-    track: &Track,
-    crit: &Criteria,
-    junctions: &[usize],
-) -> Vec<Pinch> {
+/// For each sample, its farthest partner up to the next protected sample.
+pub(super) fn farthest_pinches(track: &Track, crit: &Criteria) -> Vec<Pinch> {
     let n = track.len();
-    if n < 4 || junctions.is_empty() {
+    if n < 3 {
         return Vec::new();
     }
-    let pts = &track.points;
-    let cell_m = cell_size_m(track, crit.pinch_distance_m);
-    let anchors = Anchors::new(track, ANCHOR_SPACING_IN_CELLS * cell_m);
-    // Each junction anchor in the nine cells around it: a segment that
-    // meets a junction has an anchor in one of them.
-    let mut spread = Vec::new();
-    for &a in junctions {
-        for pos in anchors.positions(a) {
-            let (cx, cy) = cell_of(pos, cell_m);
-            for k in 0..9 {
-                let cell = (cx + k % 3 - 1, cy + k / 3 - 1);
-                let tag = a as u32;
-                spread.push((
-                    cell,
-                    Anchor {
-                        pos,
-                        tag,
-                        is_sample: false,
-                    },
-                ));
-            }
-        }
-    }
-    let (near_junctions, _) = Grid::build_in_cells(spread.len(), spread.into_iter());
-
     let next_protected = track.next_protected();
-    let mut found: Vec<(usize, usize)> = Vec::new();
-    for b in 0..n - 1 {
-        for pos in anchors.positions(b) {
-            let c = near_junctions.cell_id(cell_of(pos, cell_m));
-            if c == NO_CELL {
-                continue;
-            }
-            for e in near_junctions.entries(c) {
-                let a = e.first as usize;
-                let (i, last) = match a.cmp(&b) {
-                    std::cmp::Ordering::Less => (a, b),
-                    _ => (b, a),
-                };
-                let j = last + 1;
-                if last >= i + 2
-                    && j <= next_protected[i] as usize
-                    && long_enough(track, crit, i, j)
-                    && segments_meet(pts[i], pts[i + 1], pts[last], pts[j])
-                {
-                    found.push((i, j));
-                }
-            }
-        }
-    }
-    found.sort_unstable_by(|x, y| x.0.cmp(&y.0).then(y.1.cmp(&x.1)));
-    found.dedup_by_key(|p| p.0);
-    found
-        .into_iter()
-        .map(|(i, j)| {
-            let d2 = distance2(pts[i], pts[j]);
-            Pinch {
-                i,
-                j,
-                distance_m: d2.sqrt(),
-                kind: if d2 < crit.pinch_distance2 {
-                    PinchKind::Near
-                } else {
-                    PinchKind::Crossing
-                },
-            }
-        })
+    let mut finder = FastFinder::new(track, crit);
+    (0..n - 2)
+        .filter_map(|i| finder.farthest(i, next_protected[i] as usize))
         .collect()
 }
 

@@ -18,6 +18,33 @@ pub(super) fn distance(a: Point, b: Point) -> f64 {
     distance2(a, b).sqrt()
 }
 
+/// Squared distance from `s` to the closed segment `p q` (to the point `p`
+/// when `p == q`): the coverage predicate every finder shares.
+#[inline]
+pub(super) fn segment_distance2(s: Point, p: Point, q: Point) -> f64 {
+    let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
+    let (ex, ey) = (s[0] - p[0], s[1] - p[1]);
+    let dot = ex * dx + ey * dy;
+    if dot <= 0.0 {
+        return ex * ex + ey * ey;
+    }
+    let length2 = dx * dx + dy * dy;
+    if dot >= length2 {
+        return distance2(s, q);
+    }
+    let t = dot / length2;
+    let (fx, fy) = (ex - t * dx, ey - t * dy);
+    fx * fx + fy * fy
+}
+
+/// Squared distance from `s` to the box `lo..=hi` (zero inside).
+#[inline]
+pub(super) fn box_distance2(s: Point, lo: Point, hi: Point) -> f64 {
+    let dx = (lo[0] - s[0]).max(s[0] - hi[0]).max(0.0);
+    let dy = (lo[1] - s[1]).max(s[1] - hi[1]).max(0.0);
+    dx * dx + dy * dy
+}
+
 /// Twice the signed area of the triangle `a b c` (> 0: counter-clockwise).
 #[inline]
 fn orient(a: Point, b: Point, c: Point) -> f64 {
@@ -64,6 +91,18 @@ pub(super) fn segments_meet(p1: Point, p2: Point, p3: Point, p4: Point) -> bool 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn distance_to_a_segment_its_ends_and_a_point() {
+        let (p, q) = ([0.0, 0.0], [2.0, 0.0]);
+        assert_eq!(segment_distance2([1.0, 3.0], p, q), 9.0);
+        assert_eq!(segment_distance2([-3.0, 4.0], p, q), 25.0);
+        assert_eq!(segment_distance2([5.0, 4.0], p, q), 25.0);
+        assert_eq!(segment_distance2([1.0, 0.0], p, q), 0.0);
+        assert_eq!(segment_distance2([3.0, 4.0], p, p), 25.0);
+        assert_eq!(box_distance2([1.0, 1.0], [0.0, 0.0], [2.0, 2.0]), 0.0);
+        assert_eq!(box_distance2([5.0, 6.0], [0.0, 0.0], [2.0, 2.0]), 25.0);
+    }
 
     #[test]
     fn crossing_touching_and_apart() {

@@ -36,7 +36,6 @@ pub(super) struct Grid {
     neighbours: Vec<[u32; 9]>,
     /// The largest tag in the 3×3 cells around each cell.
     latest_around: Vec<u32>,
-    ids: CellIds,
 }
 
 impl Grid {
@@ -96,26 +95,7 @@ impl Grid {
             last_is_sample = a.is_sample;
         }
 
-        let mut starts = vec![0u32; coords.len() + 1];
-        for &(id, _) in &raw {
-            starts[id as usize + 1] += 1;
-        }
-        for c in 0..coords.len() {
-            starts[c + 1] += starts[c];
-        }
-        let mut fill = starts.clone();
-        let mut entries = vec![
-            Entry {
-                first: 0,
-                last: 0,
-                pos: [0.0; 2]
-            };
-            raw.len()
-        ];
-        for (id, e) in raw {
-            entries[fill[id as usize] as usize] = e;
-            fill[id as usize] += 1;
-        }
+        let (starts, entries) = by_cell(coords.len(), raw);
         let neighbours = ids.neighbours(&coords);
         let latest: Vec<u32> = (0..coords.len())
             .map(|c| entries[starts[c + 1] as usize - 1].last)
@@ -137,7 +117,6 @@ impl Grid {
                 entries,
                 neighbours,
                 latest_around,
-                ids,
             },
             anchor_cell,
         )
@@ -157,17 +136,35 @@ impl Grid {
         &self.neighbours[cell as usize]
     }
 
-    /// The id of the cell at these coordinates, `NO_CELL` if it holds
-    /// nothing.
-    pub fn cell_id(&self, cell: (i32, i32)) -> u32 {
-        self.ids.id(cell)
-    }
-
     #[inline]
     pub fn entries(&self, cell: u32) -> &[Entry] {
         let c = cell as usize;
         &self.entries[self.starts[c] as usize..self.starts[c + 1] as usize]
     }
+}
+
+/// Items tagged with a cell id, grouped by cell (a counting sort, so each
+/// cell keeps its items in the order given): cell `c`'s items are
+/// `items[starts[c]..starts[c + 1]]`.
+pub(super) fn by_cell<T: Copy>(cells: usize, tagged: Vec<(u32, T)>) -> (Vec<u32>, Vec<T>) {
+    let mut starts = vec![0u32; cells + 1];
+    for &(id, _) in &tagged {
+        starts[id as usize + 1] += 1;
+    }
+    for c in 0..cells {
+        starts[c + 1] += starts[c];
+    }
+    let Some(&(_, any)) = tagged.first() else {
+        return (starts, Vec::new());
+    };
+    let mut fill = starts.clone();
+    // Every slot is written: the counts add up to the items.
+    let mut items = vec![any; tagged.len()];
+    for (id, item) in tagged {
+        items[fill[id as usize] as usize] = item;
+        fill[id as usize] += 1;
+    }
+    (starts, items)
 }
 
 /// Integer cell coordinates. Callers choose `cell_m` so that they stay
@@ -185,7 +182,7 @@ pub(super) fn cell_of(p: Point, cell_m: f64) -> (i32, i32) {
 /// A path stays in one tile for many cells, so most look-ups, and most
 /// neighbour look-ups, never touch the hash table.
 #[derive(Default)]
-struct CellIds {
+pub(super) struct CellIds {
     tiles: CellTable,
     cells: Vec<[u32; TILE * TILE]>,
     last_tile: Option<((i32, i32), u32)>,
@@ -204,7 +201,7 @@ fn split((cx, cy): (i32, i32)) -> ((i32, i32), usize) {
 }
 
 impl CellIds {
-    fn id(&self, cell: (i32, i32)) -> u32 {
+    pub fn id(&self, cell: (i32, i32)) -> u32 {
         let (tile, slot) = split(cell);
         match self.tiles.id(tile) {
             NO_CELL => NO_CELL,
@@ -212,7 +209,7 @@ impl CellIds {
         }
     }
 
-    fn id_or_insert(&mut self, cell: (i32, i32), new_id: impl FnOnce() -> u32) -> u32 {
+    pub fn id_or_insert(&mut self, cell: (i32, i32), new_id: impl FnOnce() -> u32) -> u32 {
         let (tile, slot) = split(cell);
         let t = match self.last_tile {
             Some((k, t)) if k == tile => t,
@@ -234,7 +231,7 @@ impl CellIds {
     }
 
     /// The 3×3 neighbourhood of every cell, `coords` in id order.
-    fn neighbours(&self, coords: &[(i32, i32)]) -> Vec<[u32; 9]> {
+    pub fn neighbours(&self, coords: &[(i32, i32)]) -> Vec<[u32; 9]> {
         // Tile ids around the tile of the previous cell: consecutive cells
         // are mostly in one tile.
         let mut around_tile: Option<((i32, i32), [u32; 9])> = None;

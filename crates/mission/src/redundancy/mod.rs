@@ -1,87 +1,97 @@
-//! Redundancy removal (paper section 5, Fig. 7): find the pinch points of a
-//! path and delete the loops and kinks between them.
+//! Redundancy removal (paper section 5, Fig. 7): delete what the robot need
+//! not drive again, and never the ground it explored.
 //!
 //! # What is redundant
 //!
-//! The user says so in a [`RedundancyConfig`]:
-//! - a **pinch** is a pair of samples `i < j` that the path could join
-//!   without losing anything: either they are closer than
-//!   `pinch_distance_m` (strictly, `j >= i + 2`, kind [`PinchKind::Near`]),
-//!   or the segments `(i, i+1)` and `(j-1, j)` meet (a true self-crossing of
-//!   the polyline, `j >= i + 3`, kind [`PinchKind::Crossing`]; this catches
-//!   crossings between sparse samples that are never near one another);
-//! - and the path from `i` to `j` is a loop worth the name: at least
-//!   `min_loop_length_m` long (default: [`DEFAULT_LOOP_LENGTH_IN_PINCH_DISTANCES`]
-//!   pinch distances, so a straight or gently curving stretch never pinches
-//!   itself: an arc of constant curvature pinches only once it has turned
-//!   through more than about 260°, a corner only if sharper than about 39°)
-//!   and lasting at least `min_loop_duration_s` (by the input's time stamps);
+//! The paper's definition: what can be removed "without causing a change
+//! to the robot's exploration route that would result in the oversight of
+//! valuable information". Here that is a rule on **coverage**: the places
+//! the path passed within the coverage radius `r` (`coverage_radius_m`,
+//! default: the pinch distance). A cut is allowed only when every sample it
+//! deletes stays within `r` of the path that remains. Where two passes
+//! cover the same ground, the **first** is kept and the later retrace cut.
+//!
+//! The cuts the user's [`RedundancyConfig`] allows:
+//! - a **pinch** is a pair of samples `i < j` that the path could join:
+//!   either they are closer than `pinch_distance_m` (strictly,
+//!   `j >= i + 2`, kind [`PinchKind::Near`]), or the segments `(i, i+1)` and
+//!   `(j-1, j)` meet (a true self-crossing of the polyline, `j >= i + 3`,
+//!   kind [`PinchKind::Crossing`]; this catches crossings between sparse
+//!   samples that are never near one another); and the path from `i` to `j`
+//!   is a loop worth the name: at least `min_loop_length_m` long (default:
+//!   [`DEFAULT_LOOP_LENGTH_IN_PINCH_DISTANCES`] pinch distances, so a
+//!   straight or gently curving stretch never pinches itself) and lasting at
+//!   least `min_loop_duration_s` (by the input's time stamps);
 //! - with `reversing_is_redundant` (the default), each "bump and back up"
 //!   is a **kink**: a maximal run of samples with `v_m_s < 0` together with
-//!   the forward stretch it retraces. Kinks are cut whatever their length;
+//!   the forward stretch it retraces;
+//! - the **trailing retrace**: the end of the mission, when it only passes
+//!   ground already covered. By default the plan ends where the last new
+//!   ground was covered; with `keep_end` it reaches the mission's final pose
+//!   along the recorded route;
 //! - samples in `keep_regions` or `keep_windows` (places worth looking at
-//!   twice), the first and the last sample, and — when reversing is *not*
-//!   redundant — every reversing sample are **protected**: no cut deletes
-//!   them, so a loop through them stays.
+//!   twice), the first sample, the last with `keep_end`, and — when
+//!   reversing is *not* redundant — every reversing sample are
+//!   **protected**: no cut deletes them.
 //!
-//! Cutting a pinch `(i, j)` deletes the samples strictly between `i` and
-//! `j`; `i` and `j` stay, so the path jumps by less than the pinch distance
-//! (for a crossing, across the crossing point).
+//! Cutting a pinch or kink `(i, j)` deletes the samples strictly between
+//! `i` and `j`; `i` and `j` stay, so the path jumps by less than the pinch
+//! distance (for a crossing, across the crossing point).
 //!
 //! # Algorithm
 //!
-//! The pinch finders report, for each sample `i`, only the **farthest** `j`
-//! that pinches it and whose cut deletes no protected sample: that is all
-//! the removal needs, and it keeps the output linear in the path length (a
-//! lap driven twice has a pinch for every sample pair along it).
+//! One sweep along the path (`prune.rs`). At each kept sample `i` it takes
+//! the kink that starts there, or else the farthest pinch back to `i`, if
+//! its deleted samples are all within `r` of the kept path up to `i`, and
+//! goes on from the cut's end. A cut that would drop ground gives way to the
+//! farthest cut that ends at or before the first sample it would drop (and
+//! the outermost refused cut of each overlapping group is listed with the
+//! metres it would have dropped). A pinch that is little more than a kink
+//! (the path it cuts around the kink is shorter than a loop) waits for the
+//! kink, so the turn after a back-up stays in the plan. Witnesses lie before `i`, where
+//! no later cut reaches, so the coverage checked is the coverage the plan
+//! has. Once past the last new ground (a sample farther than `r` from the
+//! path that ends `r` metres before it) and the last protected sample, the
+//! first sample whose kept path covers everything after it ends the path.
 //!
+//! The pinch finders answer "the farthest partner of `i` up to `hi`":
 //! [`find_pinches`] indexes the samples in a uniform grid hash with cells
 //! one pinch distance wide (a hand-written table of 8×8-cell tiles; each
 //! cell's entries in one flat array, in index order). A sample's partners
 //! lie in the 3×3 cells around it, so the farthest one is the first hit
-//! scanning each cell down from the protection limit, and the scan stops
-//! where the path from `i` is too short to be a loop; a sample whose 3×3
-//! cells hold nothing that far along is settled by one look-up. Segments are
-//! found through the same grid: segment `(b, b+1)` is anchored at sample `b`
-//! and, if longer than 0.45 cells, at points along it, so two segments that
-//! meet have anchors in neighbouring cells. Runs of samples at one position
-//! (standing still, turning in place) are one grid entry, so a long stop
-//! costs no more than one sample.
+//! scanning each cell down from `hi`, and the scan stops where the path
+//! from `i` is too short to be a loop; a sample whose 3×3 cells hold
+//! nothing that far along is settled by one look-up. Segments are found
+//! through the same grid: segment `(b, b+1)` is anchored at sample `b` and,
+//! if longer than 0.45 cells, at points along it, so two segments that meet
+//! have anchors in neighbouring cells. Runs of samples at one position
+//! (standing still, turning in place) are one grid entry.
+//!
+//! Coverage (`coverage.rs`) has a grid of its own, cells 1.25 `r` wide,
+//! holding each pass of the path through a cell as one run with its box.
+//! The kept path only grows as the sweep goes on, so a sample once covered
+//! stays covered, and one found uncovered is tested again only against what
+//! was added since: each sample is tested through the grid about once.
 //!
 //! [`find_pinches_reference`] is the paper's method: it materialises the
 //! full `n × n` matrix of squared distances and tests every segment pair, in
-//! `O(n²)` time and memory. The tests compare the two on random paths, and
-//! both share the two floating-point predicates (`geometry.rs`), so they
-//! agree to the bit.
+//! `O(n²)` time and memory; [`remove_redundancy_reference`] sweeps with it
+//! and tests coverage against every piece of path. The tests compare the
+//! fast and the reference results on random paths; both share the
+//! floating-point predicates (`geometry.rs`), so they agree to the bit.
 //!
-//! [`remove_redundancy`] then repeats, until nothing changes:
-//! 1. cut the kinks (when reversing is redundant);
-//! 2. find the pinches of the current path and cut outermost first: take
-//!    the earliest pinch start, cut to its farthest end (so nested loops go
-//!    in one cut), go on from that end.
+//! The sweep is `O(n)` expected on ordinary paths (grid builds are a hash
+//! insert per sample and a counting sort). The worst case is a path that
+//! lingers at many *distinct* points near another place where it also
+//! lingers: each sample there scans the other place's samples.
 //!
-//! A later round can only find crossings through the jumps that earlier
-//! cuts left (a pair of samples that pinches after a cut pinched before it,
-//! with more path in between, and the cut from the earlier one went to its
-//! farthest partner), so the fast removal searches only around those jumps
-//! after the first round, while the reference searches everything every
-//! round; the tests check that both cut the same. Paths settle in two
-//! rounds in practice, the second finding nothing.
-//!
-//! Each round is `O(n)` expected: building the grid is a hash insert per
-//! sample plus a counting sort, a query scans only entries between its
-//! window's ends, and a later round is one pass over the samples. The whole
-//! is within the `O(n log n)` asked for on ordinary paths. The worst case
-//! is a path that lingers at many *distinct* points between one and three
-//! pinch distances from another place where it also lingers, with a short
-//! `min_loop_length_m`: each sample there scans the other place's samples.
-//!
-//! Deletions are reported in input indices, disjoint and sorted; a later
-//! round's cut that swallows an earlier deletion replaces it.
+//! [`route_coverage`] measures a finished plan: the route's length within
+//! `r` of the plan, and the stretches it leaves uncovered.
 //!
 //! Lengths are along the polyline, durations by the input's time stamps.
 
 mod config;
+mod coverage;
 mod fast;
 mod geometry;
 mod grid;
@@ -93,7 +103,10 @@ mod track;
 pub use config::{
     DEFAULT_LOOP_LENGTH_IN_PINCH_DISTANCES, KeepRegion, RedundancyConfig, TimeWindow,
 };
-pub use prune::{Deletion, DeletionReason, Pruned, remove_redundancy, remove_redundancy_reference};
+pub use coverage::{RouteCoverage, UncoveredStretch, route_coverage};
+pub use prune::{
+    Deletion, DeletionReason, Pruned, RefusedCut, remove_redundancy, remove_redundancy_reference,
+};
 
 use serde::{Deserialize, Serialize};
 
@@ -149,6 +162,13 @@ pub enum PinchKind {
     Near,
     /// Segments `(i, i+1)` and `(j-1, j)` meet, and the samples are not near.
     Crossing,
+}
+
+/// The finders' one question.
+pub(super) trait PinchFinder {
+    /// The farthest `j` in `i + 2..=hi` that pinches `i` (see the module
+    /// docs); calls come with `i` never decreasing.
+    fn farthest(&mut self, i: usize, hi: usize) -> Option<Pinch>;
 }
 
 /// For each sample `i` of the path, the farthest sample `j` it pinches with

@@ -1,43 +1,52 @@
-//! Loop and kink removal: cut outermost first, round after round, until
-//! the path has nothing left to cut.
+//! Loop, kink and retrace removal: one sweep along the path that keeps the
+//! first visit of every place and cuts only what the kept path covers.
 
 use serde::{Deserialize, Serialize};
 
+use super::coverage::{self, BruteCoverage, Coverage, FastCoverage};
+use super::fast::FastFinder;
+use super::reference::ReferenceFinder;
 use super::track::{Criteria, Track};
-use super::{Pinch, PinchKind, RedundancyConfig, RedundancyError, fast, reference, reversal};
+use super::{PinchFinder, PinchKind, RedundancyConfig, RedundancyError, reversal};
 use crate::path::PathSample;
 
 /// The outcome of [`remove_redundancy`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Pruned {
     /// Indices of the surviving input samples, increasing; always holds the
-    /// first and the last sample and every protected one.
+    /// first sample and every protected one (the last with `keep_end`).
     pub kept: Vec<usize>,
     /// What was cut, in input indices: disjoint, sorted, and together
     /// exactly the samples not in `kept`.
     pub deletions: Vec<Deletion>,
-    /// The pinch points the loop removal started from (found after the
-    /// kinks were cut), in input indices: for figures like the paper's Fig. 7.
-    pub pinches: Vec<Pinch>,
+    /// Cuts the coverage rule refused (the outermost of each overlapping
+    /// group), with the ground they would have dropped.
+    pub refused: Vec<RefusedCut>,
+    /// The coverage radius the cuts were checked at.
+    pub coverage_radius_m: f64,
 }
 
 /// One deleted stretch: samples `first_removed..=last_removed` of the
-/// input. The loop runs between the kept samples on either side.
+/// input. A loop, crossing or kink runs between the kept samples on either
+/// side; a trailing retrace runs from the kept sample before to the end.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Deletion {
     pub first_removed: usize,
     pub last_removed: usize,
     /// Input time of the kept sample before (`first_removed - 1`).
     pub t_start_s: f64,
-    /// Input time of the kept sample after (`last_removed + 1`).
+    /// Input time of the kept sample after (`last_removed + 1`), or of the
+    /// last sample for a trailing retrace.
     pub t_end_s: f64,
     /// Input path length between those two samples.
     pub length_m: f64,
     pub reason: DeletionReason,
+    /// Metres of the deleted path farther than the coverage radius from the
+    /// path that remains: zero, since the sweep applies no other cut.
+    pub uncovered_m: f64,
 }
 
-/// Why a stretch was deleted (for a deletion that swallowed earlier ones:
-/// why the outermost cut was made).
+/// Why a stretch was deleted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DeletionReason {
@@ -47,6 +56,24 @@ pub enum DeletionReason {
     Crossing,
     /// A "bump and back up" kink.
     Reversal,
+    /// The end of the mission, over ground already covered.
+    TrailingRetrace,
+}
+
+/// A cut from `i` to `j` (input indices) that would have dropped ground:
+/// the path between them farther than the coverage radius from the kept
+/// path before `i` and the path from `j` on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RefusedCut {
+    pub i: usize,
+    pub j: usize,
+    pub t_start_s: f64,
+    pub t_end_s: f64,
+    /// Path length between `i` and `j`.
+    pub length_m: f64,
+    pub reason: DeletionReason,
+    /// Metres of path it would have left uncovered.
+    pub would_drop_m: f64,
 }
 
 impl Pruned {
@@ -56,209 +83,199 @@ impl Pruned {
     }
 }
 
-/// Deletes the loops and kinks of a path (see the module docs). A path
-/// without any passes through unchanged; fewer than three samples always do.
+/// Deletes the retraced loops, kinks and trailing retrace of a path (see
+/// the module docs). A path without any passes through unchanged; fewer
+/// than three samples always do.
 pub fn remove_redundancy(
     path: &[PathSample],
     cfg: &RedundancyConfig,
 ) -> Result<Pruned, RedundancyError> {
-    prune(path, cfg, Finder::Fast)
+    let track = Track::new(path, cfg)?;
+    let crit = Criteria::new(cfg);
+    let radius_m = cfg.effective_coverage_radius_m();
+    let mut finder = FastFinder::new(&track, &crit);
+    let mut coverage = FastCoverage::new(&track, radius_m);
+    Ok(sweep(&track, cfg, &crit, &mut finder, &mut coverage))
 }
 
-/// [`remove_redundancy`] with the reference pinch finder in every round:
-/// the same result in `O(n²)` time and memory. For tests and benchmarks.
+/// [`remove_redundancy`] with the reference pinch finder and coverage that
+/// tests every piece of path: the same result in `O(n²)` memory and up to
+/// `O(n³)` time. For tests and benchmarks.
 pub fn remove_redundancy_reference(
     path: &[PathSample],
     cfg: &RedundancyConfig,
 ) -> Result<Pruned, RedundancyError> {
-    prune(path, cfg, Finder::Reference)
+    let track = Track::new(path, cfg)?;
+    let crit = Criteria::new(cfg);
+    let radius_m = cfg.effective_coverage_radius_m();
+    let mut finder = ReferenceFinder::new(&track, &crit)?;
+    let mut coverage = BruteCoverage::new(&track, radius_m);
+    Ok(sweep(&track, cfg, &crit, &mut finder, &mut coverage))
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Finder {
-    /// The grid hash; after the first round, only the new jumps are searched.
-    Fast,
-    /// The full distance matrix in every round.
-    Reference,
-}
-
-/// A cut `(i, j)` in current indices: samples strictly between go.
+/// A cut `(i, j)`: samples strictly between go (to the end for a trailing
+/// retrace, whose `j` is the path's length).
 type Cut = (usize, usize, DeletionReason);
 
-/// Rounds of kink cuts and pinch cuts until neither finds anything.
+/// The sweep: at each kept sample `i`, from the first on, a cut that starts
+/// there whose deleted samples the kept path up to `i` covers: the kink
+/// back to `i` (so the turn after a back-up stays), or else the farthest
+/// pinch (a loop or crossing back to `i`); then on from the cut's end. A
+/// cut that would drop ground gives way to the farthest one that ends at or
+/// before the first sample it would drop. Once past the last
+/// new ground (and the last protected sample), the first sample whose kept
+/// path covers everything after it ends the plan, unless `keep_end`.
 ///
-/// After the first pinch search, a pair of samples can pinch only through a
-/// segment that a cut has made since the last search (a "junction"): two
-/// samples that pinch now pinched then too, with no less path between them
-/// (cuts only shorten it); the search found the farthest partner of each,
-/// and the cut from the earlier sample went there, leaving them adjacent.
-/// So the fast finder searches only around the junctions after that; the
-/// reference searches everything every round, and the tests compare them.
-fn prune(
-    path: &[PathSample],
+/// Every sample is deleted by at most one cut and witnessed by kept path
+/// before it, which no later cut touches: the coverage the cuts were
+/// checked against is the coverage the result has.
+fn sweep(
+    track: &Track,
     cfg: &RedundancyConfig,
-    finder: Finder,
-) -> Result<Pruned, RedundancyError> {
-    let mut track = Track::new(path, cfg)?;
-    let crit = Criteria::new(cfg);
-    let input_length_m = track.cum_length_m.clone();
-    let input_t_s = track.t_s.clone();
-    // Records the cuts, remembers their junctions and takes them out of the track.
-    let apply = |deletions: &mut Vec<Deletion>,
-                 junctions: &mut Vec<usize>,
-                 track: &mut Track,
-                 cuts: &[Cut]| {
-        for &(i, j, reason) in cuts {
-            let (a, b) = (track.input_index[i], track.input_index[j]);
-            deletions.push(Deletion {
-                first_removed: a + 1,
-                last_removed: b - 1,
-                t_start_s: input_t_s[a],
-                t_end_s: input_t_s[b],
-                length_m: input_length_m[b] - input_length_m[a],
-                reason,
-            });
+    crit: &Criteria,
+    finder: &mut impl PinchFinder,
+    coverage: &mut impl Coverage,
+) -> Pruned {
+    let n = track.len();
+    let radius_m = cfg.effective_coverage_radius_m();
+    let mut kept = vec![true; n];
+    let mut cuts: Vec<Cut> = Vec::new();
+    let mut refused: Vec<RefusedCut> = Vec::new();
+    if n < 3 {
+        return finish(track, kept, cuts, refused, radius_m);
+    }
+    let next_protected = track.next_protected();
+    // The end of the kink that starts at each sample (0: none).
+    let mut kink_end = vec![0usize; n];
+    if cfg.reversing_is_redundant {
+        for (k, e) in reversal::kinks(track, crit) {
+            kink_end[k] = kink_end[k].max(e);
         }
-        merge_nested(deletions);
-        junctions.extend(cuts.iter().map(|c| track.input_index[c.0]));
-        *track = track.without(&spans(cuts));
-    };
-
-    // Input indices of the samples whose outgoing segment is a junction.
-    let mut junctions: Vec<usize> = Vec::new();
-    let mut deletions = Vec::new();
-    let mut first_pinches: Option<Vec<Pinch>> = None;
-    let mut kinks_stale = cfg.reversing_is_redundant;
-    let mut pinches_stale = true;
-    while kinks_stale || pinches_stale {
-        if kinks_stale {
-            kinks_stale = false;
-            let kinks = reversal::kinks(&track, &crit);
-            let cuts = outermost(
-                kinks
-                    .into_iter()
-                    .map(|(k, e)| (k, e, DeletionReason::Reversal))
-                    .collect(),
-            );
-            if !cuts.is_empty() {
-                apply(&mut deletions, &mut junctions, &mut track, &cuts);
-                pinches_stale = true;
-            }
+    }
+    // Where a trailing retrace may start: after the last new ground and the
+    // last protected sample.
+    let truncate_from = (!cfg.keep_end).then(|| {
+        let last_protected = (0..n).rev().find(|&k| track.protected[k]).unwrap_or(0);
+        coverage::last_new_sample(coverage, track, radius_m).max(last_protected)
+    });
+    // The kink from `i`, or else the farthest pinch, ending at most at `hi`.
+    let candidate = |finder: &mut dyn PinchFinder, i: usize, hi: usize| {
+        let kink = (kink_end[i] != 0 && kink_end[i] <= hi)
+            .then_some((kink_end[i], DeletionReason::Reversal));
+        if kink.is_some() {
+            return kink;
         }
-        if pinches_stale {
-            pinches_stale = false;
-            let pinches = match (finder, &first_pinches) {
-                (Finder::Reference, _) => reference::farthest_pinches(&track, &crit)?,
-                (Finder::Fast, None) => fast::farthest_pinches(&track, &crit),
-                (Finder::Fast, Some(_)) => {
-                    let at = current_indices(&track, &junctions);
-                    fast::farthest_pinches_at_junctions(&track, &crit, &at)
-                }
+        finder.farthest(i, hi).map(|p| {
+            let reason = match p.kind {
+                PinchKind::Near => DeletionReason::Loop,
+                PinchKind::Crossing => DeletionReason::Crossing,
             };
-            junctions.clear();
-            let cuts = outermost(
-                pinches
-                    .iter()
-                    .map(|p| {
-                        let reason = match p.kind {
-                            PinchKind::Near => DeletionReason::Loop,
-                            PinchKind::Crossing => DeletionReason::Crossing,
-                        };
-                        (p.i, p.j, reason)
-                    })
-                    .collect(),
-            );
-            if first_pinches.is_none() {
-                first_pinches = Some(
-                    pinches
-                        .into_iter()
-                        .map(|p| Pinch {
-                            i: track.input_index[p.i],
-                            j: track.input_index[p.j],
-                            ..p
-                        })
-                        .collect(),
-                );
-            }
-            if !cuts.is_empty() {
-                apply(&mut deletions, &mut junctions, &mut track, &cuts);
-                pinches_stale = true;
-                kinks_stale = cfg.reversing_is_redundant;
-            }
-        }
-    }
-    Ok(Pruned {
-        kept: track.input_index,
-        deletions,
-        pinches: first_pinches.unwrap_or_default(),
-    })
-}
-
-/// Where the given input samples are in the track, skipping those gone and
-/// the last sample (which starts no segment).
-fn current_indices(track: &Track, input: &[usize]) -> Vec<usize> {
-    let mut at: Vec<usize> = input
-        .iter()
-        .filter_map(|k| track.input_index.binary_search(k).ok())
-        .filter(|&i| i + 1 < track.len())
-        .collect();
-    at.sort_unstable();
-    at.dedup();
-    at
-}
-
-/// Outermost first: the earliest start, cut to its farthest end, go on
-/// from there. The cuts returned are sorted and share at most end samples.
-fn outermost(mut candidates: Vec<Cut>) -> Vec<Cut> {
-    candidates.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)));
-    let mut cuts = Vec::new();
-    let mut from = 0;
-    for c in candidates {
-        if c.0 >= from {
-            from = c.1;
-            cuts.push(c);
-        }
-    }
-    cuts
-}
-
-fn spans(cuts: &[Cut]) -> Vec<(usize, usize)> {
-    cuts.iter().map(|&(i, j, _)| (i, j)).collect()
-}
-
-/// Sorts deletions and drops those inside a later round's larger one (a
-/// later cut's ends are kept samples, so spans nest or are apart).
-fn merge_nested(deletions: &mut Vec<Deletion>) {
-    deletions.sort_by(|a, b| {
-        a.first_removed
-            .cmp(&b.first_removed)
-            .then(b.last_removed.cmp(&a.last_removed))
-    });
-    let mut reach = None;
-    deletions.retain(|d| {
-        if reach.is_some_and(|r| d.last_removed <= r) {
-            false
+            (p.j, reason)
+        })
+    };
+    // The first kink that starts after each sample (n: none).
+    let mut next_kink = vec![n; n];
+    for k in (0..n.saturating_sub(1)).rev() {
+        next_kink[k] = if kink_end[k + 1] != 0 {
+            k + 1
         } else {
-            reach = Some(d.last_removed);
-            true
+            next_kink[k + 1]
+        };
+    }
+    // A pinch that is little more than a kink (a back-up and the turn after
+    // it): the path it cuts around the kink is no loop of its own.
+    let swallows_a_kink = |i: usize, j: usize| {
+        let k = next_kink[i];
+        k < j && kink_end[k] <= j && {
+            let cum = &track.cum_length_m;
+            (cum[k] - cum[i]) + (cum[j] - cum[kink_end[k]]) < crit.min_loop_length_m
         }
-    });
+    };
+    let mut refused_reach = 0;
+    let mut i = 0;
+    while i + 1 < n {
+        if truncate_from.is_some_and(|t| i >= t) && coverage.first_uncovered(i, n, &kept).is_none()
+        {
+            kept[i + 1..].fill(false);
+            cuts.push((i, n, DeletionReason::TrailingRetrace));
+            break;
+        }
+        let hi = next_protected[i] as usize;
+        let mut chosen = None;
+        if let Some((j, reason)) = candidate(finder, i, hi) {
+            match coverage.first_uncovered(i, j, &kept) {
+                None => chosen = Some((j, reason)),
+                Some(u) => {
+                    // The outermost refusal of each overlapping group is
+                    // measured (so the measuring costs one pass), and listed
+                    // only if it would drop ground: a cut whose samples only
+                    // the path after it covers is refused to keep the first
+                    // visit, and drops nothing.
+                    if i >= refused_reach {
+                        refused_reach = j;
+                        let uncovered = |s: usize| !coverage.covered_around_cut(s, i, j, &kept);
+                        let would_drop_m = coverage::half_weighted_between(track, i, j, uncovered);
+                        if would_drop_m > 0.0 {
+                            refused.push(RefusedCut {
+                                i,
+                                j,
+                                t_start_s: track.t_s[i],
+                                t_end_s: track.t_s[j],
+                                length_m: track.cum_length_m[j] - track.cum_length_m[i],
+                                reason,
+                                would_drop_m,
+                            });
+                        }
+                    }
+                    // Everything before `u` is covered: the farthest cut to
+                    // `u` at most is safe.
+                    chosen = candidate(finder, i, hi.min(u));
+                }
+            }
+        }
+        match chosen {
+            // Left for the kink, which keeps the turn after the back-up.
+            Some((j, reason)) if reason != DeletionReason::Reversal && swallows_a_kink(i, j) => {
+                i += 1
+            }
+            Some((j, reason)) => {
+                kept[i + 1..j].fill(false);
+                cuts.push((i, j, reason));
+                i = j;
+            }
+            None => i += 1,
+        }
+    }
+    finish(track, kept, cuts, refused, radius_m)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn outermost_takes_the_earliest_then_the_farthest() {
-        let l = DeletionReason::Loop;
-        let cuts = outermost(vec![
-            (5, 9, l),
-            (2, 8, l),
-            (3, 20, l),
-            (8, 12, l),
-            (20, 25, l),
-        ]);
-        assert_eq!(cuts, vec![(2, 8, l), (8, 12, l), (20, 25, l)]);
+fn finish(
+    track: &Track,
+    kept: Vec<bool>,
+    cuts: Vec<Cut>,
+    refused: Vec<RefusedCut>,
+    coverage_radius_m: f64,
+) -> Pruned {
+    let n = track.len();
+    let deletions = cuts
+        .into_iter()
+        .map(|(i, j, reason)| {
+            let end = j.min(n - 1);
+            Deletion {
+                first_removed: i + 1,
+                last_removed: j - 1,
+                t_start_s: track.t_s[i],
+                t_end_s: track.t_s[end],
+                length_m: track.cum_length_m[end] - track.cum_length_m[i],
+                reason,
+                uncovered_m: 0.0,
+            }
+        })
+        .collect();
+    Pruned {
+        kept: (0..n).filter(|&k| kept[k]).collect(),
+        deletions,
+        refused,
+        coverage_radius_m,
     }
 }

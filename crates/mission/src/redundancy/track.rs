@@ -28,19 +28,19 @@ impl Criteria {
     }
 }
 
-/// The samples still in play (a subsequence of the input).
+/// The input path as the finders see it: positions, lengths, times and
+/// which samples no cut may delete.
 #[derive(Debug, Clone)]
 pub(super) struct Track {
     pub points: Vec<[f64; 2]>,
-    /// Path length from the first sample, along the current polyline.
+    /// Path length from the first sample, along the polyline.
     pub cum_length_m: Vec<f64>,
     pub t_s: Vec<f64>,
     pub reversing: Vec<bool>,
-    /// Never deleted: first, last, kept regions and windows, and reversing
-    /// samples when reversing is not redundant.
+    /// Never deleted: the first sample, the last with `keep_end`, kept
+    /// regions and windows, and reversing samples when reversing is not
+    /// redundant.
     pub protected: Vec<bool>,
-    /// Index of each sample in the input path.
-    pub input_index: Vec<usize>,
 }
 
 impl Track {
@@ -55,7 +55,6 @@ impl Track {
             t_s: Vec::with_capacity(n),
             reversing: Vec::with_capacity(n),
             protected: Vec::with_capacity(n),
-            input_index: (0..n).collect(),
         };
         let keeps_any = !cfg.keep_regions.is_empty() || !cfg.keep_windows.is_empty();
         for (k, s) in path.iter().enumerate() {
@@ -65,7 +64,7 @@ impl Track {
             track.reversing.push(reversing);
             track.protected.push(
                 k == 0
-                    || k + 1 == n
+                    || (cfg.keep_end && k + 1 == n)
                     || (!cfg.reversing_is_redundant && reversing)
                     || (keeps_any && cfg.keeps(s.position(), s.t_s)),
             );
@@ -76,38 +75,6 @@ impl Track {
 
     pub fn len(&self) -> usize {
         self.points.len()
-    }
-
-    /// The track without the samples strictly inside each cut `(i, j)`;
-    /// cuts are sorted and do not overlap.
-    pub fn without(&self, cuts: &[(usize, usize)]) -> Self {
-        let removed: usize = cuts.iter().map(|&(i, j)| j - i - 1).sum();
-        let m = self.len() - removed;
-        let mut out = Self {
-            points: Vec::with_capacity(m),
-            cum_length_m: Vec::new(),
-            t_s: Vec::with_capacity(m),
-            reversing: Vec::with_capacity(m),
-            protected: Vec::with_capacity(m),
-            input_index: Vec::with_capacity(m),
-        };
-        let mut keep_from = 0;
-        for &(i, j) in cuts
-            .iter()
-            .chain(std::iter::once(&(self.len(), self.len())))
-        {
-            let kept = keep_from..(i + 1).min(self.len());
-            out.points.extend_from_slice(&self.points[kept.clone()]);
-            out.t_s.extend_from_slice(&self.t_s[kept.clone()]);
-            out.reversing
-                .extend_from_slice(&self.reversing[kept.clone()]);
-            out.protected
-                .extend_from_slice(&self.protected[kept.clone()]);
-            out.input_index.extend_from_slice(&self.input_index[kept]);
-            keep_from = j;
-        }
-        out.cum_length_m = cumulative_length_m(&out.points);
-        out
     }
 
     /// For each sample, the first protected sample after it (`len - 1`

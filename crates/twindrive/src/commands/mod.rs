@@ -25,21 +25,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             scenario,
             out,
         } => verify_plan::run(&plan, scenario.as_deref(), &out),
-        Command::Prune {
-            path,
-            pinch_distance,
-            min_loop_length,
-            min_loop_duration,
-            keep_reversals,
-            out,
-        } => prune::run(
-            &path,
-            pinch_distance,
-            min_loop_length,
-            min_loop_duration,
-            keep_reversals,
-            &out,
-        ),
+        Command::Prune(a) => prune::run(&a),
         Command::Demo { out } => demo::run(&out),
         Command::DrawMap { dir } => draw_map::run(&dir),
     }

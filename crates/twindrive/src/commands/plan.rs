@@ -97,17 +97,14 @@ fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
             toml::from_str::<RedundancyConfig>(&text)
                 .with_context(|| format!("{}", path.display()))?
         }
-        None => RedundancyConfig::with_pinch_distance(args.pinch_distance.unwrap_or(0.1)),
+        None => RedundancyConfig::with_pinch_distance(
+            args.pinch_distance.unwrap_or(log.header.footprint_radius_m),
+        ),
     };
     if let Some(d) = args.pinch_distance {
         redundancy.pinch_distance_m = d;
     }
-    if let Some(l) = args.min_loop_length {
-        redundancy.min_loop_length_m = Some(l);
-    }
-    if args.keep_reversals {
-        redundancy.reversing_is_redundant = false;
-    }
+    args.flags.apply(&mut redundancy);
     redundancy.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
     let scenario = scenario_for(&log, args.scenario.as_deref())?;
     Ok(Job {
@@ -275,13 +272,21 @@ pub fn print_summary(s: &StageSummary, plan: &MissionPlan, out: &Path) -> anyhow
     let mut o = std::io::stdout().lock();
     writeln!(
         o,
-        "executed path {:.2} m in {:.1} s; removed {} loop(s) and {} bump-and-back-up kink(s) -> {:.2} m",
+        "executed path {:.2} m in {:.1} s; removed {} loop(s), {} bump-and-back-up kink(s) and {:.2} m of trailing retrace -> {:.2} m",
         s.executed_length_m,
         s.executed_duration_s,
         s.loops_removed,
         s.kinks_removed,
+        s.trailing_retrace_m,
         s.cleaned_length_m
     )?;
+    for r in &s.refused_cuts {
+        writeln!(
+            o,
+            "kept: a {:?} cut from t = {:.2} s to {:.2} s ({:.2} m) would have dropped {:.2} m of explored ground",
+            r.reason, r.t_start_s, r.t_end_s, r.length_m, r.would_drop_m
+        )?;
+    }
     let fastest = match (&s.time_optimal_duration_s, &s.time_optimal_error) {
         (Some(t), _) => format!("time-optimal re-timing {t:.1} s"),
         (None, Some(e)) => format!("no time-optimal re-timing: {e}"),
@@ -291,6 +296,17 @@ pub fn print_summary(s: &StageSummary, plan: &MissionPlan, out: &Path) -> anyhow
         o,
         "{} control spike(s) filtered in {} window(s): plan {:.2} m in {:.1} s ({fastest})",
         s.spikes_found, s.filter_windows, s.filtered_length_m, s.filtered_duration_s
+    )?;
+    let c = &s.coverage;
+    writeln!(
+        o,
+        "coverage: the plan passes within {} m of {:.2} % of the executed route ({:.2} m uncovered); plan {:.2} m of {:.2} m executed, {:.3} m driven backwards",
+        c.radius_m,
+        c.covered_percent,
+        c.uncovered_m,
+        c.plan_length_m,
+        c.route_length_m,
+        s.reversing_m
     )?;
     writeln!(
         o,

@@ -6,8 +6,11 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use twindrive_kinematics::Pose;
 use twindrive_mission::PathSample;
-use twindrive_mission::redundancy::{DeletionReason, RedundancyConfig, remove_redundancy};
+use twindrive_mission::redundancy::{
+    DeletionReason, RedundancyConfig, remove_redundancy, route_coverage,
+};
 
+use crate::cli::PruneArgs;
 use crate::output::Staging;
 
 /// Reads `t,x,y,theta` CSV or TUM; velocities from the displacement along
@@ -93,23 +96,17 @@ pub fn read_path(path: &Path) -> anyhow::Result<Vec<PathSample>> {
     Ok(samples)
 }
 
-pub fn run(
-    path: &Path,
-    pinch_distance: f64,
-    min_loop_length: Option<f64>,
-    min_loop_duration: f64,
-    keep_reversals: bool,
-    out: &Path,
-) -> anyhow::Result<()> {
-    let mut cfg = RedundancyConfig::with_pinch_distance(pinch_distance);
-    cfg.min_loop_length_m = min_loop_length;
-    cfg.min_loop_duration_s = min_loop_duration;
-    cfg.reversing_is_redundant = !keep_reversals;
+pub fn run(args: &PruneArgs) -> anyhow::Result<()> {
+    let (path, out) = (&args.path, &args.out);
+    let mut cfg = RedundancyConfig::with_pinch_distance(args.pinch_distance);
+    args.redundancy.apply(&mut cfg);
     cfg.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
     let samples = read_path(path)?;
     let pruned = remove_redundancy(&samples, &cfg)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let kept = pruned.apply(&samples);
+    let coverage = route_coverage(&samples, &kept, pruned.coverage_radius_m)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let (dir, _, file_name) = crate::output::split_out_path(out, "pruned")?;
     let staging = Staging::new(&dir, "prune")?;
     staging.write_with(&file_name, |w| {
@@ -131,17 +128,36 @@ pub fn run(
     let count = |r: DeletionReason| pruned.deletions.iter().filter(|d| d.reason == r).count();
     // From +0.0: an empty float sum is -0.0, which would print as "-0.00".
     let removed_m = pruned.deletions.iter().fold(0.0, |a, d| a + d.length_m);
+    let trailing_m = pruned
+        .deletions
+        .iter()
+        .filter(|d| d.reason == DeletionReason::TrailingRetrace)
+        .fold(0.0, |a, d| a + d.length_m);
+    let mut o = std::io::stdout().lock();
     writeln!(
-        std::io::stdout().lock(),
-        "removed {} loop(s), {} crossing loop(s) and {} reversal kink(s) ({:.2} m of {:.2} m); kept {} of {} samples -> {}",
+        o,
+        "removed {} loop(s), {} crossing loop(s), {} reversal kink(s) and {:.2} m of trailing retrace ({:.2} m of {:.2} m); kept {} of {} samples -> {}",
         count(DeletionReason::Loop),
         count(DeletionReason::Crossing),
         count(DeletionReason::Reversal),
+        trailing_m,
         removed_m,
-        twindrive_mission::path_length_m(&samples),
+        coverage.route_length_m,
         kept.len(),
         samples.len(),
         out.display()
     )?;
+    writeln!(
+        o,
+        "coverage within {} m: {:.2} % of the input's length, {:.3} m uncovered; output {:.2} m",
+        coverage.radius_m, coverage.covered_percent, coverage.uncovered_m, coverage.plan_length_m
+    )?;
+    for r in &pruned.refused {
+        writeln!(
+            o,
+            "refused: {:?} cut from t = {} s to t = {} s ({:.2} m) would have dropped {:.2} m of explored ground",
+            r.reason, r.t_start_s, r.t_end_s, r.length_m, r.would_drop_m
+        )?;
+    }
     Ok(())
 }
