@@ -4,12 +4,19 @@
 # bench/filterpy/run_filterpy.py). Checks that the final parameter estimates
 # agree, then prints steps/s (one step = one predict + one update) and the ratio.
 # Usage: bench/ekf_vs_filterpy.sh   (from any directory)
+#   SMOKE=1   a few repeats only (seconds): checks that both sides still run
+#   PEERS=0   twindrive's side only (no Python, no filterpy)
 set -euo pipefail
 
 FILTERPY_VERSION=1.4.5
 NUMPY_VERSION=2.4.6
 SCIPY_VERSION=1.17.1   # filterpy's update inverts S with scipy.linalg.inv
+SMOKE=${SMOKE:-0}
+PEERS=${PEERS:-1}
 FILTERPY_REPEAT=${FILTERPY_REPEAT:-1}
+if [[ $SMOKE == 1 ]]; then
+    TWINDRIVE_REPEAT=${TWINDRIVE_REPEAT:-2}
+fi
 TWINDRIVE_REPEAT=${TWINDRIVE_REPEAT:-200}
 RTOL=1e-6
 
@@ -17,23 +24,27 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv-filterpy
 cd "$ROOT"
 
-if [[ ! -x $VENV/bin/python ]]; then
-    python3 -m venv "$VENV"
-fi
-"$VENV/bin/python" -m pip install -q --disable-pip-version-check \
-    "filterpy==$FILTERPY_VERSION" "numpy==$NUMPY_VERSION" "scipy==$SCIPY_VERSION" >&2
-
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 example() { cargo run --release -q -p twindrive-estimation --example ekf_throughput -- "$@"; }
 
 echo "writing the input ..." >&2
 example --write-input "$TMP/input.csv"
+echo "twindrive, repeat $TWINDRIVE_REPEAT ..." >&2
+example --run "$TMP/input.csv" --repeat "$TWINDRIVE_REPEAT" >"$TMP/twindrive.out"
+if [[ $PEERS != 1 ]]; then
+    cat "$TMP/twindrive.out"
+    exit 0
+fi
+
+if [[ ! -x $VENV/bin/python ]]; then
+    python3 -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check \
+    "filterpy==$FILTERPY_VERSION" "numpy==$NUMPY_VERSION" "scipy==$SCIPY_VERSION" >&2
 "$VENV/bin/python" bench/filterpy/run_filterpy.py --self-test >&2
 echo "filterpy $FILTERPY_VERSION, repeat $FILTERPY_REPEAT ..." >&2
 "$VENV/bin/python" bench/filterpy/run_filterpy.py --input "$TMP/input.csv" --repeat "$FILTERPY_REPEAT" >"$TMP/filterpy.out"
-echo "twindrive, repeat $TWINDRIVE_REPEAT ..." >&2
-example --run "$TMP/input.csv" --repeat "$TWINDRIVE_REPEAT" >"$TMP/twindrive.out"
 
 # "<rate> <dL> <dR> <b>" from one implementation's output
 summary() {

@@ -9,9 +9,17 @@
 # Needs python3 and about 4 GB of free memory (the Rust reference holds the
 # whole 20 000 x 20 000 matrix: 3.2 GB; numpy works in blocks of rows).
 # Takes about a minute, mostly numpy.
+#   SMOKE=1   2 000 samples (seconds): checks that every side still runs and agrees
+#   PEERS=0   twindrive's side only (the grid hash against the Rust reference; no numpy)
 set -euo pipefail
 
 NUMPY_VERSION=2.4.6
+SMOKE=${SMOKE:-0}
+PEERS=${PEERS:-1}
+if [[ $SMOKE == 1 ]]; then
+    N=${N:-2000}
+    FAST_REPEAT=${FAST_REPEAT:-2}
+fi
 N=${N:-20000}
 SEED=${SEED:-1}
 FAST_REPEAT=${FAST_REPEAT:-50}
@@ -20,11 +28,6 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv-numpy
 cd "$ROOT"
 
-if [[ ! -x $VENV/bin/python ]]; then
-    python3 -m venv "$VENV"
-fi
-"$VENV/bin/python" -m pip install -q --disable-pip-version-check "numpy==$NUMPY_VERSION" >&2
-
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 cargo build --release -q -p twindrive-mission --example prune_peer
@@ -32,9 +35,19 @@ PEER=$ROOT/target/release/examples/prune_peer
 
 echo "writing a $N-sample path (seed $SEED) ..." >&2
 "$PEER" --write "$N" "$SEED" "$TMP/path.csv" "$TMP/config.json"
-"$VENV/bin/python" bench/distance_matrix/prune_numpy.py --self-test
 echo "twindrive: grid hash (best of $FAST_REPEAT) and distance-matrix reference ..." >&2
+# --reference fails unless the reference finds and keeps what the grid hash does.
 "$PEER" --run "$TMP/path.csv" "$TMP/config.json" "$TMP" --reference --repeat "$FAST_REPEAT" >"$TMP/rust.out"
+if [[ $PEERS != 1 ]]; then
+    cat "$TMP/rust.out"
+    exit 0
+fi
+
+if [[ ! -x $VENV/bin/python ]]; then
+    python3 -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check "numpy==$NUMPY_VERSION" >&2
+"$VENV/bin/python" bench/distance_matrix/prune_numpy.py --self-test
 echo "numpy $NUMPY_VERSION distance matrix ..." >&2
 "$VENV/bin/python" bench/distance_matrix/prune_numpy.py "$TMP/path.csv" "$TMP/config.json" "$TMP" >"$TMP/numpy.out"
 

@@ -1,6 +1,7 @@
 //! Writes a one-hour calibration log as generic CSVs (encoders at 50 Hz,
 //! tracker at 120 Hz) for `bench/calibrate_one_hour.sh`:
-//! `cargo run --release -p twindrive-estimation --example one_hour_log -- DIR`.
+//! `cargo run --release -p twindrive-estimation --example one_hour_log -- DIR [SECONDS]`
+//! (default 3600 s; the benchmark's smoke mode asks for less).
 
 use std::io::Write;
 use std::path::Path;
@@ -8,7 +9,13 @@ use std::path::Path;
 use twindrive_sim::{ControllerConfig, Scenario, Simulator, StepOutput};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let dir = std::env::args().nth(1).ok_or("usage: one_hour_log DIR")?;
+    let dir = std::env::args()
+        .nth(1)
+        .ok_or("usage: one_hour_log DIR [SECONDS]")?;
+    let duration_s: f64 = match std::env::args().nth(2) {
+        Some(s) => s.parse()?,
+        None => 3600.0,
+    };
     let dir = Path::new(&dir);
     std::fs::create_dir_all(dir)?;
     let mut sc = Scenario::load(
@@ -19,7 +26,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .retain(|s| s.left_rad_s != 0.0 || s.right_rad_s != 0.0);
         spec.repeat = true;
     }
-    sc.set_duration_s(3600.0)?;
+    sc.set_duration_s(duration_s)?;
     let mut sim = Simulator::new(sc);
     let mut out = StepOutput::new(sim.beams());
     let mut enc = std::io::BufWriter::new(std::fs::File::create(dir.join("encoders.csv"))?);

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Every benchmark in smoke mode: tiny sizes, a few seconds each, so that a
+# change that breaks a benchmark is caught before it lands. The numbers it
+# prints mean nothing.
+# Usage: bench/smoke.sh            (from any directory; with the Python peers)
+#        PEERS=0 bench/smoke.sh    (twindrive's side only: what scripts/test.sh runs)
+set -euo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$ROOT"
+export SMOKE=1
+export PEERS=${PEERS:-1}
+
+for script in sim_vs_irsim.sh ekf_vs_filterpy.sh prune_vs_distance_matrix.sh calibrate_one_hour.sh; do
+    echo "== bench/$script (smoke, peers $PEERS)" >&2
+    bash "bench/$script"
+done
+# The criterion benches, each benchmark run once as a test.
+echo "== cargo bench (test mode)" >&2
+cargo bench -q --workspace -- --test
+echo "bench smoke: all benchmarks ran"

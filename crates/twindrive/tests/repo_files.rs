@@ -1,0 +1,92 @@
+//! No file in the repository can rot unnoticed: every scenario, benchmark
+//! setup and example TOML loads and runs.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::repo;
+use twindrive_mission::PathSample;
+use twindrive_mission::redundancy::{RedundancyConfig, remove_redundancy};
+use twindrive_sim::{Scenario, Simulator, StepOutput};
+
+/// Every `*.toml` under the repository but the build's own (`Cargo.toml`,
+/// `.cargo/`), outside `target/`, hidden directories and virtualenvs.
+fn toml_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let mut entries: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    entries.sort();
+    for path in entries {
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if path.is_dir() {
+            if !(name.starts_with('.') || name == "target" || name == "node_modules") {
+                toml_files(&path, out);
+            }
+        } else if name.ends_with(".toml") && name != "Cargo.toml" {
+            out.push(path);
+        }
+    }
+}
+
+/// Twice round a circle of 0.5 m, for redundancy definitions to work on.
+fn two_laps() -> Vec<PathSample> {
+    (0..=1_256)
+        .map(|k| {
+            let a = k as f64 * 0.01 / 0.5;
+            PathSample {
+                t_s: k as f64 * 0.05,
+                pose: twindrive_kinematics::Pose::new(0.5 * a.sin(), 0.5 - 0.5 * a.cos(), a),
+                v_m_s: 0.2,
+                omega_rad_s: 0.4,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn every_toml_in_the_repository_loads_and_runs() {
+    let mut files = Vec::new();
+    toml_files(&repo(), &mut files);
+    let (mut scenarios, mut definitions) = (0, 0);
+    for path in &files {
+        let text = std::fs::read_to_string(path).unwrap();
+        let table: toml::Table =
+            toml::from_str(&text).unwrap_or_else(|e| panic!("{}: not TOML: {e}", path.display()));
+        if table.contains_key("simulation") {
+            // A scenario: it loads (maps and command files too) and steps.
+            let scenario =
+                Scenario::load(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let mut sim = Simulator::new(scenario);
+            let mut out = StepOutput::new(sim.beams());
+            for step in 0..20 {
+                assert!(
+                    sim.step(&mut out),
+                    "{}: ended after {step} steps",
+                    path.display()
+                );
+            }
+            assert!(out.record.t_ns > 0, "{}", path.display());
+            scenarios += 1;
+        } else if table.contains_key("pinch_distance_m") {
+            // A redundancy definition: it parses, validates and prunes.
+            let cfg: RedundancyConfig =
+                toml::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            cfg.validate()
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let path_samples = two_laps();
+            let pruned = remove_redundancy(&path_samples, &cfg)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert!(pruned.kept.len() < path_samples.len(), "{}", path.display());
+            definitions += 1;
+        } else {
+            panic!(
+                "{}: neither a scenario nor a redundancy definition; teach this test what it is",
+                path.display()
+            );
+        }
+    }
+    // The built-in scenarios, the two ir-sim setups and the example definition.
+    assert!(scenarios >= 5 && definitions >= 1, "{files:?}");
+}
