@@ -85,15 +85,17 @@ def cumulative_length(x, y):
 def criteria(cfg):
     d = float(cfg["pinch_distance_m"])
     loop = cfg.get("min_loop_length_m")
-    return {
+    crit = {
         "d": d,
         "d2": d * d,
         "L": 3.0 * d if loop is None else float(loop),
         "D": float(cfg.get("min_loop_duration_s", 0.0)),
         "reversing_is_redundant": bool(cfg.get("reversing_is_redundant", True)),
-        "r2": (d if cfg.get("coverage_radius_m") is None else float(cfg["coverage_radius_m"])) ** 2,
+        "r": d if cfg.get("coverage_radius_m") is None else float(cfg["coverage_radius_m"]),
         "keep_end": bool(cfg.get("keep_end", False)),
     }
+    crit["r2"] = crit["r"] * crit["r"]
+    return crit
 
 
 def keeps(cfg, x, y, t):
@@ -339,22 +341,18 @@ class Sweep:
         return total
 
     def last_new_sample(self):
-        x, y, r2 = self.tr.x, self.tr.y, self.crit["r2"]
+        """The last sample farther than r from the path ending 2 r (along the path) before it."""
+        cum, r = self.tr.cum.tolist(), self.crit["r"]
         n = len(self.tr)
-        s = n
-        while s > 0:
-            s -= 1
-            if s + 1 < n and x[s] == x[s + 1] and y[s] == y[s + 1]:
-                continue
-            before = s
-            left = None
-            while before > 0:
-                before -= 1
-                dx, dy = x[before] - x[s], y[before] - y[s]
-                if dx * dx + dy * dy > r2:
-                    left = before
-                    break
-            if left is None or not self.within(s, self.prefix_pieces(0, left, left)):
+        upto = n
+        for s in range(n - 1, -1, -1):
+            reach = cum[s] - 2.0 * r
+            if reach < 0.0:
+                return s
+            upto = min(upto, s)
+            while upto > 0 and cum[upto] > reach:
+                upto -= 1
+            if not self.within(s, self.prefix_pieces(0, upto, upto)):
                 return s
         return 0
 

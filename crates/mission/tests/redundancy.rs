@@ -984,6 +984,35 @@ fn a_path_without_loops_passes_through_unchanged() {
 }
 
 #[test]
+fn coverage_of_a_sparse_path_is_measured_along_its_segments() {
+    // Samples metres apart with a 1 m radius: the rule holds at every
+    // sample, but a deleted leg passes 3 m from what remains between its
+    // ends. The measured coverage says so.
+    let points = [
+        [0.0, 0.0],
+        [0.0, -5.0],
+        [6.0, -5.0],
+        [6.0, 0.0],
+        [6.0, 0.5],
+        [0.0, 0.5],
+        [0.0, 0.2],
+        [6.0, 0.05],
+        [6.0, -1.0],
+    ];
+    let path = through(&points, 1.0);
+    let mut cfg = cfg(0.1);
+    cfg.coverage_radius_m = Some(1.0);
+    cfg.keep_end = true;
+    let pruned = remove_redundancy(&path, &cfg).unwrap();
+    check_invariants(&path, &cfg, &pruned, "sparse");
+    assert_eq!(pruned.deletions.len(), 1, "{:?}", pruned.deletions);
+    let c = route_coverage(&path, &pruned.apply(&path), 1.0).unwrap();
+    assert!(c.uncovered_m > 1.0, "{c:?}");
+    assert!(c.covered_percent < 95.0, "{c:?}");
+    assert!(!c.uncovered_stretches.is_empty());
+}
+
+#[test]
 fn route_coverage_measures_the_ground_a_plan_leaves_out() {
     // A 3 m line; the "plan" drives only its first metre and its last.
     let route = through(

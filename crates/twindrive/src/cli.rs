@@ -116,7 +116,8 @@ pub struct RedundancyFlags {
     /// Shortest loop worth cutting, seconds (default: 0).
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub min_loop_duration: Option<f64>,
-    /// Keep reversing stretches (bump and back up) instead of cutting them.
+    /// Keep reversing stretches (bump and back up) instead of cutting them
+    /// (a file's reversing_is_redundant = false stays).
     #[arg(long)]
     pub keep_reversals: bool,
     /// A cut may delete only samples within this distance (metres) of the
@@ -124,7 +125,8 @@ pub struct RedundancyFlags {
     #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
     pub coverage_radius: Option<f64>,
     /// Let the path reach its final pose along the recorded route (default:
-    /// it ends where the last new ground was covered).
+    /// it ends once the rest only passes ground it covers, after the last
+    /// new ground). Sets keep_end; a file's keep_end = true stays.
     #[arg(long)]
     pub keep_end: bool,
 }

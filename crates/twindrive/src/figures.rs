@@ -359,7 +359,7 @@ pub fn plan_figures(
     ];
     if plan_end != mission_end {
         markers.push(Markers {
-            label: "plan ends (last new ground)",
+            label: "plan ends (the rest retraced covered ground)",
             points: &plan_end,
             color: palette::TRUTH,
         });

@@ -421,36 +421,32 @@ pub(super) fn half_weighted_between(
     half_weighted_m(&track.cum_length_m[i..=j], &flags)
 }
 
+/// Path length, in coverage radii, that a sample's own approach may take
+/// before the path behind it counts as another visit.
+const APPROACH_IN_RADII: f64 = 2.0;
+
 /// The last sample that is new ground: farther than the radius from the
-/// path before the stretch that led to it (the samples just before it that
-/// are all within the radius of it). 0 for an empty path.
+/// path that ends two radii (along the path) before it, so that its own
+/// approach does not count. 0 for an empty path. One grid query per sample
+/// from the end back to it.
+///
+/// This only bounds where a trailing retrace may start: a sample taken for
+/// old ground here is still cut only where the kept path covers it.
 pub(super) fn last_new_sample(coverage: &impl Coverage, track: &Track, radius_m: f64) -> usize {
-    let pts = &track.points;
-    let radius2 = radius_m * radius_m;
-    let mut s = track.len();
-    while s > 0 {
-        s -= 1;
-        // Samples at one place (a stop, a turn in place) share the answer:
-        // the last of them is asked.
-        if s + 1 < track.len() && pts[s] == pts[s + 1] {
-            continue;
+    let cum = &track.cum_length_m;
+    let n = track.len();
+    let mut upto = n;
+    for s in (0..n).rev() {
+        let reach = cum[s] - APPROACH_IN_RADII * radius_m;
+        if reach < 0.0 {
+            return s;
         }
-        let here = pts[s];
-        let mut before = s;
-        let left = loop {
-            if before == 0 {
-                break None;
-            }
-            before -= 1;
-            if super::geometry::distance2(pts[before], here) > radius2 {
-                break Some(before);
-            }
-        };
-        match left {
-            // Never farther than the radius from here before: new.
-            None => return s,
-            Some(p) if !coverage.covered_by_prefix(s, p) => return s,
-            Some(_) => {}
+        upto = upto.min(s);
+        while upto > 0 && cum[upto] > reach {
+            upto -= 1;
+        }
+        if !coverage.covered_by_prefix(s, upto) {
+            return s;
         }
     }
     0
@@ -484,11 +480,13 @@ pub struct RouteCoverage {
     pub covered_percent: f64,
     /// Route length farther than the radius from the plan.
     pub uncovered_m: f64,
-    /// Maximal runs of route samples farther than the radius from the plan.
+    /// Maximal stretches of the route farther than the radius from the plan.
     pub uncovered_stretches: Vec<UncoveredStretch>,
 }
 
-/// Route samples `first..=last`, all farther than the radius from the plan.
+/// A stretch of the route farther than the radius from the plan, between
+/// route samples `first` and `last` (it may start or end between samples,
+/// on a segment longer than half the radius).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct UncoveredStretch {
     pub first: usize,
@@ -500,8 +498,9 @@ pub struct UncoveredStretch {
 }
 
 /// The coverage of `route` by the polyline through `plan`'s samples, at
-/// `radius_m`: which route samples lie within the radius of the plan, and
-/// how many metres of route that leaves uncovered.
+/// `radius_m`: which parts of the route lie within the radius of the plan
+/// (tested at the route's samples and at most half a radius apart along
+/// its segments), and how many metres of route that leaves uncovered.
 pub fn route_coverage(
     route: &[PathSample],
     plan: &[PathSample],
@@ -534,26 +533,52 @@ pub fn route_coverage(
     };
     let route_pts = points(route)?;
     let plan_pts = points(plan)?;
-    let cum = super::track::cumulative_length_m(&route_pts);
     let plan_length_m = super::track::cumulative_length_m(&plan_pts)
         .last()
         .copied()
         .unwrap_or(0.0);
+    // Check points: the route's samples, and points along any segment
+    // longer than half the radius, so that coverage is measured along the
+    // route and not only where it was sampled.
+    let spacing_m = 0.5 * radius_m;
+    let mut checks: Vec<(Point, usize, f64)> = Vec::with_capacity(route_pts.len());
+    let mut along = 0.0;
+    for (k, &p) in route_pts.iter().enumerate() {
+        if k > 0 {
+            let q = route_pts[k - 1];
+            let length = distance(q, p);
+            let pieces = (length / spacing_m).ceil();
+            if pieces > 1.0 && pieces.is_finite() {
+                let pieces = pieces as usize;
+                for m in 1..pieces {
+                    let f = m as f64 / pieces as f64;
+                    checks.push((
+                        [q[0] + f * (p[0] - q[0]), q[1] + f * (p[1] - q[1])],
+                        k - 1,
+                        along + f * length,
+                    ));
+                }
+            }
+            along += length;
+        }
+        checks.push((p, k, along));
+    }
     let uncovered: Vec<bool> = if plan_pts.is_empty() {
-        vec![true; route_pts.len()]
+        vec![true; checks.len()]
     } else {
         let index = CoverageIndex::new(&plan_pts, radius_m);
         let last = plan_pts.len() - 1;
-        route_pts
+        checks
             .iter()
-            .map(|&p| {
+            .map(|&(p, _, _)| {
                 !index.any_within(p, &index.cells_around(p), &[(0, last as u32)], |a| {
                     Some(prefix_piece(&plan_pts, last, a))
                 })
             })
             .collect()
     };
-    let route_length_m = cum.last().copied().unwrap_or(0.0);
+    let cum: Vec<f64> = checks.iter().map(|c| c.2).collect();
+    let route_length_m = along;
     let uncovered_m = half_weighted_m(&cum, &uncovered);
     let mut stretches = Vec::new();
     let mut k = 0;
@@ -569,11 +594,19 @@ pub fn route_coverage(
         // The half segments on either side count too.
         let from = first.saturating_sub(1);
         let to = (k + 1).min(uncovered.len() - 1);
+        // In route samples: from the one at or before the first point to the
+        // one at or after the last.
+        let (a, b) = (checks[first].1, checks[k].1);
+        let b = if checks[k].0 == route_pts[b] {
+            b
+        } else {
+            b + 1
+        };
         stretches.push(UncoveredStretch {
-            first,
-            last: k,
-            t_start_s: route[first].t_s,
-            t_end_s: route[k].t_s,
+            first: a,
+            last: b,
+            t_start_s: route[a].t_s,
+            t_end_s: route[b].t_s,
             length_m: half_weighted_m(&cum[from..=to], &uncovered[from..=to]),
         });
         k += 1;

@@ -44,15 +44,24 @@
 //! the kink that starts there, or else the farthest pinch back to `i`, if
 //! its deleted samples are all within `r` of the kept path up to `i`, and
 //! goes on from the cut's end. A cut that would drop ground gives way to the
-//! farthest cut that ends at or before the first sample it would drop (and
-//! the outermost refused cut of each overlapping group is listed with the
-//! metres it would have dropped). A pinch that is little more than a kink
+//! farthest cut that ends at or before the first sample it would drop. The
+//! first refused cut of each overlapping group is measured (one pass over
+//! the path in all) and listed with the metres it would have dropped, if
+//! any: a refused cut that drops nothing (only a later pass covers what it
+//! would delete) is not listed, and the refusals inside its reach are not
+//! measured. A pinch that is little more than a kink
 //! (the path it cuts around the kink is shorter than a loop) waits for the
 //! kink, so the turn after a back-up stays in the plan. Witnesses lie before `i`, where
 //! no later cut reaches, so the coverage checked is the coverage the plan
-//! has. Once past the last new ground (a sample farther than `r` from the
-//! path that ends `r` metres before it) and the last protected sample, the
-//! first sample whose kept path covers everything after it ends the path.
+//! has. Once past the last new ground (the last sample farther than `r`
+//! from the path that ends `2 r` metres, along the path, before it) and the
+//! last protected sample, the first sample whose kept path covers everything
+//! after it ends the path.
+//!
+//! The rule is checked at the samples: on a path sampled more sparsely than
+//! `r`, a deleted segment can pass farther than `r` from what remains though
+//! its ends do not. [`route_coverage`] measures along the segments, so a plan
+//! made from such a path reports what it lost.
 //!
 //! The pinch finders answer "the farthest partner of `i` up to `hi`":
 //! [`find_pinches`] indexes the samples in a uniform grid hash with cells

@@ -19,8 +19,9 @@ pub struct Pruned {
     /// What was cut, in input indices: disjoint, sorted, and together
     /// exactly the samples not in `kept`.
     pub deletions: Vec<Deletion>,
-    /// Cuts the coverage rule refused (the outermost of each overlapping
-    /// group), with the ground they would have dropped.
+    /// Cuts the coverage rule refused that would have dropped ground (the
+    /// first of each overlapping group of refusals is measured), with the
+    /// metres they would have dropped.
     pub refused: Vec<RefusedCut>,
     /// The coverage radius the cuts were checked at.
     pub coverage_radius_m: f64,
@@ -41,8 +42,10 @@ pub struct Deletion {
     /// Input path length between those two samples.
     pub length_m: f64,
     pub reason: DeletionReason,
-    /// Metres of the deleted path farther than the coverage radius from the
-    /// path that remains: zero, since the sweep applies no other cut.
+    /// Coverage the cut lost: metres of the deleted path whose samples lie
+    /// farther than the coverage radius from the path that remains. Zero,
+    /// since the sweep applies no other cut (the rule is checked at the
+    /// samples; see the module docs for paths sparser than the radius).
     pub uncovered_m: f64,
 }
 
@@ -206,7 +209,7 @@ fn sweep(
             match coverage.first_uncovered(i, j, &kept) {
                 None => chosen = Some((j, reason)),
                 Some(u) => {
-                    // The outermost refusal of each overlapping group is
+                    // The first refusal of each overlapping group is
                     // measured (so the measuring costs one pass), and listed
                     // only if it would drop ground: a cut whose samples only
                     // the path after it covers is refused to keep the first

@@ -1,0 +1,18 @@
+//! The link between master and robot: what crosses it and how, without
+//! I/O. Everything here takes time as an argument and runs the same over
+//! zenoh and in virtual time.
+//!
+//! - [`emulator`]: a userspace link emulator (latency, jitter, loss,
+//!   bandwidth, outages; named profiles), deterministic under a seed;
+//! - [`wire`]: the versioned messages and their bytes (any bytes decode to a
+//!   message or an error, never a panic);
+//! - [`upload`]: chunked, resumable upload with NAKs (sender and receiver
+//!   state machines, durable chunk stores);
+//! - [`vtime`]: two endpoints joined by emulated links in virtual time.
+
+pub mod emulator;
+pub mod upload;
+pub mod vtime;
+pub mod wire;
+
+pub use emulator::{LinkEmulator, LinkProfile, LinkStats, Outage};

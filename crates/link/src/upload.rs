@@ -1,0 +1,840 @@
+//! Chunked, resumable file upload with negative acknowledgements (the
+//! pattern of CCSDS CFDP class 2), as two state machines without I/O.
+//!
+//! The sender offers the file (its SHA-256 names the transfer), streams
+//! every chunk once at its pacing rate, then says so (`EndOfFile`). The
+//! receiver stores each good chunk durably the moment it arrives and answers
+//! with NAKs: right after an offer (so a resumed upload only sends what is
+//! missing), every `nak_interval` while chunks below the highest one
+//! received are missing, and at the end of the file. The sender sends again
+//! what a NAK lists, unless it sent it less than a round trip ago. When the
+//! last chunk is in and the whole file hashes to the transfer id, the
+//! receiver says `Finished`; the sender repeats `EndOfFile` until it hears
+//! that.
+//!
+//! Both sides take the time as an argument (`now_ns`) and hand out the
+//! messages they want sent (`poll_transmit`) and when they next want to be
+//! woken (`poll_timeout`), so the same code runs over zenoh and in virtual
+//! time. A restart of either side loses nothing: the receiver's chunks are
+//! in its [`ChunkStore`]; a sender that restarts offers again and waits for
+//! the receiver's NAK before sending.
+
+use std::collections::VecDeque;
+
+use sha2::{Digest, Sha256};
+
+use crate::wire::{Body, MAX_NAK_RANGES, Message, Offer, Stamper, TransferId};
+
+/// Default chunk payload: small enough for any link's MTU budget.
+pub const DEFAULT_CHUNK_BYTES: u32 = 1024;
+
+/// The SHA-256 of a file: its transfer id.
+pub fn transfer_id(file: &[u8]) -> TransferId {
+    Sha256::digest(file).into()
+}
+
+/// Sender settings.
+#[derive(Debug, Clone, Copy)]
+pub struct SenderConfig {
+    pub chunk_bytes: u32,
+    /// Send no faster than this (the link's rate, if known); `None`: as fast
+    /// as asked.
+    pub pace_bit_s: Option<f64>,
+    /// A first guess of the round trip, until one is measured.
+    pub rtt_hint_ns: u64,
+}
+
+impl Default for SenderConfig {
+    fn default() -> Self {
+        Self {
+            chunk_bytes: DEFAULT_CHUNK_BYTES,
+            pace_bit_s: None,
+            rtt_hint_ns: 1_000_000_000,
+        }
+    }
+}
+
+/// Progress and cost of an upload.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct SenderStats {
+    pub chunks: u32,
+    pub chunks_sent: u64,
+    pub chunks_resent: u64,
+    /// Chunks the receiver reported holding.
+    pub chunks_confirmed: u32,
+    pub naks_received: u64,
+}
+
+/// The master's side of one upload.
+#[derive(Debug, Clone)]
+pub struct Sender {
+    stamper: Stamper,
+    file: Vec<u8>,
+    offer: Offer,
+    config: SenderConfig,
+    /// When each chunk was last sent (`None`: never).
+    sent_at: Vec<Option<u64>>,
+    confirmed: Vec<bool>,
+    queued: Vec<bool>,
+    queue: VecDeque<u32>,
+    /// Stream chunks before the receiver has answered the offer.
+    optimistic: bool,
+    offer_sent_at: Option<u64>,
+    answered: bool,
+    eof_sent_at: Option<u64>,
+    next_send_ns: u64,
+    rtt_ns: u64,
+    finished: bool,
+    refused: Option<String>,
+    pub stats: SenderStats,
+}
+
+impl Sender {
+    /// A fresh upload: the chunks stream right after the offer.
+    pub fn new(robot_id: &str, file: Vec<u8>, config: SenderConfig) -> Self {
+        Self::start(robot_id, file, config, true)
+    }
+
+    /// An upload that may be partly done (after a restart): offer, then send
+    /// only what the receiver's answer says is missing.
+    pub fn resume(robot_id: &str, file: Vec<u8>, config: SenderConfig) -> Self {
+        Self::start(robot_id, file, config, false)
+    }
+
+    fn start(robot_id: &str, file: Vec<u8>, config: SenderConfig, optimistic: bool) -> Self {
+        let chunk_bytes = config.chunk_bytes.max(1);
+        let offer = Offer {
+            transfer: transfer_id(&file),
+            size: file.len() as u64,
+            chunk_size: chunk_bytes,
+        };
+        let n = offer.chunks() as usize;
+        let mut sender = Self {
+            stamper: Stamper::new(robot_id),
+            file,
+            offer,
+            config: SenderConfig {
+                chunk_bytes,
+                ..config
+            },
+            sent_at: vec![None; n],
+            confirmed: vec![false; n],
+            queued: vec![false; n],
+            queue: VecDeque::with_capacity(n),
+            optimistic,
+            offer_sent_at: None,
+            answered: false,
+            eof_sent_at: None,
+            next_send_ns: 0,
+            rtt_ns: config.rtt_hint_ns.max(1),
+            finished: false,
+            refused: None,
+            stats: SenderStats {
+                chunks: n as u32,
+                ..SenderStats::default()
+            },
+        };
+        if optimistic {
+            for k in 0..n as u32 {
+                sender.enqueue(k);
+            }
+        }
+        sender
+    }
+
+    pub fn transfer(&self) -> TransferId {
+        self.offer.transfer
+    }
+
+    /// The receiver has the whole file.
+    pub fn is_finished(&self) -> bool {
+        self.finished
+    }
+
+    /// Why the receiver refused the offer, if it did.
+    pub fn refused(&self) -> Option<&str> {
+        self.refused.as_deref()
+    }
+
+    fn enqueue(&mut self, k: u32) {
+        if !self.queued[k as usize] && !self.confirmed[k as usize] {
+            self.queued[k as usize] = true;
+            self.queue.push_back(k);
+        }
+    }
+
+    /// Takes in a message from the receiver.
+    pub fn handle(&mut self, message: &Message, now_ns: u64) {
+        match &message.body {
+            Body::Nak {
+                transfer,
+                received,
+                upto,
+                missing,
+            } if *transfer == self.offer.transfer => {
+                self.stats.naks_received += 1;
+                if !self.answered {
+                    self.answered = true;
+                    if let Some(t) = self.offer_sent_at {
+                        self.rtt_ns = now_ns.saturating_sub(t).max(1);
+                    }
+                }
+                self.apply_nak(*received, *upto, missing, now_ns);
+            }
+            Body::Finished { transfer } if *transfer == self.offer.transfer => {
+                self.finished = true;
+                self.confirmed.fill(true);
+                self.stats.chunks_confirmed = self.stats.chunks;
+                self.queue.clear();
+            }
+            Body::Refused { transfer, reason } if *transfer == self.offer.transfer => {
+                self.refused = Some(reason.clone());
+                self.queue.clear();
+            }
+            _ => {}
+        }
+    }
+
+    fn apply_nak(&mut self, received: u32, upto: u32, missing: &[(u32, u32)], now_ns: u64) {
+        let n = self.stats.chunks;
+        // The NAK speaks for chunks below `upto`: those not listed are held.
+        let listed_to = upto.min(n);
+        let mut is_missing = vec![false; listed_to as usize];
+        for &(a, b) in missing {
+            for k in a..=b.min(listed_to.saturating_sub(1)) {
+                is_missing[k as usize] = true;
+            }
+        }
+        for (confirmed, &gone) in self.confirmed.iter_mut().zip(&is_missing) {
+            if !gone {
+                *confirmed = true;
+            }
+        }
+        self.stats.chunks_confirmed = received.min(n);
+        for (k, &gone) in is_missing.iter().enumerate() {
+            // Not again if it is still on its way.
+            let in_flight = self.sent_at[k].is_some_and(|t| now_ns < t + self.rtt_ns);
+            if gone && !in_flight {
+                self.enqueue(k as u32);
+            }
+        }
+    }
+
+    /// The next message to send at `now_ns`, if any.
+    pub fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        if self.finished || self.refused.is_some() {
+            return None;
+        }
+        let offer_due = match self.offer_sent_at {
+            None => true,
+            Some(t) => !self.answered && now_ns >= t + 2 * self.rtt_ns,
+        };
+        if offer_due {
+            self.offer_sent_at = Some(now_ns);
+            return Some(self.stamper.stamp(Body::Offer(self.offer), now_ns));
+        }
+        if !(self.optimistic || self.answered) {
+            return None;
+        }
+        if now_ns < self.next_send_ns {
+            return None;
+        }
+        while let Some(k) = self.queue.pop_front() {
+            self.queued[k as usize] = false;
+            if self.confirmed[k as usize] {
+                continue;
+            }
+            let from = k as usize * self.offer.chunk_size as usize;
+            let to = (from + self.offer.chunk_size as usize).min(self.file.len());
+            let data = self.file[from..to].to_vec();
+            if self.sent_at[k as usize].is_some() {
+                self.stats.chunks_resent += 1;
+            }
+            self.sent_at[k as usize] = Some(now_ns);
+            self.stats.chunks_sent += 1;
+            let message = self.stamper.stamp(
+                Body::Chunk {
+                    transfer: self.offer.transfer,
+                    index: k,
+                    crc32: crc32fast::hash(&data),
+                    data,
+                },
+                now_ns,
+            );
+            self.pace(now_ns, crate::wire::encode(&message).len());
+            return Some(message);
+        }
+        // Everything sent: say so, and again each round trip until done.
+        let eof_due = self
+            .eof_sent_at
+            .is_none_or(|t| now_ns >= t + self.rtt_ns + self.rtt_ns / 4);
+        if eof_due {
+            self.eof_sent_at = Some(now_ns);
+            let message = self.stamper.stamp(
+                Body::EndOfFile {
+                    transfer: self.offer.transfer,
+                },
+                now_ns,
+            );
+            self.pace(now_ns, crate::wire::encode(&message).len());
+            return Some(message);
+        }
+        None
+    }
+
+    fn pace(&mut self, now_ns: u64, bytes: usize) {
+        if let Some(rate) = self.config.pace_bit_s {
+            self.next_send_ns = now_ns + (8.0 * bytes as f64 / rate * 1e9).ceil() as u64;
+        }
+    }
+
+    /// When the sender next wants `poll_transmit` called, if ever.
+    pub fn poll_timeout(&self) -> Option<u64> {
+        if self.finished || self.refused.is_some() {
+            return None;
+        }
+        match self.offer_sent_at {
+            None => return Some(0),
+            Some(t) if !self.answered => {
+                let retry = t + 2 * self.rtt_ns;
+                if !self.optimistic {
+                    return Some(retry);
+                }
+                if self.queue.is_empty() {
+                    return Some(retry.min(self.eof_due_at()));
+                }
+                return Some(retry.min(self.next_send_ns));
+            }
+            _ => {}
+        }
+        if !self.queue.is_empty() {
+            return Some(self.next_send_ns);
+        }
+        Some(self.eof_due_at().max(self.next_send_ns))
+    }
+
+    fn eof_due_at(&self) -> u64 {
+        self.eof_sent_at
+            .map_or(0, |t| t + self.rtt_ns + self.rtt_ns / 4)
+    }
+}
+
+/// Where a receiver keeps the chunks it has, across restarts.
+pub trait ChunkStore {
+    /// Starts or resumes `offer`'s transfer: which chunks are already held.
+    fn open(&mut self, offer: &Offer) -> std::io::Result<Vec<bool>>;
+    /// Keeps one chunk; once this returns, a restart still has it.
+    fn put(&mut self, offer: &Offer, index: u32, data: &[u8]) -> std::io::Result<()>;
+    /// The whole file, chunks in order.
+    fn assemble(&mut self, offer: &Offer) -> std::io::Result<Vec<u8>>;
+    /// Drops what is kept for the transfer (done, or to start over).
+    fn discard(&mut self, offer: &Offer) -> std::io::Result<()>;
+    /// A transfer opened and not yet discarded (after a restart: the one to
+    /// resume before the sender offers it again).
+    fn pending(&mut self) -> std::io::Result<Option<Offer>>;
+}
+
+/// Receiver settings.
+#[derive(Debug, Clone, Copy)]
+pub struct ReceiverConfig {
+    /// Largest file accepted, checked on the offer.
+    pub max_file_bytes: u64,
+    /// How often to NAK while chunks are missing.
+    pub nak_interval_ns: u64,
+}
+
+impl Default for ReceiverConfig {
+    fn default() -> Self {
+        Self {
+            max_file_bytes: 64 * 1024 * 1024,
+            nak_interval_ns: 500_000_000,
+        }
+    }
+}
+
+/// What the receiver reports to its owner.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ReceiverEvent {
+    /// Upload progress: chunks held of all.
+    Progress { received: u32, chunks: u32 },
+    /// A chunk whose CRC did not match was dropped.
+    Corrupted { index: u32 },
+    /// The file is complete and hashes to its transfer id.
+    Completed { transfer: TransferId, file: Vec<u8> },
+    /// The offer was refused.
+    Refused { reason: String },
+    /// Storage failed; the chunk will be asked for again.
+    StorageError(String),
+}
+
+#[derive(Debug)]
+struct Transfer {
+    offer: Offer,
+    have: Vec<bool>,
+    received: u32,
+    highest: Option<u32>,
+    eof_seen: bool,
+    last_nak_ns: Option<u64>,
+    nak_now: bool,
+    /// The next NAK lists every chunk (an answer to an offer).
+    full: bool,
+    done: bool,
+}
+
+/// The robot's side of uploads.
+#[derive(Debug)]
+pub struct Receiver<S: ChunkStore> {
+    stamper: Stamper,
+    store: S,
+    config: ReceiverConfig,
+    current: Option<Transfer>,
+    outbox: VecDeque<Body>,
+    events: VecDeque<ReceiverEvent>,
+}
+
+impl<S: ChunkStore> Receiver<S> {
+    /// A receiver; one that finds an unfinished transfer in its store (a
+    /// restart) resumes it at once and says where it stands.
+    pub fn new(robot_id: &str, store: S, config: ReceiverConfig) -> Self {
+        let mut receiver = Self {
+            stamper: Stamper::new(robot_id),
+            store,
+            config,
+            current: None,
+            outbox: VecDeque::new(),
+            events: VecDeque::new(),
+        };
+        match receiver.store.pending() {
+            Ok(Some(offer)) => receiver.offer(offer),
+            Ok(None) => {}
+            Err(e) => receiver
+                .events
+                .push_back(ReceiverEvent::StorageError(e.to_string())),
+        }
+        receiver
+    }
+
+    /// The next thing to tell the owner.
+    pub fn poll_event(&mut self) -> Option<ReceiverEvent> {
+        self.events.pop_front()
+    }
+
+    pub fn store(&self) -> &S {
+        &self.store
+    }
+
+    /// Takes in a message from the sender.
+    pub fn handle(&mut self, message: &Message, now_ns: u64) {
+        match &message.body {
+            Body::Offer(offer) => self.offer(*offer),
+            Body::Chunk {
+                transfer,
+                index,
+                crc32,
+                data,
+            } => self.chunk(*transfer, *index, *crc32, data, now_ns),
+            Body::EndOfFile { transfer } => {
+                if let Some(t) = &mut self.current
+                    && t.offer.transfer == *transfer
+                {
+                    if t.done {
+                        self.outbox.push_back(Body::Finished {
+                            transfer: *transfer,
+                        });
+                    } else {
+                        t.eof_seen = true;
+                        t.nak_now = true;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn offer(&mut self, offer: Offer) {
+        if let Some(t) = &mut self.current
+            && t.offer == offer
+        {
+            // The same upload again (the sender restarted): say where it stands.
+            if t.done {
+                self.outbox.push_back(Body::Finished {
+                    transfer: offer.transfer,
+                });
+            } else {
+                t.nak_now = true;
+                t.full = true;
+            }
+            return;
+        }
+        if offer.size > self.config.max_file_bytes || offer.chunk_size == 0 {
+            let reason = if offer.chunk_size == 0 {
+                "chunk size 0".to_string()
+            } else {
+                format!(
+                    "{} bytes, more than the {} accepted",
+                    offer.size, self.config.max_file_bytes
+                )
+            };
+            self.events.push_back(ReceiverEvent::Refused {
+                reason: reason.clone(),
+            });
+            self.outbox.push_back(Body::Refused {
+                transfer: offer.transfer,
+                reason,
+            });
+            return;
+        }
+        let have = match self.store.open(&offer) {
+            Ok(have) if have.len() == offer.chunks() as usize => have,
+            Ok(_) => vec![false; offer.chunks() as usize],
+            Err(e) => {
+                self.events
+                    .push_back(ReceiverEvent::StorageError(e.to_string()));
+                vec![false; offer.chunks() as usize]
+            }
+        };
+        let received = have.iter().filter(|&&h| h).count() as u32;
+        let highest = have.iter().rposition(|&h| h).map(|k| k as u32);
+        self.current = Some(Transfer {
+            offer,
+            have,
+            received,
+            highest,
+            eof_seen: false,
+            last_nak_ns: None,
+            nak_now: true,
+            full: true,
+            done: false,
+        });
+        self.events.push_back(ReceiverEvent::Progress {
+            received,
+            chunks: offer.chunks(),
+        });
+        self.check_complete();
+    }
+
+    fn chunk(&mut self, transfer: TransferId, index: u32, crc32: u32, data: &[u8], now_ns: u64) {
+        let Some(t) = &mut self.current else {
+            return;
+        };
+        if t.offer.transfer != transfer || t.done || index >= t.offer.chunks() {
+            return;
+        }
+        let expected_len = if index + 1 == t.offer.chunks() {
+            (t.offer.size - u64::from(index) * u64::from(t.offer.chunk_size)) as usize
+        } else {
+            t.offer.chunk_size as usize
+        };
+        if crc32fast::hash(data) != crc32 || data.len() != expected_len {
+            self.events.push_back(ReceiverEvent::Corrupted { index });
+            return;
+        }
+        if t.have[index as usize] {
+            return;
+        }
+        if let Err(e) = self.store.put(&t.offer, index, data) {
+            self.events
+                .push_back(ReceiverEvent::StorageError(e.to_string()));
+            return;
+        }
+        t.have[index as usize] = true;
+        t.received += 1;
+        // A gap below a new highest chunk: NAK soon.
+        if t.highest.is_some_and(|h| index > h + 1) || (t.highest.is_none() && index > 0) {
+            t.nak_now = t.nak_now || t.last_nak_ns.is_none();
+        }
+        t.highest = Some(t.highest.map_or(index, |h| h.max(index)));
+        let _ = now_ns;
+        self.events.push_back(ReceiverEvent::Progress {
+            received: t.received,
+            chunks: t.offer.chunks(),
+        });
+        self.check_complete();
+    }
+
+    fn check_complete(&mut self) {
+        let Some(t) = &mut self.current else {
+            return;
+        };
+        if t.done || t.received != t.offer.chunks() {
+            return;
+        }
+        let offer = t.offer;
+        match self.store.assemble(&offer) {
+            Ok(file) if transfer_id(&file) == offer.transfer => {
+                t.done = true;
+                let _ = self.store.discard(&offer);
+                self.outbox.push_back(Body::Finished {
+                    transfer: offer.transfer,
+                });
+                self.events.push_back(ReceiverEvent::Completed {
+                    transfer: offer.transfer,
+                    file,
+                });
+            }
+            Ok(_) => {
+                // Every chunk passed its CRC yet the whole does not hash
+                // right: start this transfer over.
+                let _ = self.store.discard(&offer);
+                t.have.fill(false);
+                t.received = 0;
+                t.highest = None;
+                t.nak_now = true;
+                self.events.push_back(ReceiverEvent::StorageError(
+                    "the assembled file does not match its SHA-256; starting over".into(),
+                ));
+            }
+            Err(e) => self
+                .events
+                .push_back(ReceiverEvent::StorageError(e.to_string())),
+        }
+    }
+
+    /// The next message to send at `now_ns`, if any.
+    pub fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        if let Some(body) = self.outbox.pop_front() {
+            return Some(self.stamper.stamp(body, now_ns));
+        }
+        let t = self.current.as_mut()?;
+        if t.done {
+            return None;
+        }
+        let gaps = t.eof_seen || t.highest.is_some_and(|h| h + 1 > t.received);
+        let periodic = gaps
+            && t.last_nak_ns
+                .is_none_or(|last| now_ns >= last + self.config.nak_interval_ns);
+        if !(t.nak_now || periodic) {
+            return None;
+        }
+        t.nak_now = false;
+        t.last_nak_ns = Some(now_ns);
+        // Missing ranges up to the highest chunk seen (all of them after
+        // the end of the file), lowest first.
+        let upto = if t.eof_seen || t.full || t.highest.is_none() {
+            t.full = false;
+            t.offer.chunks()
+        } else {
+            t.highest.map_or(0, |h| h + 1)
+        };
+        let mut missing = Vec::new();
+        let mut k = 0;
+        while k < upto && missing.len() < MAX_NAK_RANGES {
+            if t.have[k as usize] {
+                k += 1;
+                continue;
+            }
+            let a = k;
+            while k + 1 < upto && !t.have[k as usize + 1] {
+                k += 1;
+            }
+            missing.push((a, k));
+            k += 1;
+        }
+        // A full list speaks only up to where it stopped.
+        let upto = if missing.len() == MAX_NAK_RANGES {
+            k
+        } else {
+            upto
+        };
+        let body = Body::Nak {
+            transfer: t.offer.transfer,
+            received: t.received,
+            upto,
+            missing,
+        };
+        Some(self.stamper.stamp(body, now_ns))
+    }
+
+    /// When the receiver next wants `poll_transmit` called, if ever.
+    pub fn poll_timeout(&self) -> Option<u64> {
+        if !self.outbox.is_empty() {
+            return Some(0);
+        }
+        let t = self.current.as_ref()?;
+        if t.done {
+            return None;
+        }
+        if t.nak_now {
+            return Some(0);
+        }
+        let gaps = t.eof_seen || t.highest.is_some_and(|h| h + 1 > t.received);
+        gaps.then(|| {
+            t.last_nak_ns
+                .map_or(0, |last| last + self.config.nak_interval_ns)
+        })
+    }
+}
+
+/// Chunks in memory. Clones share one store, so a test can "restart" a
+/// receiver and keep what it had durably.
+#[derive(Debug, Clone, Default)]
+pub struct MemoryStore {
+    inner: std::sync::Arc<std::sync::Mutex<MemoryInner>>,
+}
+
+#[derive(Debug, Default)]
+struct MemoryInner {
+    chunks: std::collections::HashMap<TransferId, Vec<Option<Vec<u8>>>>,
+    pending: Option<Offer>,
+}
+
+impl ChunkStore for MemoryStore {
+    fn open(&mut self, offer: &Offer) -> std::io::Result<Vec<bool>> {
+        let mut inner = self.inner.lock().expect("store lock");
+        inner.pending = Some(*offer);
+        let chunks = inner
+            .chunks
+            .entry(offer.transfer)
+            .or_insert_with(|| vec![None; offer.chunks() as usize]);
+        Ok(chunks.iter().map(Option::is_some).collect())
+    }
+
+    fn put(&mut self, offer: &Offer, index: u32, data: &[u8]) -> std::io::Result<()> {
+        let mut inner = self.inner.lock().expect("store lock");
+        let chunks = inner
+            .chunks
+            .entry(offer.transfer)
+            .or_insert_with(|| vec![None; offer.chunks() as usize]);
+        chunks[index as usize] = Some(data.to_vec());
+        Ok(())
+    }
+
+    fn assemble(&mut self, offer: &Offer) -> std::io::Result<Vec<u8>> {
+        let inner = self.inner.lock().expect("store lock");
+        let chunks = inner
+            .chunks
+            .get(&offer.transfer)
+            .ok_or_else(|| std::io::Error::other("no such transfer"))?;
+        let mut file = Vec::with_capacity(offer.size as usize);
+        for c in chunks {
+            let c = c
+                .as_ref()
+                .ok_or_else(|| std::io::Error::other("a chunk is missing"))?;
+            file.extend_from_slice(c);
+        }
+        Ok(file)
+    }
+
+    fn discard(&mut self, offer: &Offer) -> std::io::Result<()> {
+        let mut inner = self.inner.lock().expect("store lock");
+        inner.chunks.remove(&offer.transfer);
+        if inner.pending.is_some_and(|p| p.transfer == offer.transfer) {
+            inner.pending = None;
+        }
+        Ok(())
+    }
+
+    fn pending(&mut self) -> std::io::Result<Option<Offer>> {
+        Ok(self.inner.lock().expect("store lock").pending)
+    }
+}
+
+/// Chunks on disk: `DIR/<transfer hex>/<index>.chunk`, each written to a
+/// temporary file, synced and renamed, so a chunk is either whole or absent.
+#[derive(Debug, Clone)]
+pub struct DirStore {
+    dir: std::path::PathBuf,
+}
+
+impl DirStore {
+    pub fn new(dir: impl Into<std::path::PathBuf>) -> Self {
+        Self { dir: dir.into() }
+    }
+
+    fn transfer_dir(&self, offer: &Offer) -> std::path::PathBuf {
+        self.dir.join(hex(&offer.transfer))
+    }
+}
+
+/// Lower-case hex of bytes.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+impl ChunkStore for DirStore {
+    fn open(&mut self, offer: &Offer) -> std::io::Result<Vec<bool>> {
+        let dir = self.transfer_dir(offer);
+        std::fs::create_dir_all(&dir)?;
+        let offer_bytes = postcard::to_allocvec(offer).map_err(std::io::Error::other)?;
+        write_durably(&dir.join("offer"), &offer_bytes)?;
+        let mut have = vec![false; offer.chunks() as usize];
+        for entry in std::fs::read_dir(&dir)? {
+            let name = entry?.file_name().to_string_lossy().into_owned();
+            if let Some(k) = name
+                .strip_suffix(".chunk")
+                .and_then(|k| k.parse::<usize>().ok())
+                && k < have.len()
+            {
+                have[k] = true;
+            }
+        }
+        Ok(have)
+    }
+
+    fn put(&mut self, offer: &Offer, index: u32, data: &[u8]) -> std::io::Result<()> {
+        write_durably(
+            &self.transfer_dir(offer).join(format!("{index}.chunk")),
+            data,
+        )
+    }
+
+    fn assemble(&mut self, offer: &Offer) -> std::io::Result<Vec<u8>> {
+        let dir = self.transfer_dir(offer);
+        let mut file = Vec::with_capacity(offer.size as usize);
+        for k in 0..offer.chunks() {
+            file.extend(std::fs::read(dir.join(format!("{k}.chunk")))?);
+        }
+        Ok(file)
+    }
+
+    fn discard(&mut self, offer: &Offer) -> std::io::Result<()> {
+        match std::fs::remove_dir_all(self.transfer_dir(offer)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+            _ => Ok(()),
+        }
+    }
+
+    fn pending(&mut self) -> std::io::Result<Option<Offer>> {
+        let entries = match std::fs::read_dir(&self.dir) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        // The most recently touched transfer with a readable offer.
+        let mut best: Option<(std::time::SystemTime, Offer)> = None;
+        for entry in entries {
+            let path = entry?.path().join("offer");
+            let Ok(bytes) = std::fs::read(&path) else {
+                continue;
+            };
+            let Ok(offer) = postcard::from_bytes::<Offer>(&bytes) else {
+                continue;
+            };
+            let modified = std::fs::metadata(&path)?.modified()?;
+            if best.as_ref().is_none_or(|(t, _)| modified > *t) {
+                best = Some((modified, offer));
+            }
+        }
+        Ok(best.map(|(_, offer)| offer))
+    }
+}
+
+/// Writes `data` to a temporary file beside `path`, syncs it and renames it
+/// into place: the file is whole or absent, even across a crash.
+pub fn write_durably(path: &std::path::Path, data: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = std::path::PathBuf::from(tmp);
+    let mut f = std::fs::File::create(&tmp)?;
+    f.write_all(data)?;
+    f.sync_all()?;
+    std::fs::rename(&tmp, path)?;
+    if let Some(dir) = path.parent()
+        && let Ok(d) = std::fs::File::open(dir)
+    {
+        // The rename itself survives a power cut once the directory is synced.
+        let _ = d.sync_all();
+    }
+    Ok(())
+}

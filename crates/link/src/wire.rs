@@ -1,0 +1,182 @@
+//! Messages between master and robot, and their bytes.
+//!
+//! Every message carries the protocol version, the robot id, a sequence
+//! number (per sender, growing) and the sender's time stamp. The encoding is
+//! `postcard` (serde, compact varints); [`decode`] takes any bytes and
+//! answers with a message or an error, never a panic, and refuses anything
+//! longer than [`MAX_MESSAGE_BYTES`] before looking inside.
+
+use serde::{Deserialize, Serialize};
+
+/// Version of this message set; a message of another version is refused.
+pub const PROTOCOL_VERSION: u16 = 1;
+/// Nothing longer is decoded.
+pub const MAX_MESSAGE_BYTES: usize = 64 * 1024;
+/// Longest robot id.
+pub const MAX_ROBOT_ID_BYTES: usize = 64;
+
+/// SHA-256 of a transfer's whole file: what identifies it on both sides.
+pub type TransferId = [u8; 32];
+
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Message {
+    pub version: u16,
+    pub robot_id: String,
+    /// Per sender, one more for every message it sends.
+    pub seq: u64,
+    /// The sender's clock when it sent the message, nanoseconds.
+    pub t_ns: u64,
+    pub body: Body,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Body {
+    /// Master → robot: a file is on offer (a new upload, or one resumed).
+    Offer(Offer),
+    /// Master → robot: one piece of the file.
+    Chunk {
+        transfer: TransferId,
+        index: u32,
+        /// CRC-32 of `data`: a corrupted chunk is dropped and asked again.
+        crc32: u32,
+        data: Vec<u8>,
+    },
+    /// Master → robot: every chunk has been sent at least once.
+    EndOfFile { transfer: TransferId },
+    /// Robot → master: what it holds and what it still needs: of the
+    /// chunks below `upto`, those in `missing` (inclusive index ranges, at
+    /// most [`MAX_NAK_RANGES`]; more follow in later NAKs).
+    Nak {
+        transfer: TransferId,
+        received: u32,
+        upto: u32,
+        missing: Vec<(u32, u32)>,
+    },
+    /// Robot → master: the whole file arrived and its SHA-256 matches.
+    Finished { transfer: TransferId },
+    /// Robot → master: the offer is refused (too large, say).
+    Refused {
+        transfer: TransferId,
+        reason: String,
+    },
+}
+
+/// A transfer on offer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Offer {
+    pub transfer: TransferId,
+    pub size: u64,
+    pub chunk_size: u32,
+}
+
+/// At most this many missing ranges in one NAK.
+pub const MAX_NAK_RANGES: usize = 256;
+
+impl Offer {
+    /// How many chunks the file has.
+    pub fn chunks(&self) -> u32 {
+        if self.chunk_size == 0 {
+            return 0;
+        }
+        self.size.div_ceil(u64::from(self.chunk_size)) as u32
+    }
+}
+
+/// Why bytes are not a message.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DecodeError {
+    #[error("message of {0} bytes, longer than the {MAX_MESSAGE_BYTES}-byte limit")]
+    TooLong(usize),
+    #[error("not a twindrive message: {0}")]
+    Malformed(String),
+    #[error("protocol version {0}, this build speaks {PROTOCOL_VERSION}")]
+    Version(u16),
+    #[error("robot id of {0} bytes, longer than {MAX_ROBOT_ID_BYTES}")]
+    RobotId(usize),
+    #[error("{0} trailing bytes after the message")]
+    Trailing(usize),
+}
+
+/// The bytes of a message.
+pub fn encode(message: &Message) -> Vec<u8> {
+    postcard::to_allocvec(message).expect("messages always serialise")
+}
+
+/// A message from any bytes.
+pub fn decode(bytes: &[u8]) -> Result<Message, DecodeError> {
+    if bytes.len() > MAX_MESSAGE_BYTES {
+        return Err(DecodeError::TooLong(bytes.len()));
+    }
+    let (message, rest): (Message, _) =
+        postcard::take_from_bytes(bytes).map_err(|e| DecodeError::Malformed(e.to_string()))?;
+    if !rest.is_empty() {
+        return Err(DecodeError::Trailing(rest.len()));
+    }
+    if message.version != PROTOCOL_VERSION {
+        return Err(DecodeError::Version(message.version));
+    }
+    if message.robot_id.len() > MAX_ROBOT_ID_BYTES {
+        return Err(DecodeError::RobotId(message.robot_id.len()));
+    }
+    Ok(message)
+}
+
+/// Stamps bodies with one sender's robot id, sequence numbers and times.
+#[derive(Debug, Clone)]
+pub struct Stamper {
+    pub robot_id: String,
+    next_seq: u64,
+}
+
+impl Stamper {
+    pub fn new(robot_id: &str) -> Self {
+        Self {
+            robot_id: robot_id.into(),
+            next_seq: 0,
+        }
+    }
+
+    pub fn stamp(&mut self, body: Body, now_ns: u64) -> Message {
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        Message {
+            version: PROTOCOL_VERSION,
+            robot_id: self.robot_id.clone(),
+            seq,
+            t_ns: now_ns,
+            body,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_round_trip_and_garbage_is_an_error() {
+        let mut s = Stamper::new("rover-1");
+        let m = s.stamp(
+            Body::Chunk {
+                transfer: [7; 32],
+                index: 3,
+                crc32: 99,
+                data: vec![1, 2, 3],
+            },
+            42,
+        );
+        let bytes = encode(&m);
+        assert_eq!(decode(&bytes).unwrap(), m);
+        assert!(decode(&bytes[..bytes.len() - 1]).is_err());
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(decode(&longer), Err(DecodeError::Trailing(1)));
+        let mut other = m.clone();
+        other.version = 9;
+        assert_eq!(decode(&encode(&other)), Err(DecodeError::Version(9)));
+        assert!(matches!(
+            decode(&vec![0u8; MAX_MESSAGE_BYTES + 1]),
+            Err(DecodeError::TooLong(_))
+        ));
+    }
+}
