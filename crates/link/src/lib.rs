@@ -4,6 +4,7 @@
 //!
 //! - [`emulator`]: a userspace link emulator (latency, jitter, loss,
 //!   bandwidth, outages; named profiles), deterministic under a seed;
+//! - [`envelope`]: signed plans (ed25519) and the robot's rules for accepting one;
 //! - [`wire`]: the versioned messages and their bytes (any bytes decode to a
 //!   message or an error, never a panic);
 //! - [`upload`]: chunked, resumable upload with NAKs (sender and receiver
@@ -11,6 +12,7 @@
 //! - [`vtime`]: two endpoints joined by emulated links in virtual time.
 
 pub mod emulator;
+pub mod envelope;
 pub mod upload;
 pub mod vtime;
 pub mod wire;

@@ -103,6 +103,52 @@ pub enum Command {
         /// Directory for office.pgm and office.yaml.
         dir: PathBuf,
     },
+    /// Make the master's ed25519 key pair: DIR/master.key (PKCS#8 PEM, mode
+    /// 0600) and DIR/master.pub (public key PEM, for robots' --trust).
+    ///
+    /// Refuses to replace an existing key.
+    Keygen {
+        /// Directory for master.key and master.pub (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Sign a plan for one robot (on any machine, offline if need be).
+    ///
+    /// Writes a signed plan: an envelope (the plan's SHA-256s, robot id, a
+    /// counter that only grows, validity window, the hash of the twin's
+    /// world, the supervision policy) signed with ed25519, and the plan
+    /// document compressed. A robot accepts it only if every part checks.
+    Sign(SignArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SignArgs {
+    /// The plan JSON (from `twindrive plan`).
+    pub plan: PathBuf,
+    /// The master's private key (from `twindrive keygen`).
+    #[arg(long, value_name = "master.key")]
+    pub key: PathBuf,
+    /// The robot the plan is for.
+    #[arg(long, value_name = "ID")]
+    pub robot: String,
+    /// Plan counter, above every earlier plan's for this robot (default:
+    /// the current Unix time in milliseconds).
+    #[arg(long)]
+    pub counter: Option<u64>,
+    /// Valid for this long from now, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]
+    pub expires_in: u64,
+    /// Stop the robot if it hears nothing from the master for this long,
+    /// seconds (default: unsupervised).
+    #[arg(long, value_name = "SECONDS")]
+    pub supervise: Option<f64>,
+    /// The twin's scenario the plan was rehearsed in, for the world hash
+    /// (default: the built-in scenario the plan names).
+    #[arg(long, value_name = "S.toml")]
+    pub scenario: Option<PathBuf>,
+    /// Output file.
+    #[arg(long, value_name = "PLAN.signed")]
+    pub out: PathBuf,
 }
 
 /// The redundancy flags `plan` and `prune` share (for `plan` they

@@ -3,6 +3,7 @@
 mod calibrate;
 mod demo;
 mod draw_map;
+mod keys;
 mod plan;
 mod prune;
 mod simulate;
@@ -28,5 +29,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Prune(a) => prune::run(&a),
         Command::Demo { out } => demo::run(&out),
         Command::DrawMap { dir } => draw_map::run(&dir),
+        Command::Keygen { out } => keys::keygen(&out),
+        Command::Sign(a) => keys::sign(&a),
     }
 }

@@ -1,0 +1,147 @@
+//! `twindrive keygen` and `twindrive sign`: the master's key pair and signed
+//! plans.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use twindrive_link::envelope::{
+    Envelope, Supervision, generate_key, private_key_pem, public_key_pem, read_private_key_pem,
+    sha256_hex, sign_plan,
+};
+
+use crate::cli::SignArgs;
+
+/// Writes `DIR/master.key` (0600) and `DIR/master.pub`; never replaces a key.
+pub fn keygen(dir: &Path) -> anyhow::Result<()> {
+    let (private, public) = (dir.join("master.key"), dir.join("master.pub"));
+    for p in [&private, &public] {
+        if p.exists() {
+            bail!(
+                "{} exists: twindrive never replaces a key (move it away first)",
+                p.display()
+            );
+        }
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let key = generate_key().map_err(|e| anyhow::anyhow!("no randomness for a key: {e}"))?;
+    write_new(&private, private_key_pem(&key).as_bytes(), 0o600)?;
+    if let Err(e) = write_new(
+        &public,
+        public_key_pem(&key.verifying_key()).as_bytes(),
+        0o644,
+    ) {
+        // No half pair.
+        let _ = std::fs::remove_file(&private);
+        return Err(e);
+    }
+    writeln!(
+        std::io::stdout().lock(),
+        "wrote {} (keep it secret) and {} (give it to robots: --trust)",
+        private.display(),
+        public.display()
+    )?;
+    Ok(())
+}
+
+/// Writes a file that must not exist yet, synced, with the given mode.
+fn write_new(path: &Path, bytes: &[u8], mode: u32) -> anyhow::Result<()> {
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(mode);
+    }
+    #[cfg(not(unix))]
+    let _ = mode;
+    let mut f = options
+        .open(path)
+        .with_context(|| format!("creating {}", path.display()))?;
+    f.write_all(bytes)
+        .and_then(|_| f.sync_all())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+fn unix_now_s() -> anyhow::Result<std::time::Duration> {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .context("the system clock is before 1970")
+}
+
+pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
+    let plan_json =
+        std::fs::read(&args.plan).with_context(|| format!("reading {}", args.plan.display()))?;
+    let key_text = std::fs::read_to_string(&args.key)
+        .with_context(|| format!("reading {}", args.key.display()))?;
+    let key = read_private_key_pem(&key_text)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.key.display()))?;
+    if args.robot.is_empty() || args.robot.len() > twindrive_link::wire::MAX_ROBOT_ID_BYTES {
+        bail!(
+            "--robot: a robot id of 1 to {} bytes, got `{}`",
+            twindrive_link::wire::MAX_ROBOT_ID_BYTES,
+            args.robot
+        );
+    }
+    if let Some(s) = args.supervise
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
+    }
+    // The world the plan was rehearsed in.
+    let scenario_name = serde_json::from_slice::<serde_json::Value>(&plan_json)
+        .ok()
+        .and_then(|v| v["header"]["robot"]["scenario"].as_str().map(str::to_owned));
+    let world = match (&args.scenario, &scenario_name) {
+        (Some(path), _) => {
+            std::fs::read(path).with_context(|| format!("reading {}", path.display()))?
+        }
+        (None, Some(name)) => match twindrive_sim::builtin::ALL.iter().find(|(n, _)| n == name) {
+            Some((_, text)) => text.as_bytes().to_vec(),
+            None => bail!(
+                "the plan's scenario `{name}` is not built in; pass --scenario with the TOML it was rehearsed in"
+            ),
+        },
+        (None, None) => bail!(
+            "{}: not a plan document (no header.robot.scenario)",
+            args.plan.display()
+        ),
+    };
+    let now = unix_now_s()?;
+    let envelope = Envelope {
+        format: String::new(),
+        version: 0,
+        plan_sha256: String::new(),
+        plan_file_sha256: String::new(),
+        plan_bytes: 0,
+        robot_id: args.robot.clone(),
+        counter: args.counter.unwrap_or(now.as_millis() as u64),
+        // A minute of slack for the robot's clock.
+        not_before_unix_s: now.as_secs().saturating_sub(60),
+        expires_unix_s: now.as_secs().saturating_add(args.expires_in),
+        world_sha256: sha256_hex(&world),
+        supervision: Supervision {
+            dead_man_timeout_s: args.supervise,
+        },
+    };
+    let signed = sign_plan(&key, &plan_json, envelope)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
+    let (dir, _, file_name) = crate::output::split_out_path(&args.out, "plan")?;
+    let staging = crate::output::Staging::new(&dir, "sign")?;
+    staging.write_with(&file_name, |w| Ok(w.write_all(&signed)?))?;
+    staging.commit()?;
+    let env = twindrive_link::envelope::peek_envelope(&signed).expect("just signed");
+    writeln!(
+        std::io::stdout().lock(),
+        "signed plan {} for robot {} (counter {}, valid until Unix {}), {} bytes ({} of plan JSON) -> {}",
+        &env.plan_sha256[..16],
+        env.robot_id,
+        env.counter,
+        env.expires_unix_s,
+        signed.len(),
+        plan_json.len(),
+        args.out.display()
+    )?;
+    Ok(())
+}
