@@ -41,8 +41,8 @@ impl<S: ChunkStore> Endpoint for Receiver<S> {
 }
 
 /// A message on its way: arrival time, order of sending (ties), whether it
-/// goes A → B, and its bytes.
-type InFlight = Reverse<(u64, u64, bool, Vec<u8>)>;
+/// goes A → B (or, at one end of a real connection, out), and its bytes.
+pub type InFlight = Reverse<(u64, u64, bool, Vec<u8>)>;
 
 /// Changes a message's bytes in flight.
 pub type Tamper = Box<dyn FnMut(&mut Vec<u8>)>;
