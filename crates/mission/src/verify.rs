@@ -277,6 +277,99 @@ fn reference_at(samples: &[PlanSample], t: f64, k: &mut usize) -> (Pose, f64, f6
     (pose, a.v_m_s, a.omega_rad_s, false)
 }
 
+/// The closed-loop trajectory tracker as a state machine: encoder counts
+/// and the time since the plan started in, wheel commands out. The robot
+/// agent runs the same tracker as [`closed_loop`] does on the twin.
+#[derive(Debug, Clone)]
+pub struct Tracker<'a> {
+    samples: &'a [PlanSample],
+    params: DiffDriveParams,
+    settings: TrackerSettings,
+    rad_per_tick: f64,
+    max_wheel_rad_s: f64,
+    estimate: Pose,
+    last_ticks: Option<[i64; 2]>,
+    cursor: usize,
+}
+
+impl<'a> Tracker<'a> {
+    /// From the plan's first pose, with odometry through `params` and wheel
+    /// commands capped at `max_wheel_rad_s` (speeds scaled together).
+    pub fn new(
+        samples: &'a [PlanSample],
+        params: &DiffDriveParams,
+        settings: &TrackerSettings,
+        ticks_per_rev: u32,
+        max_wheel_rad_s: f64,
+    ) -> Result<Self, PipelineError> {
+        let first = samples
+            .first()
+            .ok_or_else(|| PipelineError::Infeasible("the plan has no samples".into()))?;
+        Ok(Self {
+            samples,
+            params: *params,
+            settings: *settings,
+            rad_per_tick: std::f64::consts::TAU / f64::from(ticks_per_rev.max(1)),
+            max_wheel_rad_s,
+            estimate: first.pose(),
+            last_ticks: None,
+            cursor: 0,
+        })
+    }
+
+    /// Odometry's pose estimate.
+    pub fn estimate(&self) -> Pose {
+        self.estimate
+    }
+
+    /// Index of the plan segment in progress.
+    pub fn progress(&self) -> usize {
+        self.cursor
+    }
+
+    /// The wheel commands at `t_s` since the plan started (with the encoder
+    /// counts, when they sampled), or `None` once the plan has ended and the
+    /// robot is level with its goal.
+    pub fn command(&mut self, t_s: f64, encoder_ticks: Option<[i64; 2]>) -> Option<[f64; 2]> {
+        if let Some(ticks) = encoder_ticks {
+            if let Some(prev) = self.last_ticks {
+                let dl = (ticks[0] - prev[0]) as f64 * self.rad_per_tick;
+                let dr = (ticks[1] - prev[1]) as f64 * self.rad_per_tick;
+                self.estimate = arc_step_wheels(&self.estimate, &self.params, dl, dr);
+            }
+            self.last_ticks = Some(ticks);
+        }
+        let g = &self.settings;
+        let t0 = self.samples[0].t_s;
+        let (r, v_r, omega_r, ended) = reference_at(self.samples, t_s + t0, &mut self.cursor);
+        let estimate = self.estimate;
+        let (sn, cs) = estimate.heading_rad.sin_cos();
+        let (dx, dy) = (r.x_m - estimate.x_m, r.y_m - estimate.y_m);
+        let (e_x, e_y) = (cs * dx + sn * dy, -sn * dx + cs * dy);
+        let e_theta = wrap_angle(r.heading_rad - estimate.heading_rad);
+        // Arrived once the plan has ended and the robot is level with
+        // its goal (a differential drive cannot step sideways).
+        if ended && e_x.abs() < g.goal_tolerance_m {
+            return None;
+        }
+        let v = v_r * e_theta.cos() + g.gain_along_per_s * e_x;
+        // Kanayama's heading and cross-track terms scale with v_r; turns
+        // in place and stops (v_r = 0) keep a plain heading correction.
+        let omega = omega_r
+            + v_r * (g.gain_cross_per_m2 * e_y + g.gain_heading_per_m * e_theta.sin())
+            + g.gain_heading_still_per_s * e_theta.sin();
+        let (mut l, mut rw) = wheel_speeds(&self.params, v, omega);
+        let peak = l.abs().max(rw.abs());
+        if peak > self.max_wheel_rad_s {
+            (l, rw) = (
+                l * self.max_wheel_rad_s / peak,
+                rw * self.max_wheel_rad_s / peak,
+            );
+        }
+        Some([l, rw])
+    }
+}
+
 /// Tracks the plan's trajectory closed loop with odometry from the encoders
 /// and `params` (the plan's calibrated parameters); see the module docs.
 pub fn closed_loop(
@@ -285,52 +378,18 @@ pub fn closed_loop(
     params: &DiffDriveParams,
     settings: &TrackerSettings,
 ) -> Result<Replay, PipelineError> {
-    let Some(first) = samples.first() else {
-        return Err(PipelineError::Infeasible("the plan has no samples".into()));
-    };
-    let rad_per_tick = std::f64::consts::TAU / f64::from(scenario.robot.encoder.ticks_per_rev);
-    let max_wheel = scenario.robot.max_wheel_speed_rad_s;
-    let t0 = first.t_s;
-    let duration = samples.last().map_or(0.0, |s| s.t_s) - t0;
-    let mut estimate = first.pose();
-    let mut last_ticks: Option<[i64; 2]> = None;
-    let mut k = 0;
-    let g = *settings;
+    let mut tracker = Tracker::new(
+        samples,
+        params,
+        settings,
+        scenario.robot.encoder.ticks_per_rev,
+        scenario.robot.max_wheel_speed_rad_s,
+    )?;
+    let duration = samples.last().map_or(0.0, |s| s.t_s) - samples[0].t_s;
     replay(
         samples,
         scenario,
         duration + settings.timeout_extra_s,
-        move |s| {
-            if let Some(ticks) = s.encoder_ticks {
-                if let Some(prev) = last_ticks {
-                    let dl = (ticks[0] - prev[0]) as f64 * rad_per_tick;
-                    let dr = (ticks[1] - prev[1]) as f64 * rad_per_tick;
-                    estimate = arc_step_wheels(&estimate, params, dl, dr);
-                }
-                last_ticks = Some(ticks);
-            }
-            let (r, v_r, omega_r, ended) = reference_at(samples, s.t_ns as f64 * 1e-9 + t0, &mut k);
-            let (sn, cs) = estimate.heading_rad.sin_cos();
-            let (dx, dy) = (r.x_m - estimate.x_m, r.y_m - estimate.y_m);
-            let (e_x, e_y) = (cs * dx + sn * dy, -sn * dx + cs * dy);
-            let e_theta = wrap_angle(r.heading_rad - estimate.heading_rad);
-            // Arrived once the plan has ended and the robot is level with
-            // its goal (a differential drive cannot step sideways).
-            if ended && e_x.abs() < g.goal_tolerance_m {
-                return None;
-            }
-            let v = v_r * e_theta.cos() + g.gain_along_per_s * e_x;
-            // Kanayama's heading and cross-track terms scale with v_r; turns
-            // in place and stops (v_r = 0) keep a plain heading correction.
-            let omega = omega_r
-                + v_r * (g.gain_cross_per_m2 * e_y + g.gain_heading_per_m * e_theta.sin())
-                + g.gain_heading_still_per_s * e_theta.sin();
-            let (mut l, mut rw) = wheel_speeds(params, v, omega);
-            let peak = l.abs().max(rw.abs());
-            if peak > max_wheel {
-                (l, rw) = (l * max_wheel / peak, rw * max_wheel / peak);
-            }
-            Some([l, rw])
-        },
+        move |s| tracker.command(s.t_ns as f64 * 1e-9, s.encoder_ticks),
     )
 }

@@ -1,0 +1,180 @@
+//! The executive on a site simulator: the case-study plan runs to its end on
+//! a site like the twin; a box the twin lacks hands control back before the
+//! robot drives through it; a supervised plan stops when the master falls
+//! silent. Every stop is decided on the robot.
+
+use std::sync::OnceLock;
+
+use twindrive_agent::backend::{RobotBackend, SimBackend};
+use twindrive_agent::executive::{Executive, Stop, Tolerances};
+use twindrive_kinematics::DiffDriveParams;
+use twindrive_mission::pipeline::{self, PipelineSettings};
+use twindrive_mission::plan::{MissionPlan, PlanHeader, PlanSample, RobotInfo};
+use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_mission::retime::WheelLimits;
+use twindrive_sim::{Scenario, SensorModel, Simulator};
+
+const CALIBRATED: DiffDriveParams = DiffDriveParams {
+    left_diameter_m: 0.0652,
+    right_diameter_m: 0.0665,
+    wheelbase_m: 0.2678,
+};
+
+fn twin() -> Scenario {
+    twindrive_sim::builtin::load("wall_following")
+        .unwrap()
+        .unwrap()
+}
+
+/// The case-study plan, made on the twin (as `twindrive plan` makes it).
+fn plan() -> &'static MissionPlan {
+    static PLAN: OnceLock<MissionPlan> = OnceLock::new();
+    PLAN.get_or_init(|| {
+        let scenario = twin();
+        let log = Simulator::new(scenario.clone()).run(|_, _| {});
+        let limits = WheelLimits {
+            max_speed_rad_s: log.header.max_wheel_speed_rad_s,
+            max_accel_rad_s2: log.header.max_wheel_accel_rad_s2,
+        };
+        let settings = PipelineSettings {
+            planner: Default::default(),
+            redundancy: RedundancyConfig::with_pinch_distance(0.15),
+            filter: Default::default(),
+        };
+        let stages = pipeline::run(&log, &CALIBRATED, &limits, &settings).unwrap();
+        let mut model = SensorModel::new(&scenario);
+        let mut ranges = vec![0.0; model.beams()];
+        let samples = stages
+            .filtered
+            .samples
+            .iter()
+            .zip(&stages.filtered.commands)
+            .map(|(p, c)| {
+                let bump = model.read(&p.pose, &mut ranges);
+                PlanSample::new(p, c, ranges.clone(), bump)
+            })
+            .collect();
+        MissionPlan::new(
+            PlanHeader {
+                robot: RobotInfo {
+                    scenario: "wall_following".into(),
+                    footprint_radius_m: 0.15,
+                    ticks_per_rev: log.header.ticks_per_rev,
+                    range_sensors: scenario
+                        .range_sensors
+                        .iter()
+                        .map(|s| s.info.clone())
+                        .collect(),
+                },
+                calibrated: CALIBRATED,
+                limits,
+                time_step_s: stages.period_s,
+                start: log.header.start,
+                source_log_sha256: "0".repeat(64),
+                settings: serde_json::json!({}),
+                summary: serde_json::json!({}),
+            },
+            samples,
+        )
+    })
+}
+
+/// The site: the twin's world, plus what the twin does not know.
+fn site(extra_world: &str) -> Scenario {
+    let text = twindrive_sim::builtin::WALL_FOLLOWING
+        .replace("[world]\n", &format!("[world]\n{extra_world}\n"));
+    Scenario::from_toml(&text, std::path::Path::new("<site>.toml")).unwrap()
+}
+
+/// Runs the executive until it stops (or `max_s`), hearing from the master
+/// every `heard_every_s` if given. Returns the stop, the backend, and the
+/// true poses after the stop.
+fn run(
+    site: Scenario,
+    dead_man_s: Option<f64>,
+    heard_every_s: Option<f64>,
+    max_s: f64,
+) -> (
+    Option<(f64, Stop)>,
+    SimBackend,
+    Vec<twindrive_kinematics::Pose>,
+    u64,
+) {
+    let plan = plan();
+    let max_wheel = site.robot.max_wheel_speed_rad_s;
+    let mut backend = SimBackend::new(site, plan.samples[0].pose(), max_s + 5.0).unwrap();
+    let mut exec = Executive::new(plan, Tolerances::default(), dead_man_s, max_wheel).unwrap();
+    let mut wheels = [0.0, 0.0];
+    let mut after = Vec::new();
+    let mut collisions = 0;
+    let mut next_heard = 0.0;
+    while let Some(reading) = backend.step(wheels) {
+        if backend.blocked() {
+            collisions += 1;
+        }
+        if let Some(every) = heard_every_s
+            && reading.t_s >= next_heard
+        {
+            exec.heard_from_master(reading.t_s);
+            next_heard += every;
+        }
+        wheels = exec.tick(&reading);
+        if exec.stopped().is_some() {
+            after.push(backend.true_pose());
+            if after.len() > 100 {
+                break;
+            }
+        }
+        if reading.t_s > max_s {
+            break;
+        }
+    }
+    (exec.stopped().cloned(), backend, after, collisions)
+}
+
+#[test]
+fn the_plan_runs_to_its_end_on_a_site_like_the_twin() {
+    let plan = plan();
+    let duration = plan.samples.last().unwrap().t_s - plan.samples[0].t_s;
+    let (stop, backend, after, collisions) = run(twin(), None, None, duration + 20.0);
+    let (t, stop) = stop.expect("stopped");
+    assert_eq!(stop, Stop::Finished, "at {t} s");
+    assert_eq!(collisions, 0);
+    let end = plan.samples.last().unwrap().pose();
+    let at = after[0];
+    assert!(
+        (at.x_m - end.x_m).hypot(at.y_m - end.y_m) < 0.1,
+        "ended at {at:?}, plan ends at {end:?}"
+    );
+    assert!(backend.wheel_travel_rad() > 100.0);
+}
+
+#[test]
+fn a_box_the_twin_lacks_hands_control_back_and_the_robot_stays_stopped() {
+    // On the first leg (west along y = 1.05 m from x = 3 m).
+    let box_world = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
+    let (stop, _, after, _) = run(site(box_world), None, None, 60.0);
+    let (t, stop) = stop.expect("stopped");
+    assert!(stop.is_handback(), "{stop:?} at {t} s");
+    // Stopped before driving through: still east of the box.
+    let at = after[0];
+    assert!(at.x_m > 2.1, "stopped at {at:?}");
+    // And stays where it stopped.
+    let last = after.last().unwrap();
+    assert!(
+        (last.x_m - at.x_m).hypot(last.y_m - at.y_m) < 0.02,
+        "{at:?} -> {last:?}"
+    );
+}
+
+#[test]
+fn a_supervised_plan_stops_when_the_master_falls_silent() {
+    let (stop, _, _, _) = run(twin(), Some(1.0), None, 30.0);
+    let (t, stop) = stop.expect("stopped");
+    assert!(matches!(stop, Stop::DeadMan { .. }), "{stop:?}");
+    assert!((1.0..1.2).contains(&t), "stopped at {t} s");
+
+    // Heard every half second: no dead-man stop in 10 s.
+    let (stop, _, _, _) = run(twin(), Some(1.0), Some(0.5), 10.0);
+    assert!(stop.is_none(), "{stop:?}");
+}
