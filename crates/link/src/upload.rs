@@ -423,6 +423,11 @@ impl<S: ChunkStore> Receiver<S> {
         &self.store
     }
 
+    /// Whether the current transfer is complete (its file handed out).
+    pub fn is_complete(&self) -> bool {
+        self.current.as_ref().is_some_and(|t| t.done)
+    }
+
     /// Takes in a message from the sender.
     pub fn handle(&mut self, message: &Message, now_ns: u64) {
         match &message.body {
