@@ -181,7 +181,7 @@ impl<'a> Executive<'a> {
         }
         // Where the plan is at this time, against where odometry says the
         // robot is.
-        let reference = reference_pose(&self.plan.samples, t + self.plan.samples[0].t_s);
+        let reference = self.tracker.reference();
         let estimate = self.tracker.estimate();
         let deviation_m = (reference.x_m - estimate.x_m).hypot(reference.y_m - estimate.y_m);
         if deviation_m > self.tolerances.max_deviation_m {
@@ -214,12 +214,8 @@ impl<'a> Executive<'a> {
                 best = Some(best.map_or(r, |b: f64| b.min(r)));
             }
         }
-        let (sum, count) = match best {
-            Some(r) => (r, 1usize),
-            None => (0.0, 0),
-        };
-        if count > 0 {
-            self.residuals.push_back(sum / count as f64);
+        if let Some(residual) = best {
+            self.residuals.push_back(residual);
             if self.residuals.len() > self.tolerances.residual_window {
                 self.residuals.pop_front();
             }
@@ -239,22 +235,4 @@ impl<'a> Executive<'a> {
         }
         None
     }
-}
-
-/// The plan's pose at time `t` (interpolated; the last one after the end).
-fn reference_pose(samples: &[twindrive_mission::plan::PlanSample], t: f64) -> Pose {
-    let k = samples.partition_point(|s| s.t_s <= t);
-    if k == 0 {
-        return samples[0].pose();
-    }
-    if k >= samples.len() {
-        return samples[samples.len() - 1].pose();
-    }
-    let (a, b) = (&samples[k - 1], &samples[k]);
-    let f = ((t - a.t_s) / (b.t_s - a.t_s)).clamp(0.0, 1.0);
-    Pose::new(
-        a.x_m + f * (b.x_m - a.x_m),
-        a.y_m + f * (b.y_m - a.y_m),
-        a.heading_rad,
-    )
 }

@@ -15,10 +15,8 @@ use ed25519_dalek::pkcs8::spki::der::pem::LineEnding;
 use ed25519_dalek::pkcs8::{DecodePrivateKey, DecodePublicKey, EncodePrivateKey, EncodePublicKey};
 use ed25519_dalek::{Signature, Signer, SigningKey, VerifyingKey};
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 use twindrive_mission::plan::MissionPlan;
-
-use crate::upload::hex;
+pub use twindrive_mission::plan::sha256_hex;
 
 /// The first bytes of a signed plan.
 pub const MAGIC: &[u8; 8] = b"TWDSIGN1";
@@ -118,11 +116,6 @@ pub fn read_private_key_pem(text: &str) -> Result<SigningKey, String> {
 pub fn read_public_key_pem(text: &str) -> Result<VerifyingKey, String> {
     VerifyingKey::from_public_key_pem(text)
         .map_err(|e| format!("not an ed25519 public key in PEM: {e}"))
-}
-
-/// SHA-256 as lower-case hex.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    hex(&Sha256::digest(bytes))
 }
 
 /// Signs a plan document (the bytes of `plan.json`) into a signed plan

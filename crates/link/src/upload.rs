@@ -429,7 +429,9 @@ impl<S: ChunkStore> Receiver<S> {
     }
 
     /// Takes in a message from the sender.
-    pub fn handle(&mut self, message: &Message, now_ns: u64) {
+    /// (The receiver acts on messages alone; its NAK timing is by
+    /// `poll_transmit`'s clock.)
+    pub fn handle(&mut self, message: &Message, _now_ns: u64) {
         match &message.body {
             Body::Offer(offer) => self.offer(*offer),
             Body::Chunk {
@@ -437,7 +439,7 @@ impl<S: ChunkStore> Receiver<S> {
                 index,
                 crc32,
                 data,
-            } => self.chunk(*transfer, *index, *crc32, data, now_ns),
+            } => self.chunk(*transfer, *index, *crc32, data),
             Body::EndOfFile { transfer } => {
                 if let Some(t) = &mut self.current
                     && t.offer.transfer == *transfer
@@ -518,7 +520,7 @@ impl<S: ChunkStore> Receiver<S> {
         self.check_complete();
     }
 
-    fn chunk(&mut self, transfer: TransferId, index: u32, crc32: u32, data: &[u8], now_ns: u64) {
+    fn chunk(&mut self, transfer: TransferId, index: u32, crc32: u32, data: &[u8]) {
         let Some(t) = &mut self.current else {
             return;
         };
@@ -549,7 +551,6 @@ impl<S: ChunkStore> Receiver<S> {
             t.nak_now = t.nak_now || t.last_nak_ns.is_none();
         }
         t.highest = Some(t.highest.map_or(index, |h| h.max(index)));
-        let _ = now_ns;
         self.events.push_back(ReceiverEvent::Progress {
             received: t.received,
             chunks: t.offer.chunks(),
@@ -747,13 +748,8 @@ impl DirStore {
     }
 
     fn transfer_dir(&self, offer: &Offer) -> std::path::PathBuf {
-        self.dir.join(hex(&offer.transfer))
+        self.dir.join(twindrive_mission::plan::hex(&offer.transfer))
     }
-}
-
-/// Lower-case hex of bytes.
-pub fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 impl ChunkStore for DirStore {

@@ -288,6 +288,8 @@ pub struct Tracker<'a> {
     rad_per_tick: f64,
     max_wheel_rad_s: f64,
     estimate: Pose,
+    /// Where the plan was at the last command's time.
+    reference: Pose,
     last_ticks: Option<[i64; 2]>,
     cursor: usize,
 }
@@ -312,6 +314,7 @@ impl<'a> Tracker<'a> {
             rad_per_tick: std::f64::consts::TAU / f64::from(ticks_per_rev.max(1)),
             max_wheel_rad_s,
             estimate: first.pose(),
+            reference: first.pose(),
             last_ticks: None,
             cursor: 0,
         })
@@ -320,6 +323,12 @@ impl<'a> Tracker<'a> {
     /// Odometry's pose estimate.
     pub fn estimate(&self) -> Pose {
         self.estimate
+    }
+
+    /// The plan's pose at the last command's time (interpolated; the last
+    /// pose once the plan has ended).
+    pub fn reference(&self) -> Pose {
+        self.reference
     }
 
     /// Index of the plan segment in progress.
@@ -342,6 +351,7 @@ impl<'a> Tracker<'a> {
         let g = &self.settings;
         let t0 = self.samples[0].t_s;
         let (r, v_r, omega_r, ended) = reference_at(self.samples, t_s + t0, &mut self.cursor);
+        self.reference = r;
         let estimate = self.estimate;
         let (sn, cs) = estimate.heading_rad.sin_cos();
         let (dx, dy) = (r.x_m - estimate.x_m, r.y_m - estimate.y_m);

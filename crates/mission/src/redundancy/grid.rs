@@ -46,22 +46,14 @@ impl Grid {
         capacity: usize,
         anchors: impl Iterator<Item = Anchor>,
     ) -> (Self, Vec<u32>) {
-        Self::build_in_cells(capacity, anchors.map(|a| (cell_of(a.pos, cell_m), a)))
-    }
-
-    /// [`Grid::build`] with each anchor's cell given.
-    pub fn build_in_cells(
-        capacity: usize,
-        anchors: impl Iterator<Item = ((i32, i32), Anchor)>,
-    ) -> (Self, Vec<u32>) {
-        let lower = capacity;
         let mut ids = CellIds::default();
         let mut coords: Vec<(i32, i32)> = Vec::new();
-        let mut anchor_cell = Vec::with_capacity(lower);
-        let mut raw: Vec<(u32, Entry)> = Vec::with_capacity(lower);
+        let mut anchor_cell = Vec::with_capacity(capacity);
+        let mut raw: Vec<(u32, Entry)> = Vec::with_capacity(capacity);
         let mut last_is_sample = false;
         let mut last_cell = None;
-        for (cell, a) in anchors {
+        for a in anchors {
+            let cell = cell_of(a.pos, cell_m);
             // Paths move little from one anchor to the next.
             let id = match last_cell {
                 Some((c, id)) if c == cell => id,

@@ -64,7 +64,7 @@ fn write_new(path: &Path, bytes: &[u8], mode: u32) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn unix_now_s() -> anyhow::Result<std::time::Duration> {
+fn since_epoch() -> anyhow::Result<std::time::Duration> {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .context("the system clock is before 1970")
@@ -108,7 +108,7 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
             args.plan.display()
         ),
     };
-    let now = unix_now_s()?;
+    let now = since_epoch()?;
     let envelope = Envelope {
         format: String::new(),
         version: 0,
