@@ -5,6 +5,7 @@
 //! implements the same trait and nothing else changes.
 
 use twindrive_kinematics::Pose;
+use twindrive_log::{LogHeader, StepRecord};
 use twindrive_sim::{Scenario, Sensed, Simulator, StepOutput};
 
 /// What the robot sensed over one control period.
@@ -19,6 +20,14 @@ pub struct Reading {
     pub ranges_m: Vec<f64>,
     /// An absolute pose (a tracker, GNSS), when one sampled.
     pub pose: Option<Pose>,
+    /// The period as the project's logs record it (wheel speeds asked for
+    /// and reached, and the true pose where the backend knows it: a
+    /// simulator does, a real robot logs its best estimate there).
+    pub record: StepRecord,
+    /// Every beam read this period (NaN where a sensor did not sample).
+    pub fresh_ranges_m: Vec<f64>,
+    /// Contact stopped the robot this period, where the backend can tell.
+    pub blocked: bool,
 }
 
 /// A robot the agent can drive.
@@ -31,6 +40,8 @@ pub trait RobotBackend {
     /// Total wheel rotation commanded and performed so far (rad), both
     /// wheels: a robot that never moved has zero.
     fn wheel_travel_rad(&self) -> f64;
+    /// What the robot's logs say of it (sensors, limits, where it is now).
+    fn log_header(&self) -> LogHeader;
 }
 
 /// The site as a simulator: the robot's true kinematics, noise, slip and
@@ -93,10 +104,19 @@ impl RobotBackend for SimBackend {
             bump: r.bump,
             ranges_m: self.latest.clone(),
             pose: r.tracker,
+            record: *r,
+            fresh_ranges_m: self.out.ranges.clone(),
+            blocked: self.out.blocked,
         })
     }
 
     fn wheel_travel_rad(&self) -> f64 {
         self.travel_rad
+    }
+
+    fn log_header(&self) -> LogHeader {
+        let mut header = self.sim.scenario().log_header();
+        header.start = self.sim.pose();
+        header
     }
 }

@@ -21,6 +21,7 @@
 //! None of these waits for a message: the link is never in the loop.
 
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 use serde::Serialize;
 use twindrive_kinematics::Pose;
@@ -29,29 +30,7 @@ use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::verify::{Tracker, TrackerSettings};
 
 use crate::backend::Reading;
-
-/// When reality has departed from the plan's prediction.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Tolerances {
-    pub max_deviation_m: f64,
-    pub max_range_residual_m: f64,
-    /// Ticks the range residual's median is taken over.
-    pub residual_window: usize,
-    /// A reading is compared with the plan's predictions this long (s)
-    /// either side of now, and the best match counts.
-    pub range_match_s: f64,
-}
-
-impl Default for Tolerances {
-    fn default() -> Self {
-        Self {
-            max_deviation_m: 0.15,
-            max_range_residual_m: 0.10,
-            residual_window: 50,
-            range_match_s: 0.5,
-        }
-    }
-}
+pub use twindrive_link::envelope::Tolerances;
 
 /// Why the robot stopped.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -82,22 +61,23 @@ impl Stop {
 }
 
 /// One plan being driven.
-pub struct Executive<'a> {
-    plan: &'a MissionPlan,
-    tracker: Tracker<'a>,
+pub struct Executive {
+    plan: Arc<MissionPlan>,
+    tracker: Tracker,
     tolerances: Tolerances,
     dead_man_timeout_s: Option<f64>,
     /// Time of the first tick (the plan's time zero).
     t0_s: Option<f64>,
     last_heard_s: f64,
     residuals: VecDeque<f64>,
+    last_median: Option<f64>,
     stopped: Option<(f64, Stop)>,
 }
 
-impl<'a> Executive<'a> {
+impl Executive {
     /// Ready to drive `plan` from its first pose.
     pub fn new(
-        plan: &'a MissionPlan,
+        plan: Arc<MissionPlan>,
         tolerances: Tolerances,
         dead_man_timeout_s: Option<f64>,
         max_wheel_rad_s: f64,
@@ -117,6 +97,7 @@ impl<'a> Executive<'a> {
             t0_s: None,
             last_heard_s: f64::NEG_INFINITY,
             residuals: VecDeque::new(),
+            last_median: None,
             stopped: None,
         })
     }
@@ -141,6 +122,20 @@ impl<'a> Executive<'a> {
         self.tracker.progress()
     }
 
+    pub fn plan(&self) -> &Arc<MissionPlan> {
+        &self.plan
+    }
+
+    /// The plan's pose now.
+    pub fn reference(&self) -> Pose {
+        self.tracker.reference()
+    }
+
+    /// The latest median range residual (m), once the window is full.
+    pub fn range_residual_m(&self) -> Option<f64> {
+        self.last_median
+    }
+
     /// What the robot sensed over the last period in; the wheel commands for
     /// the next one out.
     pub fn tick(&mut self, reading: &Reading) -> [f64; 2] {
@@ -153,7 +148,9 @@ impl<'a> Executive<'a> {
             self.last_heard_s = reading.t_s;
         }
         let t = reading.t_s - t0;
-        let command = self.tracker.command(t, reading.encoder_ticks);
+        let command = self
+            .tracker
+            .command(&self.plan.samples, t, reading.encoder_ticks);
         if let Some(stop) = self.check(reading, t) {
             self.stopped = Some((reading.t_s, stop));
             return [0.0, 0.0];
@@ -168,9 +165,19 @@ impl<'a> Executive<'a> {
     }
 
     fn check(&mut self, reading: &Reading, t: f64) -> Option<Stop> {
+        // A bump is expected when the plan predicts one within
+        // `range_match_s` of now (contact starts and ends a little early or
+        // late on a real robot).
+        let now = t + self.plan.samples[0].t_s;
+        let m = self.tolerances.range_match_s;
+        let lo = self.plan.samples.partition_point(|s| s.t_s < now - m);
+        let hi = self.plan.samples.partition_point(|s| s.t_s <= now + m);
         let k = self.tracker.progress().min(self.plan.samples.len() - 1);
-        let sample = &self.plan.samples[k];
-        if reading.bump && !sample.expected_bump {
+        let predicted = self.plan.samples[k].expected_bump
+            || self.plan.samples[lo..hi.max(lo)]
+                .iter()
+                .any(|s| s.expected_bump);
+        if reading.bump && !predicted {
             return Some(Stop::UnexpectedBump);
         }
         if let Some(timeout) = self.dead_man_timeout_s {
@@ -191,7 +198,6 @@ impl<'a> Executive<'a> {
         // samples within `range_match_s` of now (a reading that flips at a
         // wall's edge a little early or late is explained by a neighbour; a
         // box the twin lacks is explained by none).
-        let now = t + self.plan.samples[0].t_s;
         let lo = self
             .plan
             .samples
@@ -226,6 +232,7 @@ impl<'a> Executive<'a> {
                 let mut sorted: Vec<f64> = self.residuals.iter().copied().collect();
                 sorted.sort_by(f64::total_cmp);
                 let median = sorted[sorted.len() / 2];
+                self.last_median = Some(median);
                 if median > self.tolerances.max_range_residual_m {
                     return Some(Stop::RangeResidual {
                         median_residual_m: median,

@@ -1,6 +1,45 @@
-//! The robot side, without I/O: the [`backend::RobotBackend`] boundary (a
-//! simulator running the robot's site today) and the [`executive`] that
-//! drives an accepted plan on its own, with every stop decided locally.
+//! Both ends of decoupled operation, without I/O: time and messages go in
+//! as arguments, so the same code runs over zenoh in two processes and in
+//! virtual time in one.
+//!
+//! - [`backend`]: the boundary to the robot (a site simulator today);
+//! - [`executive`]: drives an accepted plan and decides every stop locally;
+//! - [`robot`]: the robot agent (uploads, plan gate, execution, online EKF,
+//!   journal, telemetry, hand-back, log back-fill);
+//! - [`master`]: the master's end (upload, supervision, telemetry, hand-backs, robot logs);
+//! - [`twin`]: updating the twin from a hand-back, and the continuation plan.
 
 pub mod backend;
 pub mod executive;
+pub mod master;
+pub mod operator;
+pub mod robot;
+pub mod twin;
+
+use twindrive_link::upload::ChunkStore;
+use twindrive_link::vtime::Endpoint;
+use twindrive_link::wire::Message;
+
+impl<B: backend::RobotBackend> Endpoint for robot::RobotAgent<B> {
+    fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        robot::RobotAgent::poll_transmit(self, now_ns)
+    }
+    fn handle(&mut self, message: &Message, now_ns: u64) {
+        robot::RobotAgent::handle(self, message, now_ns)
+    }
+    fn poll_timeout(&self) -> Option<u64> {
+        robot::RobotAgent::poll_timeout(self)
+    }
+}
+
+impl<S: ChunkStore> Endpoint for operator::Operator<S> {
+    fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        operator::Operator::poll_transmit(self, now_ns)
+    }
+    fn handle(&mut self, message: &Message, now_ns: u64) {
+        operator::Operator::handle(self, message, now_ns)
+    }
+    fn poll_timeout(&self) -> Option<u64> {
+        operator::Operator::poll_timeout(self)
+    }
+}

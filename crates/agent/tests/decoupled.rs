@@ -1,23 +1,29 @@
-//! The story in virtual time: the master signs the case-study plan and
-//! uploads it over the emulated lunar link; the robot assembles it, accepts
-//! it only if every check passes, and drives it on its own site. A forged
-//! plan crosses the same link and is refused.
+//! Decoupled operation end to end in virtual time: the operator's master
+//! and the robot agent, the same state machines the two processes run,
+//! joined by the emulated link. Each case runs under several seeds.
 
 mod common;
 
-use twindrive_agent::backend::{RobotBackend, SimBackend};
-use twindrive_agent::executive::{Executive, Stop, Tolerances};
+use std::path::Path;
 
+use ed25519_dalek::SigningKey;
+use twindrive_agent::backend::{RobotBackend, SimBackend};
+use twindrive_agent::master::{Master, MasterConfig};
+use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
+use twindrive_agent::robot::{AgentConfig, Journal, RobotAgent};
+use twindrive_agent::twin::Twin;
 use twindrive_link::emulator::{LinkEmulator, LinkProfile};
-use twindrive_link::envelope::{Envelope, PlanGate, Supervision, generate_key, sign_plan};
-use twindrive_link::upload::{
-    MemoryStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
-};
+use twindrive_link::envelope::{Envelope, Supervision, generate_key, sign_plan};
+use twindrive_link::upload::{MemoryStore, SenderConfig};
 use twindrive_link::vtime::VirtualLink;
+use twindrive_mission::pipeline::PipelineSettings;
+use twindrive_mission::redundancy::RedundancyConfig;
 
 const S: u64 = 1_000_000_000;
+const UNIX0: f64 = 1.8e9;
+const BOX: &str = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
 
-fn envelope(counter: u64) -> Envelope {
+fn envelope(counter: u64, expires_unix_s: u64, dead_man: Option<f64>) -> Envelope {
     Envelope {
         format: String::new(),
         version: 0,
@@ -27,89 +33,467 @@ fn envelope(counter: u64) -> Envelope {
         robot_id: "rover".into(),
         counter,
         not_before_unix_s: 0,
-        expires_unix_s: u64::MAX,
+        expires_unix_s,
         world_sha256: "0".repeat(64),
         supervision: Supervision {
-            dead_man_timeout_s: None,
+            dead_man_timeout_s: dead_man,
         },
+        tolerances: Default::default(),
     }
 }
 
-/// Uploads `signed` over lunar with 10 % loss; returns the bytes the robot
-/// assembled and the virtual time it took.
-fn upload(signed: Vec<u8>, seed: u64) -> (Vec<u8>, f64) {
-    let profile: LinkProfile = "lunar,loss=0.1".parse().unwrap();
-    let mut net = VirtualLink::new(
+fn plan_json() -> Vec<u8> {
+    serde_json::to_vec_pretty(&**common::plan()).unwrap()
+}
+
+struct Harness {
+    link: VirtualLink,
+    op: Operator<MemoryStore>,
+    agent: RobotAgent<SimBackend>,
+}
+
+fn site_backend(extra: &str) -> SimBackend {
+    SimBackend::new(common::site(extra), common::plan().samples[0].pose(), 400.0).unwrap()
+}
+
+fn agent(dir: &Path, trusted: &SigningKey, extra: &str) -> RobotAgent<SimBackend> {
+    let mut config = AgentConfig::new("rover", dir, vec![trusted.verifying_key()]);
+    config.unix_time_at_zero_s = UNIX0;
+    RobotAgent::new(config, site_backend(extra)).unwrap()
+}
+
+fn harness(
+    dir: &Path,
+    profile: &str,
+    seed: u64,
+    master_key: &SigningKey,
+    robot_trusts: &SigningKey,
+    extra: &str,
+    on_handback: OnHandback,
+) -> Harness {
+    let profile: LinkProfile = profile.parse().unwrap();
+    let link = VirtualLink::new(
         LinkEmulator::new(profile.clone(), seed, 0),
         LinkEmulator::new(profile.clone(), seed, 1),
     );
-    let mut sender = Sender::new(
+    let master = Master::new(
         "rover",
-        signed,
-        SenderConfig {
-            pace_bit_s: profile.bandwidth_bit_s,
-            rtt_hint_ns: (2.0 * profile.latency_s * 1e9) as u64,
-            ..SenderConfig::default()
+        MasterConfig {
+            upload: SenderConfig {
+                pace_bit_s: profile.bandwidth_bit_s,
+                rtt_hint_ns: (2.0 * profile.latency_s * 1e9) as u64,
+                ..SenderConfig::default()
+            },
+            heartbeat_period_s: 1.0,
+        },
+        MemoryStore::default(),
+    );
+    let twin = Twin::new(common::twin(), common::CALIBRATED);
+    let op = Operator::new(
+        master,
+        Some(twin),
+        master_key.clone(),
+        OperatorConfig {
+            robot_id: "rover".into(),
+            on_handback,
+            expires_in_s: 3_600,
+            supervision: Supervision {
+                dead_man_timeout_s: None,
+            },
+            tolerances: Default::default(),
+            unix_time_at_zero_s: UNIX0,
+            first_counter: 1,
+            world_sha256: "0".repeat(64),
+            log_wait_s: 1_200.0,
+            max_continuations: 6,
+            min_continuation_s: 10.0,
+            pipeline: PipelineSettings {
+                planner: Default::default(),
+                redundancy: RedundancyConfig::with_pinch_distance(0.15),
+                filter: Default::default(),
+            },
         },
     );
-    let mut receiver = Receiver::new("rover", MemoryStore::default(), ReceiverConfig::default());
-    assert!(net.run(&mut sender, &mut receiver, 3_600 * S, |s, _| {
-        s.is_finished()
-    }));
-    let mut file = None;
-    while let Some(e) = receiver.poll_event() {
-        if let ReceiverEvent::Completed { file: f, .. } = e {
-            file = Some(f);
-        }
+    Harness {
+        link,
+        op,
+        agent: agent(dir, robot_trusts, extra),
     }
-    (file.expect("completed"), net.now_ns as f64 * 1e-9)
+}
+
+impl Harness {
+    fn send(&mut self, signed: Vec<u8>, counter: u64) {
+        self.op.start(
+            common::plan().clone(),
+            signed,
+            counter,
+            false,
+            self.link.now_ns,
+        );
+    }
+
+    fn run_until(&mut self, t_s: f64) -> bool {
+        let (op, agent) = (&mut self.op, &mut self.agent);
+        self.link
+            .run(op, agent, (t_s * 1e9) as u64, |op, _| op.is_done())
+    }
+}
+
+fn journal(dir: &Path) -> Vec<serde_json::Value> {
+    Journal::read(&dir.join("journal.jsonl")).unwrap()
+}
+
+fn events(dir: &Path, event: &str) -> Vec<serde_json::Value> {
+    journal(dir)
+        .into_iter()
+        .filter(|l| l["event"] == event)
+        .collect()
 }
 
 #[test]
-fn a_signed_plan_crosses_the_lunar_link_and_runs_and_a_forged_one_is_refused() {
-    let plan = common::plan();
-    let plan_json = serde_json::to_vec_pretty(plan).unwrap();
-    let master = generate_key().unwrap();
-    let gate = PlanGate {
-        robot_id: "rover".into(),
-        trusted: vec![master.verifying_key()],
-        max_signed_bytes: 16 << 20,
-        max_plan_bytes: 64 << 20,
-    };
+fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
+    for seed in [1, 2, 3] {
+        let dir = tempfile::tempdir().unwrap();
+        let key = generate_key().unwrap();
+        let mut h = harness(
+            dir.path(),
+            "lunar,loss=0.1",
+            seed,
+            &key,
+            &key,
+            BOX,
+            OnHandback::Replan,
+        );
+        let signed = sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap();
+        h.send(signed, 1);
+        assert!(
+            h.run_until(1_800.0),
+            "seed {seed}: not done: {:?}",
+            h.op.report.timeline
+        );
+        let r = &h.op.report;
+        assert_eq!(
+            r.outcome,
+            Some(Outcome::Completed),
+            "seed {seed}: {:#?}",
+            r.timeline
+        );
+        assert!(!r.handbacks.is_empty());
+        // Contact happens only where the robot met the box the twin lacked
+        // (the bumper closes within a tick or two of touching).
+        let bumps = r
+            .handbacks
+            .iter()
+            .filter(|h| h.reason == "unexpected_bump")
+            .count();
+        assert!(
+            r.collisions as usize <= 2 * bumps,
+            "seed {seed}: {} collisions",
+            r.collisions
+        );
+        // The twin learnt a block where the site's box is.
+        let learnt = &h.op.twin().unwrap().learnt;
+        assert!(
+            learnt
+                .iter()
+                .any(|(min, max)| min[0] < 2.1 && max[0] > 1.9 && min[1] < 1.2 && max[1] > 0.9),
+            "seed {seed}: {learnt:?}"
+        );
+        // Every plan the robot accepted is stored byte for byte as signed.
+        assert_eq!(r.uploads.len(), r.handbacks.len() + 1);
+        let stored = std::fs::read(
+            dir.path()
+                .join("plans")
+                .join(format!("{}.json", common::plan().sha256)),
+        )
+        .unwrap();
+        assert_eq!(stored, plan_json());
+        for (plan, json, _) in &h.op.new_plans {
+            let path = dir
+                .path()
+                .join("plans")
+                .join(format!("{}.json", plan.sha256));
+            assert_eq!(&std::fs::read(path).unwrap(), json);
+        }
+        // The robot's logs came back, one per plan driven, and read as logs.
+        assert_eq!(
+            h.op.new_logs.len(),
+            r.uploads.len(),
+            "seed {seed}: {:#?}",
+            r.timeline
+        );
+        for (_, mcap) in &h.op.new_logs {
+            let path = dir.path().join("received.mcap");
+            std::fs::write(&path, mcap).unwrap();
+            let log = twindrive_log::read_mcap(&path).unwrap();
+            assert!(log.steps.len() > 100);
+        }
+        assert_eq!(
+            events(dir.path(), "execution_started").len(),
+            r.uploads.len()
+        );
+        assert_eq!(events(dir.path(), "handback").len(), r.handbacks.len());
+    }
+}
 
-    // The genuine plan: arrives byte-identical, is accepted, and runs on a
-    // site with a box the twin lacks until the robot hands control back.
-    let signed = sign_plan(&master, &plan_json, envelope(1)).unwrap();
-    let (received, upload_s) = upload(signed.clone(), 1);
-    assert_eq!(received, signed);
-    let accepted = gate.check(&received, 0, 1_000).unwrap();
-    assert_eq!(accepted.plan_json, plan_json);
-    let site = common::site("rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]");
-    let max_wheel = site.robot.max_wheel_speed_rad_s;
-    let mut backend = SimBackend::new(site, accepted.plan.samples[0].pose(), 120.0).unwrap();
-    let mut exec = Executive::new(&accepted.plan, Tolerances::default(), None, max_wheel).unwrap();
-    let mut wheels = [0.0, 0.0];
-    while let Some(reading) = backend.step(wheels) {
-        wheels = exec.tick(&reading);
-        if exec.stopped().is_some() {
-            break;
+#[test]
+fn on_handback_stop_ends_the_mission_handed_back_with_the_twin_updated() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = generate_key().unwrap();
+    let mut h = harness(
+        dir.path(),
+        "satellite-lossy",
+        7,
+        &key,
+        &key,
+        BOX,
+        OnHandback::Stop,
+    );
+    h.send(
+        sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+        1,
+    );
+    assert!(h.run_until(600.0));
+    let r = &h.op.report;
+    assert_eq!(r.outcome, Some(Outcome::HandedBack));
+    assert_eq!(r.handbacks.len(), 1);
+    assert_eq!(r.twin_updates.len(), 1);
+    assert!(!r.twin_updates[0].obstacles_added.is_empty());
+}
+
+/// A plan the gate must refuse: it crosses the link whole, is rejected with
+/// its reason, and no wheel moves.
+fn refused(signed: impl Fn(&SigningKey) -> Vec<u8>, prepare: impl Fn(&Path), expect: &str) {
+    for seed in [11, 12, 13] {
+        let dir = tempfile::tempdir().unwrap();
+        prepare(dir.path());
+        let key = generate_key().unwrap();
+        let mut h = harness(
+            dir.path(),
+            "lunar,loss=0.1",
+            seed,
+            &key,
+            &key,
+            "",
+            OnHandback::Stop,
+        );
+        h.send(signed(&key), 1);
+        assert!(h.run_until(600.0), "seed {seed}");
+        assert_eq!(h.op.report.outcome, Some(Outcome::Rejected), "seed {seed}");
+        let rejected = events(dir.path(), "plan_rejected");
+        assert_eq!(rejected.len(), 1, "seed {seed}");
+        let reason = rejected[0]["reason"].as_str().unwrap();
+        assert!(reason.contains(expect), "seed {seed}: {reason}");
+        assert_eq!(h.agent.backend().wheel_travel_rad(), 0.0);
+        assert!(events(dir.path(), "execution_started").is_empty());
+        assert!(
+            journal(dir.path())
+                .iter()
+                .all(|l| l["wheel_travel_rad"].as_f64() == Some(0.0))
+        );
+    }
+}
+
+#[test]
+fn a_plan_signed_by_an_unknown_key_is_refused_and_no_wheel_moves() {
+    refused(
+        |_| {
+            let forger = generate_key().unwrap();
+            sign_plan(&forger, &plan_json(), envelope(5, u64::MAX, None)).unwrap()
+        },
+        |_| {},
+        "signature",
+    );
+}
+
+#[test]
+fn a_replayed_plan_is_refused_even_after_a_restart() {
+    refused(
+        |key| sign_plan(key, &plan_json(), envelope(5, u64::MAX, None)).unwrap(),
+        // The robot accepted counter 9 before it restarted.
+        |dir| {
+            std::fs::create_dir_all(dir).unwrap();
+            twindrive_link::envelope::CounterFile::new(dir.join("counter"))
+                .store(9)
+                .unwrap();
+        },
+        "replay",
+    );
+}
+
+#[test]
+fn an_expired_plan_is_refused() {
+    refused(
+        |key| sign_plan(key, &plan_json(), envelope(5, UNIX0 as u64 + 5, None)).unwrap(),
+        |_| {},
+        "expired",
+    );
+}
+
+#[test]
+fn a_plan_corrupted_after_signing_is_refused() {
+    refused(
+        |key| {
+            let mut s = sign_plan(key, &plan_json(), envelope(5, u64::MAX, None)).unwrap();
+            let n = s.len();
+            s[n - 100] ^= 0x40;
+            s
+        },
+        |_| {},
+        "plan",
+    );
+}
+
+#[test]
+fn chunks_corrupted_in_flight_are_asked_again_and_the_plan_arrives_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = generate_key().unwrap();
+    let mut h = harness(
+        dir.path(),
+        "lunar,loss=0.05",
+        5,
+        &key,
+        &key,
+        "",
+        OnHandback::Stop,
+    );
+    let mut k = 0u64;
+    h.link.tamper_up = Some(Box::new(move |bytes: &mut Vec<u8>| {
+        k += 1;
+        if k % 7 == 0 && bytes.len() > 500 {
+            let n = bytes.len();
+            bytes[n - 10] ^= 0xff;
+        }
+    }));
+    h.send(
+        sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+        1,
+    );
+    assert!(h.run_until(900.0));
+    assert_eq!(h.op.report.outcome, Some(Outcome::Completed));
+    assert!(!events(dir.path(), "chunk_corrupted").is_empty());
+    assert!(h.op.report.uploads[0].chunks_resent > 0);
+}
+
+#[test]
+fn a_robot_restarted_mid_upload_resumes_and_the_plan_arrives_byte_identical() {
+    for seed in [21, 22, 23] {
+        let dir = tempfile::tempdir().unwrap();
+        let key = generate_key().unwrap();
+        let mut h = harness(
+            dir.path(),
+            "lunar,loss=0.1",
+            seed,
+            &key,
+            &key,
+            "",
+            OnHandback::Stop,
+        );
+        h.send(
+            sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+            1,
+        );
+        // Part of the way, then the robot's process dies and comes back.
+        assert!(!h.run_until(6.0));
+        let before = events(dir.path(), "upload_progress");
+        let held = before.last().unwrap()["received"].as_u64().unwrap();
+        assert!(held > 0);
+        h.link.drop_in_flight();
+        h.agent = agent(dir.path(), &key, "");
+        assert!(h.run_until(900.0), "seed {seed}");
+        assert_eq!(h.op.report.outcome, Some(Outcome::Completed), "seed {seed}");
+        let stored = std::fs::read(
+            dir.path()
+                .join("plans")
+                .join(format!("{}.json", common::plan().sha256)),
+        )
+        .unwrap();
+        assert_eq!(stored, plan_json());
+        // Resumed: the restarted robot still held what it had, and said so.
+        let lines = journal(dir.path());
+        let restart = lines
+            .iter()
+            .rposition(|l| l["event"] == "agent_started")
+            .unwrap();
+        let first = lines[restart..]
+            .iter()
+            .find(|l| l["event"] == "upload_progress")
+            .unwrap();
+        assert!(first["received"].as_u64().unwrap() >= held, "seed {seed}");
+    }
+}
+
+#[test]
+fn a_robot_restarted_mid_execution_stays_stopped_and_never_drives_the_plan_again() {
+    for seed in [31, 32, 33] {
+        let dir = tempfile::tempdir().unwrap();
+        let key = generate_key().unwrap();
+        let mut h = harness(dir.path(), "lan", seed, &key, &key, "", OnHandback::Replan);
+        h.send(
+            sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+            1,
+        );
+        assert!(!h.run_until(10.0));
+        assert!(
+            h.agent.is_executing(),
+            "seed {seed}: {:#?}",
+            h.op.report.timeline
+        );
+        h.link.drop_in_flight();
+        h.agent = agent(dir.path(), &key, "");
+        assert!(h.run_until(300.0), "seed {seed}");
+        assert_eq!(h.op.report.outcome, Some(Outcome::Failed), "seed {seed}");
+        assert_eq!(h.agent.backend().wheel_travel_rad(), 0.0);
+        assert_eq!(events(dir.path(), "execution_started").len(), 1);
+        let stopped = events(dir.path(), "stopped");
+        assert_eq!(stopped[0]["reason"], "restarted_mid_execution");
+    }
+}
+
+/// The master goes away for good after the upload: a supervised plan stops
+/// on its dead-man, an unsupervised one runs to its end.
+#[test]
+fn when_the_master_dies_the_plans_policy_decides() {
+    for (dead_man, expect) in [(Some(3.0), "dead_man"), (None, "finished")] {
+        let dir = tempfile::tempdir().unwrap();
+        let key = generate_key().unwrap();
+        let mut h = harness(dir.path(), "wifi", 41, &key, &key, "", OnHandback::Stop);
+        h.send(
+            sign_plan(&key, &plan_json(), envelope(1, u64::MAX, dead_man)).unwrap(),
+            1,
+        );
+        assert!(!h.run_until(5.0));
+        assert!(h.agent.is_executing());
+        // Only the robot runs from here.
+        let mut silent = Silent;
+        h.link.drop_in_flight();
+        let agent = &mut h.agent;
+        h.link
+            .run(&mut silent, agent, 200 * S, |_, a| !a.is_executing());
+        let ended: Vec<_> = journal(dir.path())
+            .into_iter()
+            .filter(|l| l["event"] == "stopped" || l["event"] == "execution_finished")
+            .collect();
+        assert_eq!(ended.len(), 1);
+        if expect == "finished" {
+            assert_eq!(ended[0]["event"], "execution_finished");
+        } else {
+            assert_eq!(ended[0]["reason"], expect);
+            // Stopped within the timeout and a tick of the last word heard.
+            assert!(ended[0]["plan_t_s"].as_f64().unwrap() < 5.0 + 3.0 + 0.5);
         }
     }
-    let (t, stop) = exec.stopped().cloned().expect("stopped");
-    assert!(stop.is_handback(), "{stop:?} at {t} s");
-    assert_ne!(stop, Stop::Finished);
-    assert!(backend.wheel_travel_rad() > 10.0);
-    // The upload took seconds of link time, not the mission's.
-    assert!(upload_s < 120.0, "{upload_s} s");
+}
 
-    // A plan signed by another key crosses the same link intact and is
-    // refused, so no executive is ever made for it.
-    let forger = generate_key().unwrap();
-    let forged = sign_plan(&forger, &plan_json, envelope(2)).unwrap();
-    let (received, _) = upload(forged.clone(), 2);
-    assert_eq!(received, forged);
-    assert!(matches!(
-        gate.check(&received, 1, 1_000),
-        Err(twindrive_link::envelope::Rejection::BadSignature)
-    ));
+/// A master that is gone.
+struct Silent;
+
+impl twindrive_link::vtime::Endpoint for Silent {
+    fn poll_transmit(&mut self, _: u64) -> Option<twindrive_link::wire::Message> {
+        None
+    }
+    fn handle(&mut self, _: &twindrive_link::wire::Message, _: u64) {}
+    fn poll_timeout(&self) -> Option<u64> {
+        None
+    }
 }

@@ -27,7 +27,8 @@ fn run(
     let plan = plan();
     let max_wheel = site.robot.max_wheel_speed_rad_s;
     let mut backend = SimBackend::new(site, plan.samples[0].pose(), max_s + 5.0).unwrap();
-    let mut exec = Executive::new(plan, Tolerances::default(), dead_man_s, max_wheel).unwrap();
+    let mut exec =
+        Executive::new(plan.clone(), Tolerances::default(), dead_man_s, max_wheel).unwrap();
     let mut wheels = [0.0, 0.0];
     let mut after = Vec::new();
     let mut collisions = 0;

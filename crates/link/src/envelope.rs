@@ -49,6 +49,37 @@ pub struct Envelope {
     /// SHA-256 of the twin's world (the scenario) the plan was rehearsed in.
     pub world_sha256: String,
     pub supervision: Supervision,
+    /// When the robot is to hand control back.
+    #[serde(default)]
+    pub tolerances: Tolerances,
+}
+
+/// How far reality may depart from the twin's prediction before the robot
+/// stops and hands control back; carried, and signed, with the plan.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tolerances {
+    /// Odometry this far from the plan's pose at that time (m).
+    pub max_deviation_m: f64,
+    /// The median, over `residual_window` ticks, of range readings' distance
+    /// from the best-matching prediction (m).
+    pub max_range_residual_m: f64,
+    /// Ticks the range residual's median is taken over.
+    pub residual_window: usize,
+    /// A reading is compared with the plan's predictions this long (s)
+    /// either side of now, and the best match counts.
+    pub range_match_s: f64,
+}
+
+impl Default for Tolerances {
+    fn default() -> Self {
+        Self {
+            max_deviation_m: 0.15,
+            max_range_residual_m: 0.10,
+            residual_window: 50,
+            range_match_s: 0.5,
+        }
+    }
 }
 
 /// How the robot is to be watched while it drives.

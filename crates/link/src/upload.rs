@@ -423,6 +423,11 @@ impl<S: ChunkStore> Receiver<S> {
         &self.store
     }
 
+    /// The transfer under way (or the last one completed).
+    pub fn current_transfer(&self) -> Option<TransferId> {
+        self.current.as_ref().map(|t| t.offer.transfer)
+    }
+
     /// Whether the current transfer is complete (its file handed out).
     pub fn is_complete(&self) -> bool {
         self.current.as_ref().is_some_and(|t| t.done)

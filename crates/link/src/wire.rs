@@ -18,7 +18,7 @@ pub const MAX_ROBOT_ID_BYTES: usize = 64;
 /// SHA-256 of a transfer's whole file: what identifies it on both sides.
 pub type TransferId = [u8; 32];
 
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Message {
     pub version: u16,
     pub robot_id: String,
@@ -29,7 +29,7 @@ pub struct Message {
     pub body: Body,
 }
 
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Body {
     /// Master → robot: a file is on offer (a new upload, or one resumed).
     Offer(Offer),
@@ -59,6 +59,88 @@ pub enum Body {
         transfer: TransferId,
         reason: String,
     },
+    /// Master → robot: the master is there (a supervised plan's dead-man
+    /// counts from the last message heard, of any kind).
+    Heartbeat,
+    /// Robot → master: a live summary, at a low rate.
+    Status(Box<Status>),
+    /// Robot → master: reality departed from the plan; the robot stopped
+    /// and control returns to the operator. Repeated until acknowledged.
+    Handback(Box<Handback>),
+    /// Master → robot: the hand-back of this plan arrived.
+    HandbackAck { plan: TransferId },
+}
+
+/// Where the robot stands with one plan file.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PlanPhase {
+    /// Arriving: chunks held of all.
+    Receiving { received: u32, chunks: u32 },
+    /// Refused at the gate; no wheel moved.
+    Rejected { reason: String },
+    /// Accepted and running.
+    Executing,
+    /// Ran to its end.
+    Finished,
+    /// Stopped before its end: hand-back, dead-man, or a restart mid-run.
+    Stopped { reason: String },
+}
+
+/// The robot's live summary.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    /// The plan file (its transfer id) this speaks of, and where it stands.
+    pub plan: Option<(TransferId, PlanPhase)>,
+    /// Plan samples passed, of all.
+    pub progress: (u32, u32),
+    /// The robot's time since its plan started (s).
+    pub plan_t_s: f64,
+    /// Pose estimate: x, y (m), heading (rad).
+    pub pose: [f64; 3],
+    /// Kinematic estimate: left and right wheel diameters, wheelbase (m),
+    /// and their standard deviations.
+    pub params: [f64; 3],
+    pub params_std: [f64; 3],
+    /// Distance from the plan's pose now, and the latest median range
+    /// residual (m).
+    pub deviation_m: f64,
+    pub range_residual_m: f64,
+    /// Wheel rotation since the agent started (rad, both wheels).
+    pub wheel_travel_rad: f64,
+    /// Robot logs not yet acknowledged by the master.
+    pub logs_pending: u32,
+    /// Bumper contacts, and periods a collision held the robot (where the
+    /// backend can tell), since the agent started.
+    pub bumps: u32,
+    pub collisions: u32,
+}
+
+/// Why and where the robot handed control back, with what it knows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Handback {
+    pub plan: TransferId,
+    pub reason: String,
+    /// Time since the plan started (s), and plan samples passed.
+    pub plan_t_s: f64,
+    pub progress: u32,
+    /// Pose estimate: x, y (m), heading (rad).
+    pub pose: [f64; 3],
+    /// Wheel diameters and wheelbase (m) with their 3 × 3 covariance (row
+    /// major).
+    pub params: [f64; 3],
+    pub params_covariance: [f64; 9],
+    /// The recent sensor window, oldest first.
+    pub window: Vec<WindowSample>,
+}
+
+/// One moment of the hand-back's sensor window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WindowSample {
+    pub plan_t_s: f64,
+    pub pose: [f64; 3],
+    /// The latest reading of each range beam (m; NaN: none).
+    pub ranges_m: Vec<f32>,
+    pub bump: bool,
 }
 
 /// A transfer on offer.

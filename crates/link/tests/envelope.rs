@@ -67,6 +67,7 @@ fn envelope(robot: &str, counter: u64) -> Envelope {
         supervision: Supervision {
             dead_man_timeout_s: Some(30.0),
         },
+        tolerances: Default::default(),
     }
 }
 

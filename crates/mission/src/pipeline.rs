@@ -191,3 +191,72 @@ pub fn run(
         coverage,
     })
 }
+
+/// A mission log made on the twin, turned into a plan: the pipeline's
+/// stages, then the plan's samples with the twin's predicted range readings
+/// and bumps along the path (`scenario` is the twin the log was made in).
+/// `time_optimal` takes the time-optimal re-timing instead of the mission's
+/// pace. The plan is validated before it is returned.
+pub fn plan_from_log(
+    log: &MissionLog,
+    log_sha256: &str,
+    params: &DiffDriveParams,
+    scenario: &twindrive_sim::Scenario,
+    settings: &PipelineSettings,
+    time_optimal: bool,
+) -> Result<(crate::plan::MissionPlan, Stages), PipelineError> {
+    use crate::plan::{MissionPlan, PlanHeader, PlanSample, RobotInfo};
+    let header = &log.header;
+    let limits = WheelLimits {
+        max_speed_rad_s: header.max_wheel_speed_rad_s,
+        max_accel_rad_s2: header.max_wheel_accel_rad_s2,
+    };
+    let stages = run(log, params, &limits, settings)?;
+    let mut model = twindrive_sim::SensorModel::new(scenario);
+    let mut ranges = vec![0.0; model.beams()];
+    let (path, commands) = if time_optimal {
+        let (p, c) = stages.fastest.as_ref().map_err(|e| {
+            PipelineError::Infeasible(format!("the time-optimal re-timing failed: {e}"))
+        })?;
+        (p, c)
+    } else {
+        (&stages.filtered.samples, &stages.filtered.commands)
+    };
+    let samples: Vec<PlanSample> = path
+        .iter()
+        .zip(commands)
+        .map(|(p, c)| {
+            let bump = model.read(&p.pose, &mut ranges);
+            PlanSample::new(p, c, ranges.clone(), bump)
+        })
+        .collect();
+    let summary = serde_json::to_value(stages.summary())
+        .map_err(|e| PipelineError::Infeasible(format!("the stage summary: {e}")))?;
+    let plan = MissionPlan::new(
+        PlanHeader {
+            robot: RobotInfo {
+                scenario: header.scenario.clone(),
+                footprint_radius_m: header.footprint_radius_m,
+                ticks_per_rev: header.ticks_per_rev,
+                range_sensors: scenario
+                    .range_sensors
+                    .iter()
+                    .map(|s| s.info.clone())
+                    .collect(),
+            },
+            calibrated: *params,
+            limits,
+            time_step_s: stages.period_s,
+            start: header.start,
+            source_log_sha256: log_sha256.to_owned(),
+            settings: serde_json::json!({
+                "pipeline": settings,
+                "timing": if time_optimal { "time_optimal" } else { "mission_pace" },
+            }),
+            summary,
+        },
+        samples,
+    );
+    plan.validate()?;
+    Ok((plan, stages))
+}

@@ -281,8 +281,7 @@ fn reference_at(samples: &[PlanSample], t: f64, k: &mut usize) -> (Pose, f64, f6
 /// and the time since the plan started in, wheel commands out. The robot
 /// agent runs the same tracker as [`closed_loop`] does on the twin.
 #[derive(Debug, Clone)]
-pub struct Tracker<'a> {
-    samples: &'a [PlanSample],
+pub struct Tracker {
     params: DiffDriveParams,
     settings: TrackerSettings,
     rad_per_tick: f64,
@@ -294,11 +293,12 @@ pub struct Tracker<'a> {
     cursor: usize,
 }
 
-impl<'a> Tracker<'a> {
+impl Tracker {
     /// From the plan's first pose, with odometry through `params` and wheel
-    /// commands capped at `max_wheel_rad_s` (speeds scaled together).
+    /// commands capped at `max_wheel_rad_s` (speeds scaled together). Every
+    /// [`Tracker::command`] takes the same `samples`.
     pub fn new(
-        samples: &'a [PlanSample],
+        samples: &[PlanSample],
         params: &DiffDriveParams,
         settings: &TrackerSettings,
         ticks_per_rev: u32,
@@ -308,7 +308,6 @@ impl<'a> Tracker<'a> {
             .first()
             .ok_or_else(|| PipelineError::Infeasible("the plan has no samples".into()))?;
         Ok(Self {
-            samples,
             params: *params,
             settings: *settings,
             rad_per_tick: std::f64::consts::TAU / f64::from(ticks_per_rev.max(1)),
@@ -339,7 +338,12 @@ impl<'a> Tracker<'a> {
     /// The wheel commands at `t_s` since the plan started (with the encoder
     /// counts, when they sampled), or `None` once the plan has ended and the
     /// robot is level with its goal.
-    pub fn command(&mut self, t_s: f64, encoder_ticks: Option<[i64; 2]>) -> Option<[f64; 2]> {
+    pub fn command(
+        &mut self,
+        samples: &[PlanSample],
+        t_s: f64,
+        encoder_ticks: Option<[i64; 2]>,
+    ) -> Option<[f64; 2]> {
         if let Some(ticks) = encoder_ticks {
             if let Some(prev) = self.last_ticks {
                 let dl = (ticks[0] - prev[0]) as f64 * self.rad_per_tick;
@@ -349,8 +353,8 @@ impl<'a> Tracker<'a> {
             self.last_ticks = Some(ticks);
         }
         let g = &self.settings;
-        let t0 = self.samples[0].t_s;
-        let (r, v_r, omega_r, ended) = reference_at(self.samples, t_s + t0, &mut self.cursor);
+        let t0 = samples[0].t_s;
+        let (r, v_r, omega_r, ended) = reference_at(samples, t_s + t0, &mut self.cursor);
         self.reference = r;
         let estimate = self.estimate;
         let (sn, cs) = estimate.heading_rad.sin_cos();
@@ -400,6 +404,6 @@ pub fn closed_loop(
         samples,
         scenario,
         duration + settings.timeout_extra_s,
-        move |s| tracker.command(s.t_ns as f64 * 1e-9, s.encoder_ticks),
+        move |s| tracker.command(samples, s.t_ns as f64 * 1e-9, s.encoder_ticks),
     )
 }

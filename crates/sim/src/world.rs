@@ -67,6 +67,26 @@ impl World {
         &self.segments
     }
 
+    /// Solid blocks.
+    pub fn solids(&self) -> &[Aabb] {
+        &self.solids
+    }
+
+    /// This world with solid axis-aligned blocks added (what a robot found
+    /// that the map lacked).
+    pub fn with_blocks(&self, blocks: &[([f64; 2], [f64; 2])]) -> World {
+        let mut segments = self.segments.clone();
+        let mut solids = self.solids.clone();
+        for &(min, max) in blocks {
+            segments.extend(rectangle_segments(min, max));
+            solids.push(Aabb::new(
+                Vector::new(min[0], min[1]),
+                Vector::new(max[0], max[1]),
+            ));
+        }
+        World::new(segments, solids, self.grid.clone())
+    }
+
     pub fn grid(&self) -> Option<&OccupancyGrid> {
         self.grid.as_ref()
     }

@@ -124,6 +124,7 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
         supervision: Supervision {
             dead_man_timeout_s: args.supervise,
         },
+        tolerances: Default::default(),
     };
     let signed = sign_plan(&key, &plan_json, envelope)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;

@@ -10,11 +10,10 @@ use serde::Deserialize;
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_log::MissionLog;
 use twindrive_mission::pipeline::{PipelineSettings, StageSummary, Stages};
-use twindrive_mission::plan::{MissionPlan, PlanHeader, PlanSample, RobotInfo, sha256_hex};
+use twindrive_mission::plan::{MissionPlan, sha256_hex};
 use twindrive_mission::redundancy::RedundancyConfig;
-use twindrive_mission::retime::WheelLimits;
 use twindrive_mission::{PathSample, pipeline};
-use twindrive_sim::{Scenario, SensorModel};
+use twindrive_sim::Scenario;
 
 use crate::cli::PlanArgs;
 use crate::figures;
@@ -123,58 +122,22 @@ fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
 
 /// Runs the pipeline and assembles the plan (with the twin's sensor predictions).
 pub fn make_plan(job: &Job) -> anyhow::Result<(MissionPlan, Stages)> {
-    let header = &job.log.header;
-    let limits = WheelLimits {
-        max_speed_rad_s: header.max_wheel_speed_rad_s,
-        max_accel_rad_s2: header.max_wheel_accel_rad_s2,
-    };
-    let stages = pipeline::run(&job.log, &job.params, &limits, &job.settings)?;
-    let mut model = SensorModel::new(&job.scenario);
-    let mut ranges = vec![0.0; model.beams()];
-    let (path, commands) = if job.time_optimal {
-        let (p, c) = stages.fastest.as_ref().map_err(|e| {
-            anyhow::anyhow!("--time-optimal: the time-optimal re-timing failed: {e}")
-        })?;
-        (p, c)
-    } else {
-        (&stages.filtered.samples, &stages.filtered.commands)
-    };
-    let samples: Vec<PlanSample> = path
-        .iter()
-        .zip(commands)
-        .map(|(p, c)| {
-            let bump = model.read(&p.pose, &mut ranges);
-            PlanSample::new(p, c, ranges.clone(), bump)
-        })
-        .collect();
-    let plan = MissionPlan::new(
-        PlanHeader {
-            robot: RobotInfo {
-                scenario: header.scenario.clone(),
-                footprint_radius_m: header.footprint_radius_m,
-                ticks_per_rev: header.ticks_per_rev,
-                range_sensors: job
-                    .scenario
-                    .range_sensors
-                    .iter()
-                    .map(|s| s.info.clone())
-                    .collect(),
-            },
-            calibrated: job.params,
-            limits,
-            time_step_s: stages.period_s,
-            start: header.start,
-            source_log_sha256: job.log_sha256.clone(),
-            settings: serde_json::json!({
-                "pipeline": &job.settings,
-                "timing": if job.time_optimal { "time_optimal" } else { "mission_pace" },
-            }),
-            summary: serde_json::to_value(stages.summary())?,
-        },
-        samples,
-    );
-    plan.validate()?;
-    Ok((plan, stages))
+    pipeline::plan_from_log(
+        &job.log,
+        &job.log_sha256,
+        &job.params,
+        &job.scenario,
+        &job.settings,
+        job.time_optimal,
+    )
+    .map_err(|e| match (&e, job.time_optimal) {
+        (twindrive_mission::PipelineError::Infeasible(m), true)
+            if m.starts_with("the time-optimal") =>
+        {
+            anyhow::anyhow!("--time-optimal: {m}")
+        }
+        _ => e.into(),
+    })
 }
 
 fn ns(t_s: f64) -> u64 {

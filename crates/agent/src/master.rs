@@ -1,0 +1,306 @@
+//! The master's end of the link as one state machine: it uploads signed
+//! plans, keeps a supervised robot's dead-man quiet with heartbeats, reads
+//! the robot's status summaries, acknowledges hand-backs and assembles the
+//! robot's back-filled logs. What to do about any of it is the owner's
+//! business ([`crate::operator`]): the master reports [`MasterEvent`]s.
+
+use std::collections::{HashMap, HashSet, VecDeque};
+
+use twindrive_link::upload::{
+    ChunkStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
+};
+use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Stamper, Status, TransferId};
+
+/// What the master reports to its owner.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MasterEvent {
+    /// Chunks of the plan file the robot has confirmed.
+    UploadProgress {
+        transfer: TransferId,
+        confirmed: u32,
+        chunks: u32,
+    },
+    /// The robot holds the whole plan file.
+    Uploaded(UploadRecord),
+    /// The robot refused the upload itself (too large, say).
+    UploadRefused {
+        transfer: TransferId,
+        reason: String,
+    },
+    /// A plan file's phase on the robot changed.
+    Phase {
+        transfer: TransferId,
+        phase: PlanPhase,
+    },
+    /// The robot handed control back (reported once per plan).
+    Handback(Box<Handback>),
+    /// A robot log (MCAP) arrived whole.
+    RobotLog { transfer: TransferId, file: Vec<u8> },
+    /// A status summary.
+    Status(Box<Status>),
+}
+
+/// One finished upload.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct UploadRecord {
+    #[serde(serialize_with = "ser_hex")]
+    pub transfer: TransferId,
+    pub bytes: u64,
+    pub duration_s: f64,
+    pub chunks: u32,
+    pub chunks_resent: u64,
+}
+
+fn ser_hex<S: serde::Serializer>(t: &TransferId, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(&twindrive_mission::plan::hex(t))
+}
+
+struct Upload {
+    sender: Sender,
+    bytes: u64,
+    started_ns: u64,
+    last_confirmed: u32,
+    done: bool,
+}
+
+/// Master settings.
+#[derive(Debug, Clone, Copy)]
+pub struct MasterConfig {
+    pub upload: SenderConfig,
+    /// A heartbeat this often (s).
+    pub heartbeat_period_s: f64,
+}
+
+impl Default for MasterConfig {
+    fn default() -> Self {
+        Self {
+            upload: SenderConfig::default(),
+            heartbeat_period_s: 1.0,
+        }
+    }
+}
+
+/// The master's end.
+pub struct Master<S: ChunkStore> {
+    stamper: Stamper,
+    config: MasterConfig,
+    upload: Option<Upload>,
+    logs: Receiver<S>,
+    next_heartbeat_ns: u64,
+    outbox: VecDeque<Body>,
+    handbacks_seen: HashSet<TransferId>,
+    phases: HashMap<TransferId, PlanPhase>,
+    latest: Option<Status>,
+    events: VecDeque<MasterEvent>,
+    /// When the robot was last heard (the driving clock).
+    pub last_heard_ns: Option<u64>,
+}
+
+impl<S: ChunkStore> Master<S> {
+    /// A master for `robot_id`; robot logs are assembled in `log_store`.
+    pub fn new(robot_id: &str, config: MasterConfig, log_store: S) -> Self {
+        Self {
+            stamper: Stamper::new(robot_id),
+            config,
+            upload: None,
+            logs: Receiver::new(
+                robot_id,
+                log_store,
+                ReceiverConfig {
+                    max_file_bytes: 1 << 30,
+                    ..ReceiverConfig::default()
+                },
+            ),
+            next_heartbeat_ns: 0,
+            outbox: VecDeque::new(),
+            handbacks_seen: HashSet::new(),
+            phases: HashMap::new(),
+            latest: None,
+            events: VecDeque::new(),
+            last_heard_ns: None,
+        }
+    }
+
+    /// Starts uploading a signed plan file. `resume`: it may be partly on
+    /// the robot already (this master restarted), so only what the robot's
+    /// answer lists as missing is sent.
+    pub fn upload(&mut self, file: Vec<u8>, resume: bool, now_ns: u64) -> TransferId {
+        let bytes = file.len() as u64;
+        let robot = self.stamper.robot_id.clone();
+        let sender = if resume {
+            Sender::resume(&robot, file, self.config.upload)
+        } else {
+            Sender::new(&robot, file, self.config.upload)
+        };
+        let transfer = sender.transfer();
+        self.upload = Some(Upload {
+            sender,
+            bytes,
+            started_ns: now_ns,
+            last_confirmed: 0,
+            done: false,
+        });
+        transfer
+    }
+
+    /// The upload under way or last finished.
+    pub fn uploading(&self) -> Option<TransferId> {
+        self.upload.as_ref().map(|u| u.sender.transfer())
+    }
+
+    /// Whether the current upload is on the robot whole.
+    pub fn upload_finished(&self) -> bool {
+        self.upload.as_ref().is_some_and(|u| u.done)
+    }
+
+    pub fn phase(&self, transfer: &TransferId) -> Option<&PlanPhase> {
+        self.phases.get(transfer)
+    }
+
+    pub fn latest_status(&self) -> Option<&Status> {
+        self.latest.as_ref()
+    }
+
+    pub fn poll_event(&mut self) -> Option<MasterEvent> {
+        self.events.pop_front()
+    }
+
+    /// Takes in a message from the robot.
+    pub fn handle(&mut self, message: &Message, now_ns: u64) {
+        self.last_heard_ns = Some(now_ns);
+        match &message.body {
+            Body::Nak { transfer, .. }
+            | Body::Finished { transfer }
+            | Body::Refused { transfer, .. } => {
+                if let Some(u) = &mut self.upload
+                    && u.sender.transfer() == *transfer
+                {
+                    u.sender.handle(message, now_ns);
+                    self.upload_events(now_ns);
+                }
+            }
+            Body::Offer(_) | Body::Chunk { .. } | Body::EndOfFile { .. } => {
+                self.logs.handle(message, now_ns);
+                while let Some(e) = self.logs.poll_event() {
+                    match e {
+                        ReceiverEvent::Completed { transfer, file } => self
+                            .events
+                            .push_back(MasterEvent::RobotLog { transfer, file }),
+                        ReceiverEvent::StorageError(e) => {
+                            tracing::error!(error = %e, "storing a robot log chunk")
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            Body::Status(status) => {
+                if let Some((t, phase)) = &status.plan {
+                    self.phase_seen(*t, phase.clone());
+                }
+                self.latest = Some((**status).clone());
+                self.events.push_back(MasterEvent::Status(status.clone()));
+            }
+            Body::Handback(h) => {
+                self.outbox.push_back(Body::HandbackAck { plan: h.plan });
+                if self.handbacks_seen.insert(h.plan) {
+                    self.phase_seen(
+                        h.plan,
+                        PlanPhase::Stopped {
+                            reason: h.reason.clone(),
+                        },
+                    );
+                    self.events.push_back(MasterEvent::Handback(h.clone()));
+                }
+            }
+            Body::Heartbeat | Body::HandbackAck { .. } => {}
+        }
+    }
+
+    fn phase_seen(&mut self, transfer: TransferId, phase: PlanPhase) {
+        // Receiving progress is reported as upload progress.
+        if matches!(phase, PlanPhase::Receiving { .. }) {
+            return;
+        }
+        if self.phases.get(&transfer) != Some(&phase) {
+            // A stop the hand-back already reported keeps its reason.
+            if matches!(self.phases.get(&transfer), Some(PlanPhase::Stopped { .. }))
+                && matches!(phase, PlanPhase::Stopped { .. })
+            {
+                return;
+            }
+            self.phases.insert(transfer, phase.clone());
+            self.events
+                .push_back(MasterEvent::Phase { transfer, phase });
+        }
+    }
+
+    fn upload_events(&mut self, now_ns: u64) {
+        let Some(u) = &mut self.upload else {
+            return;
+        };
+        let transfer = u.sender.transfer();
+        let confirmed = u.sender.stats.chunks_confirmed;
+        if confirmed != u.last_confirmed {
+            u.last_confirmed = confirmed;
+            self.events.push_back(MasterEvent::UploadProgress {
+                transfer,
+                confirmed,
+                chunks: u.sender.stats.chunks,
+            });
+        }
+        if u.done {
+            return;
+        }
+        if u.sender.is_finished() {
+            u.done = true;
+            self.events.push_back(MasterEvent::Uploaded(UploadRecord {
+                transfer,
+                bytes: u.bytes,
+                duration_s: now_ns.saturating_sub(u.started_ns) as f64 * 1e-9,
+                chunks: u.sender.stats.chunks,
+                chunks_resent: u.sender.stats.chunks_resent,
+            }));
+        } else if let Some(reason) = u.sender.refused() {
+            u.done = true;
+            self.events.push_back(MasterEvent::UploadRefused {
+                transfer,
+                reason: reason.to_string(),
+            });
+        }
+    }
+
+    /// The next message to send at `now_ns`.
+    pub fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        if let Some(body) = self.outbox.pop_front() {
+            return Some(self.stamper.stamp(body, now_ns));
+        }
+        if let Some(u) = &mut self.upload
+            && let Some(m) = u.sender.poll_transmit(now_ns)
+        {
+            return Some(m);
+        }
+        if let Some(m) = self.logs.poll_transmit(now_ns) {
+            return Some(m);
+        }
+        if now_ns >= self.next_heartbeat_ns {
+            self.next_heartbeat_ns = now_ns + (self.config.heartbeat_period_s * 1e9) as u64;
+            return Some(self.stamper.stamp(Body::Heartbeat, now_ns));
+        }
+        None
+    }
+
+    /// When the master next wants `poll_transmit` called.
+    pub fn poll_timeout(&self) -> Option<u64> {
+        if !self.outbox.is_empty() {
+            return Some(0);
+        }
+        [
+            self.upload.as_ref().and_then(|u| u.sender.poll_timeout()),
+            self.logs.poll_timeout(),
+            Some(self.next_heartbeat_ns),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+}

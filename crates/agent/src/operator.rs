@@ -1,0 +1,497 @@
+//! The master's decisions, around its [`Master`] end: what to upload, what
+//! a hand-back changes in the twin, whether to continue, and when the
+//! mission is over. Drives in real processes and in virtual time alike:
+//! call [`Operator::react`] after messages are handled, and stop when
+//! [`Operator::is_done`].
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use ed25519_dalek::SigningKey;
+use serde::Serialize;
+use twindrive_link::envelope::{Envelope, Supervision, Tolerances, sign_plan};
+use twindrive_link::upload::ChunkStore;
+use twindrive_link::wire::{Message, PlanPhase, TransferId};
+use twindrive_mission::pipeline::PipelineSettings;
+use twindrive_mission::plan::{MissionPlan, hex, sha256_hex};
+
+use crate::master::{Master, MasterEvent};
+use crate::twin::{LearnSettings, Twin, TwinUpdate, remaining_s};
+
+/// What the operator does when the robot hands control back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OnHandback {
+    /// Update the twin and end the mission there.
+    Stop,
+    /// Update the twin, rehearse a continuation on it from the hand-back
+    /// pose, sign it and upload it; until the mission completes.
+    Replan,
+}
+
+/// How the mission ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    Completed,
+    HandedBack,
+    Rejected,
+    Failed,
+}
+
+/// Operator settings.
+#[derive(Debug, Clone)]
+pub struct OperatorConfig {
+    pub robot_id: String,
+    pub on_handback: OnHandback,
+    /// Signed plans expire this long after signing (s).
+    pub expires_in_s: u64,
+    pub supervision: Supervision,
+    pub tolerances: Tolerances,
+    /// Unix time (s) at `now_ns = 0`.
+    pub unix_time_at_zero_s: f64,
+    /// The counter of the first continuation is one above the first plan's.
+    pub first_counter: u64,
+    /// SHA-256 of the twin's world the first plan was rehearsed in.
+    pub world_sha256: String,
+    /// How long to wait for the robot's log once the mission is decided (s).
+    pub log_wait_s: f64,
+    /// At most this many continuations.
+    pub max_continuations: usize,
+    /// The shortest continuation rehearsed (s).
+    pub min_continuation_s: f64,
+    pub pipeline: PipelineSettings,
+}
+
+/// The report's record of one plan sent.
+#[derive(Debug, Clone, Serialize)]
+pub struct UploadEntry {
+    pub plan_sha256: String,
+    pub transfer: String,
+    pub counter: u64,
+    pub bytes: u64,
+    pub duration_s: f64,
+    pub chunks: u32,
+    pub chunks_resent: u64,
+    /// The plan's own duration (s).
+    pub plan_duration_s: f64,
+}
+
+/// The report's record of one hand-back.
+#[derive(Debug, Clone, Serialize)]
+pub struct HandbackEntry {
+    pub plan_sha256: String,
+    pub reason: String,
+    /// When it arrived (s of the master's clock).
+    pub t_s: f64,
+    /// How far into its plan the robot was (s).
+    pub plan_t_s: f64,
+    pub pose: [f64; 3],
+    pub params: [f64; 3],
+    pub params_std: [f64; 3],
+}
+
+/// One moment of the mission, for the timeline.
+#[derive(Debug, Clone, Serialize)]
+pub struct TimelineEntry {
+    pub t_s: f64,
+    pub event: String,
+    pub detail: String,
+}
+
+/// `report.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub outcome: Option<Outcome>,
+    pub robot_id: String,
+    pub on_handback: OnHandback,
+    pub uploads: Vec<UploadEntry>,
+    pub handbacks: Vec<HandbackEntry>,
+    pub twin_updates: Vec<TwinUpdate>,
+    pub rejections: Vec<String>,
+    pub failure: Option<String>,
+    pub collisions: u32,
+    pub bumps: u32,
+    /// Directories of the robot's logs as received (filled by the owner).
+    pub robot_logs: Vec<String>,
+    pub status_messages: u64,
+    pub timeline: Vec<TimelineEntry>,
+}
+
+struct SentPlan {
+    transfer: TransferId,
+    plan: Arc<MissionPlan>,
+    counter: u64,
+    executed: bool,
+}
+
+/// The operator at the master.
+pub struct Operator<S: ChunkStore> {
+    pub master: Master<S>,
+    twin: Option<Twin>,
+    key: SigningKey,
+    config: OperatorConfig,
+    pub report: Report,
+    plans: Vec<SentPlan>,
+    decided_at_ns: Option<u64>,
+    logs_received: usize,
+    /// Logs pending on the robot, by its latest status since the decision.
+    status_after_decision: Option<u32>,
+    /// Robot logs (MCAP bytes, with the plan they belong to) for the owner
+    /// to write.
+    pub new_logs: VecDeque<(Option<Arc<MissionPlan>>, Vec<u8>)>,
+    /// Continuation plans signed (document bytes, signed file) for the
+    /// owner to keep.
+    pub new_plans: VecDeque<(Arc<MissionPlan>, Vec<u8>, Vec<u8>)>,
+    now_ns: u64,
+}
+
+impl<S: ChunkStore> Operator<S> {
+    /// An operator for `master`; `twin` is needed to replan.
+    pub fn new(
+        master: Master<S>,
+        twin: Option<Twin>,
+        key: SigningKey,
+        config: OperatorConfig,
+    ) -> Self {
+        Self {
+            report: Report {
+                outcome: None,
+                robot_id: config.robot_id.clone(),
+                on_handback: config.on_handback,
+                uploads: Vec::new(),
+                handbacks: Vec::new(),
+                twin_updates: Vec::new(),
+                rejections: Vec::new(),
+                failure: None,
+                collisions: 0,
+                bumps: 0,
+                robot_logs: Vec::new(),
+                status_messages: 0,
+                timeline: Vec::new(),
+            },
+            master,
+            twin,
+            key,
+            config,
+            plans: Vec::new(),
+            decided_at_ns: None,
+            logs_received: 0,
+            status_after_decision: None,
+            new_logs: VecDeque::new(),
+            new_plans: VecDeque::new(),
+            now_ns: 0,
+        }
+    }
+
+    pub fn twin(&self) -> Option<&Twin> {
+        self.twin.as_ref()
+    }
+
+    fn note(&mut self, event: &str, detail: String) {
+        tracing::info!(target: "twindrive::master", event, "{detail}");
+        self.report.timeline.push(TimelineEntry {
+            t_s: self.now_ns as f64 * 1e-9,
+            event: event.into(),
+            detail,
+        });
+    }
+
+    /// Starts the mission with a signed plan file (`resume`: this master
+    /// restarted and the robot may hold part of it).
+    pub fn start(
+        &mut self,
+        plan: Arc<MissionPlan>,
+        signed: Vec<u8>,
+        counter: u64,
+        resume: bool,
+        now_ns: u64,
+    ) {
+        self.now_ns = now_ns;
+        let bytes = signed.len();
+        let transfer = self.master.upload(signed, resume, now_ns);
+        self.note(
+            "upload_started",
+            format!("plan {} ({bytes} bytes signed)", &plan.sha256[..12]),
+        );
+        self.plans.push(SentPlan {
+            transfer,
+            plan,
+            counter,
+            executed: false,
+        });
+    }
+
+    fn decide(&mut self, outcome: Outcome) {
+        if self.report.outcome.is_none() {
+            self.report.outcome = Some(outcome);
+            self.decided_at_ns = Some(self.now_ns);
+            self.note("outcome", format!("{outcome:?}"));
+        }
+    }
+
+    /// The mission is decided, and the robot's logs are in (or were waited
+    /// for long enough).
+    pub fn is_done(&self) -> bool {
+        let Some(at) = self.decided_at_ns else {
+            return false;
+        };
+        // The robot has said, since, that no log of its waits for the master.
+        let logs_in = self
+            .status_after_decision
+            .is_some_and(|pending| pending == 0);
+        logs_in || self.now_ns >= at + (self.config.log_wait_s * 1e9) as u64
+    }
+
+    /// Gives up: the mission failed for `why` (the link never came back, say).
+    pub fn fail(&mut self, why: String, now_ns: u64) {
+        self.now_ns = now_ns;
+        if self.report.outcome.is_none() {
+            self.report.failure = Some(why);
+            self.decide(Outcome::Failed);
+        }
+    }
+
+    fn plan_of(&self, transfer: &TransferId) -> Option<&SentPlan> {
+        self.plans.iter().find(|p| p.transfer == *transfer)
+    }
+
+    fn is_current(&self, transfer: &TransferId) -> bool {
+        self.plans.last().is_some_and(|p| p.transfer == *transfer)
+    }
+
+    /// Acts on everything the master reported.
+    pub fn react(&mut self, now_ns: u64) {
+        self.now_ns = now_ns;
+        while let Some(event) = self.master.poll_event() {
+            match event {
+                MasterEvent::UploadProgress { .. } => {}
+                MasterEvent::Uploaded(rec) => {
+                    let (sha, counter, duration) = self
+                        .plan_of(&rec.transfer)
+                        .map(|p| (p.plan.sha256.clone(), p.counter, p.plan.duration_s()))
+                        .unwrap_or_default();
+                    self.note(
+                        "upload_finished",
+                        format!(
+                            "{} bytes in {:.1} s, {} chunks resent",
+                            rec.bytes, rec.duration_s, rec.chunks_resent
+                        ),
+                    );
+                    self.report.uploads.push(UploadEntry {
+                        plan_sha256: sha,
+                        transfer: hex(&rec.transfer),
+                        counter,
+                        bytes: rec.bytes,
+                        duration_s: rec.duration_s,
+                        chunks: rec.chunks,
+                        chunks_resent: rec.chunks_resent,
+                        plan_duration_s: duration,
+                    });
+                }
+                MasterEvent::UploadRefused { reason, .. } => {
+                    self.report.rejections.push(reason.clone());
+                    self.note("upload_refused", reason);
+                    self.decide(Outcome::Rejected);
+                }
+                MasterEvent::Phase { transfer, phase } => self.phase(transfer, phase),
+                MasterEvent::Handback(h) => self.handback(&h),
+                MasterEvent::RobotLog { file, .. } => {
+                    self.logs_received += 1;
+                    // Logs come back in the order the plans ran.
+                    let plan = self
+                        .plans
+                        .iter()
+                        .filter(|p| p.executed)
+                        .nth(self.logs_received - 1)
+                        .map(|p| p.plan.clone());
+                    self.note("robot_log", format!("{} bytes", file.len()));
+                    self.new_logs.push_back((plan, file));
+                }
+                MasterEvent::Status(s) => {
+                    self.report.status_messages += 1;
+                    if self.decided_at_ns.is_some() {
+                        self.status_after_decision = Some(s.logs_pending);
+                    }
+                    self.report.collisions = s.collisions;
+                    self.report.bumps = s.bumps;
+                }
+            }
+        }
+    }
+
+    fn phase(&mut self, transfer: TransferId, phase: PlanPhase) {
+        let current = self.is_current(&transfer);
+        match phase {
+            PlanPhase::Receiving { .. } => {}
+            PlanPhase::Rejected { reason } => {
+                self.report.rejections.push(reason.clone());
+                self.note("plan_rejected", reason);
+                if current {
+                    self.decide(Outcome::Rejected);
+                }
+            }
+            PlanPhase::Executing => {
+                if let Some(p) = self.plans.iter_mut().find(|p| p.transfer == transfer) {
+                    p.executed = true;
+                }
+                self.note("execution_started", hex(&transfer)[..12].to_string());
+            }
+            PlanPhase::Finished => {
+                self.mark_executed(transfer);
+                self.note("execution_finished", hex(&transfer)[..12].to_string());
+                if current {
+                    self.decide(Outcome::Completed);
+                }
+            }
+            PlanPhase::Stopped { reason } => {
+                self.mark_executed(transfer);
+                let handback = matches!(
+                    reason.as_str(),
+                    "unexpected_bump" | "deviation" | "range_residual"
+                );
+                self.note("stopped", reason.clone());
+                if current && !handback {
+                    self.report.failure = Some(format!("the robot stopped: {reason}"));
+                    self.decide(Outcome::Failed);
+                }
+            }
+        }
+    }
+
+    fn mark_executed(&mut self, transfer: TransferId) {
+        if let Some(p) = self.plans.iter_mut().find(|p| p.transfer == transfer) {
+            p.executed = true;
+        }
+    }
+
+    fn handback(&mut self, h: &twindrive_link::wire::Handback) {
+        self.mark_executed(h.plan);
+        let std = |i: usize| h.params_covariance[4 * i].max(0.0).sqrt();
+        let sha = self
+            .plan_of(&h.plan)
+            .map(|p| p.plan.sha256.clone())
+            .unwrap_or_default();
+        self.report.handbacks.push(HandbackEntry {
+            plan_sha256: sha,
+            reason: h.reason.clone(),
+            t_s: self.now_ns as f64 * 1e-9,
+            plan_t_s: h.plan_t_s,
+            pose: h.pose,
+            params: h.params,
+            params_std: [std(0), std(1), std(2)],
+        });
+        self.note(
+            "handback",
+            format!(
+                "{} at {:.1} s into the plan, pose ({:.2}, {:.2}, {:.2})",
+                h.reason, h.plan_t_s, h.pose[0], h.pose[1], h.pose[2]
+            ),
+        );
+        if !self.is_current(&h.plan) {
+            return;
+        }
+        let Some(twin) = &mut self.twin else {
+            self.decide(Outcome::HandedBack);
+            return;
+        };
+        let update = twin.apply(h, &LearnSettings::default());
+        self.note(
+            "twin_updated",
+            format!(
+                "pose; {} block(s) added from {} point(s); parameters {}",
+                update.obstacles_added.len(),
+                update.evidence_points,
+                if update.params.is_some() {
+                    "updated"
+                } else {
+                    "kept"
+                }
+            ),
+        );
+        self.report.twin_updates.push(update);
+        let continuations = self.plans.len() - 1;
+        if self.config.on_handback == OnHandback::Stop
+            || continuations >= self.config.max_continuations
+        {
+            self.decide(Outcome::HandedBack);
+            return;
+        }
+        let duration = self.plan_of(&h.plan).map_or(0.0, |p| p.plan.duration_s());
+        let remaining = remaining_s(duration, h.plan_t_s, self.config.min_continuation_s);
+        match self.continue_from(remaining) {
+            Ok(()) => {}
+            Err(e) => {
+                self.report.failure = Some(format!("the continuation: {e}"));
+                self.decide(Outcome::HandedBack);
+            }
+        }
+    }
+
+    /// Rehearses, signs and uploads a continuation of `duration_s`.
+    fn continue_from(&mut self, duration_s: f64) -> anyhow::Result<()> {
+        let twin = self.twin.as_ref().expect("replanning needs the twin");
+        let plan = twin.continuation(duration_s, &self.config.pipeline)?;
+        let learnt = serde_json::to_string(&twin.learnt)?;
+        let plan_json = serde_json::to_vec_pretty(&plan)?;
+        let counter = self
+            .plans
+            .iter()
+            .map(|p| p.counter)
+            .max()
+            .unwrap_or(self.config.first_counter)
+            + 1;
+        let now_unix = (self.config.unix_time_at_zero_s + self.now_ns as f64 * 1e-9) as u64;
+        let envelope = Envelope {
+            format: String::new(),
+            version: 0,
+            plan_sha256: String::new(),
+            plan_file_sha256: String::new(),
+            plan_bytes: 0,
+            robot_id: self.config.robot_id.clone(),
+            counter,
+            not_before_unix_s: now_unix.saturating_sub(60),
+            expires_unix_s: now_unix.saturating_add(self.config.expires_in_s),
+            world_sha256: sha256_hex(format!("{}{learnt}", self.config.world_sha256).as_bytes()),
+            supervision: self.config.supervision,
+            tolerances: self.config.tolerances,
+        };
+        let signed = sign_plan(&self.key, &plan_json, envelope)?;
+        self.note(
+            "continuation_planned",
+            format!(
+                "{:.1} s rehearsed on the updated twin, plan {} ({} samples)",
+                duration_s,
+                &plan.sha256[..12],
+                plan.samples.len()
+            ),
+        );
+        let plan = Arc::new(plan);
+        self.new_plans
+            .push_back((plan.clone(), plan_json, signed.clone()));
+        let now = self.now_ns;
+        self.start(plan, signed, counter, false, now);
+        Ok(())
+    }
+
+    /// Takes in a message from the robot.
+    pub fn handle(&mut self, message: &Message, now_ns: u64) {
+        self.master.handle(message, now_ns);
+        self.react(now_ns);
+    }
+
+    pub fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        self.now_ns = now_ns;
+        self.master.poll_transmit(now_ns)
+    }
+
+    pub fn poll_timeout(&self) -> Option<u64> {
+        let wait = self
+            .decided_at_ns
+            .map(|at| at + (self.config.log_wait_s * 1e9) as u64);
+        [self.master.poll_timeout(), wait]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+}

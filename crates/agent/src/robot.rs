@@ -1,0 +1,989 @@
+//! The robot agent as one state machine: messages and a clock in, messages
+//! and wheel commands out.
+//!
+//! It assembles uploads (durably, so a restart resumes them), accepts a
+//! plan only through the [`PlanGate`], drives an accepted plan with the
+//! [`Executive`] at the backend's control rate, runs the online augmented
+//! EKF on its encoders and absolute poses, sends live [`Status`] summaries
+//! within a telemetry budget, hands control back with what it knows when
+//! reality departs from the plan, and back-fills its mission log (MCAP) to
+//! the master with the same chunked upload the plans travel by, paced to
+//! what the budget leaves.
+//!
+//! Everything it must not forget lives in its state directory:
+//! - `journal.jsonl`: one JSON object per line (`t`, `event`, details,
+//!   `wheel_travel_rad`), synced on every line;
+//! - `counter`: the last plan counter accepted (replays stay closed);
+//! - `chunks/`: uploads in progress;
+//! - `plans/<sha256>.json`: every accepted plan document, byte for byte the
+//!   master's `plan.json` (named by its content hash);
+//! - `logs/<sha256>/`: the robot's own log of each plan it drove
+//!   (`log.mcap`, `log.csv`, `log.meta.json`), kept until the master
+//!   acknowledges it.
+//!
+//! A restart reads the journal: an upload resumes where it stood; a plan
+//! that was executing is marked stopped and is never driven again (no plan
+//! step runs twice); logs not yet acknowledged are offered again.
+
+use std::collections::{HashMap, VecDeque};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use ed25519_dalek::VerifyingKey;
+use serde_json::json;
+use twindrive_estimation::NoiseModel;
+use twindrive_estimation::{
+    FilterConfig, OnlineCalibrator, PoseSample, WheelSample, initial_estimate,
+};
+use twindrive_link::envelope::{CounterFile, PlanGate};
+use twindrive_link::upload::{
+    DirStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
+};
+use twindrive_link::wire::{
+    Body, Handback, Message, PlanPhase, Stamper, Status, TransferId, WindowSample,
+};
+use twindrive_log::{MissionLog, StepRecord};
+use twindrive_mission::plan::{MissionPlan, hex};
+
+use crate::backend::{Reading, RobotBackend};
+use crate::executive::{Executive, Stop};
+
+/// How the agent runs.
+#[derive(Debug, Clone)]
+pub struct AgentConfig {
+    pub robot_id: String,
+    pub state_dir: PathBuf,
+    /// Keys whose plans this robot accepts.
+    pub trusted: Vec<VerifyingKey>,
+    /// Unix time (s) at `now_ns = 0` of the clock the agent is driven by.
+    pub unix_time_at_zero_s: f64,
+    /// Bytes per second the robot may spend on what it sends (status,
+    /// hand-back, log back-fill).
+    pub telemetry_budget_bytes_s: f64,
+    /// Shortest time between two status summaries (s).
+    pub status_period_s: f64,
+    /// Backend seconds per second of the driving clock (1 for a real robot;
+    /// more runs a simulated site faster than real time).
+    pub time_scale: f64,
+    /// Largest signed plan file accepted.
+    pub max_plan_file_bytes: u64,
+}
+
+impl AgentConfig {
+    pub fn new(robot_id: &str, state_dir: impl Into<PathBuf>, trusted: Vec<VerifyingKey>) -> Self {
+        Self {
+            robot_id: robot_id.into(),
+            state_dir: state_dir.into(),
+            trusted,
+            unix_time_at_zero_s: 0.0,
+            telemetry_budget_bytes_s: 8_000.0,
+            status_period_s: 1.0,
+            time_scale: 1.0,
+            max_plan_file_bytes: 16 << 20,
+        }
+    }
+}
+
+/// The journal: one JSON object per line, synced as written.
+#[derive(Debug)]
+pub struct Journal {
+    path: PathBuf,
+}
+
+impl Journal {
+    pub fn new(path: PathBuf) -> Self {
+        Self { path }
+    }
+
+    /// Appends one line; a failure is reported to the caller's log, and the
+    /// robot carries on (its safety never depends on the journal).
+    pub fn append(&self, line: &serde_json::Value) -> std::io::Result<()> {
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&self.path)?;
+        let mut bytes = serde_json::to_vec(line).expect("JSON values serialise");
+        bytes.push(b'\n');
+        f.write_all(&bytes)?;
+        f.sync_data()
+    }
+
+    /// Every line that parses (a torn last line from a power cut is skipped).
+    pub fn read(path: &Path) -> std::io::Result<Vec<serde_json::Value>> {
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) => return Err(e),
+        };
+        Ok(text
+            .lines()
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect())
+    }
+}
+
+/// A plan being driven.
+struct Running {
+    transfer: TransferId,
+    exec: Executive,
+    ekf: Option<OnlineCalibrator>,
+    rad_per_tick: f64,
+    log: MissionLog,
+    /// Backend time of the plan's first tick.
+    t0_s: Option<f64>,
+    wheels: [f64; 2],
+    max_deviation_m: f64,
+    window: VecDeque<WindowSample>,
+    tick: u64,
+}
+
+/// A robot log on its way to the master.
+struct Backfill {
+    plan_sha256: String,
+    sender: Sender,
+}
+
+/// Sent this many times a second at most while a hand-back is unacknowledged.
+const HANDBACK_RESEND_S: f64 = 5.0;
+/// Ticks in the hand-back's sensor window, and one kept in this many.
+const WINDOW_TICKS: usize = 200;
+const WINDOW_EVERY: u64 = 4;
+
+/// The robot agent.
+pub struct RobotAgent<B: RobotBackend> {
+    config: AgentConfig,
+    backend: B,
+    journal: Journal,
+    counter: CounterFile,
+    last_counter: u64,
+    gate: PlanGate,
+    stamper: Stamper,
+    receiver: Receiver<DirStore>,
+    /// What became of every plan file seen (from the journal on start).
+    known: HashMap<TransferId, PlanPhase>,
+    current: Option<(TransferId, PlanPhase)>,
+    running: Option<Running>,
+    /// Backend time at the last tick.
+    backend_t_s: f64,
+    next_tick_ns: u64,
+    next_status_ns: u64,
+    handback: Option<(Handback, u64)>,
+    backfills: VecDeque<Backfill>,
+    outbox: VecDeque<Body>,
+    last_progress_journaled: u32,
+    /// Latest EKF estimate (params and their standard deviations).
+    params: [f64; 3],
+    params_std: [f64; 3],
+    pose: [f64; 3],
+    bumps: u32,
+    collisions: u32,
+    last_bump: bool,
+    /// Journal writes that failed (reported in the process log).
+    pub journal_errors: u64,
+}
+
+fn pose3(p: &twindrive_kinematics::Pose) -> [f64; 3] {
+    [p.x_m, p.y_m, p.heading_rad]
+}
+
+fn transfer_from_hex(s: &str) -> Option<TransferId> {
+    if s.len() != 64 {
+        return None;
+    }
+    let mut out = [0u8; 32];
+    for (k, byte) in out.iter_mut().enumerate() {
+        *byte = u8::from_str_radix(s.get(2 * k..2 * k + 2)?, 16).ok()?;
+    }
+    Some(out)
+}
+
+impl<B: RobotBackend> RobotAgent<B> {
+    /// Starts (or restarts) the agent on its state directory.
+    pub fn new(config: AgentConfig, backend: B) -> std::io::Result<Self> {
+        let dir = &config.state_dir;
+        for sub in ["chunks", "plans", "logs"] {
+            std::fs::create_dir_all(dir.join(sub))?;
+        }
+        let journal = Journal::new(dir.join("journal.jsonl"));
+        let counter = CounterFile::new(dir.join("counter"));
+        let last_counter = counter.load()?;
+        let receiver = Receiver::new(
+            &config.robot_id,
+            DirStore::new(dir.join("chunks")),
+            ReceiverConfig {
+                max_file_bytes: config.max_plan_file_bytes,
+                ..ReceiverConfig::default()
+            },
+        );
+        let gate = PlanGate {
+            robot_id: config.robot_id.clone(),
+            trusted: config.trusted.clone(),
+            max_signed_bytes: config.max_plan_file_bytes as usize,
+            max_plan_bytes: 64 << 20,
+        };
+        let mut agent = Self {
+            stamper: Stamper::new(&config.robot_id),
+            journal,
+            counter,
+            last_counter,
+            gate,
+            receiver,
+            known: HashMap::new(),
+            current: None,
+            running: None,
+            backend_t_s: 0.0,
+            next_tick_ns: 0,
+            next_status_ns: 0,
+            handback: None,
+            backfills: VecDeque::new(),
+            outbox: VecDeque::new(),
+            last_progress_journaled: 0,
+            params: [f64::NAN; 3],
+            params_std: [f64::NAN; 3],
+            pose: [f64::NAN; 3],
+            bumps: 0,
+            collisions: 0,
+            last_bump: false,
+            journal_errors: 0,
+            config,
+            backend,
+        };
+        agent.recover()?;
+        agent.record(
+            0,
+            "agent_started",
+            json!({ "robot_id": agent.config.robot_id }),
+        );
+        Ok(agent)
+    }
+
+    /// Reads the journal of an earlier run: what each plan file became, a
+    /// plan interrupted mid-run (now stopped for good), logs to offer again.
+    fn recover(&mut self) -> std::io::Result<()> {
+        let lines = Journal::read(&self.journal.path)?;
+        let mut executing: Option<TransferId> = None;
+        let mut logs: Vec<(String, bool)> = Vec::new();
+        for line in &lines {
+            let event = line["event"].as_str().unwrap_or_default();
+            let transfer = line["transfer"].as_str().and_then(transfer_from_hex);
+            let reason = line["reason"].as_str().unwrap_or_default().to_string();
+            match (event, transfer) {
+                ("plan_accepted", Some(t)) => {
+                    self.known.insert(t, PlanPhase::Executing);
+                }
+                ("plan_rejected", Some(t)) => {
+                    self.known.insert(t, PlanPhase::Rejected { reason });
+                }
+                ("execution_started", Some(t)) => executing = Some(t),
+                ("execution_finished", Some(t)) => {
+                    self.known.insert(t, PlanPhase::Finished);
+                    executing = None;
+                }
+                ("stopped", Some(t)) => {
+                    self.known.insert(t, PlanPhase::Stopped { reason });
+                    executing = None;
+                }
+                ("log_written", _) => {
+                    if let Some(p) = line["plan_sha256"].as_str() {
+                        logs.push((p.to_string(), false));
+                    }
+                }
+                ("log_acknowledged", _) => {
+                    if let Some(p) = line["plan_sha256"].as_str() {
+                        for l in logs.iter_mut().filter(|l| l.0 == p) {
+                            l.1 = true;
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+        // Any plan accepted and never started, or started and never ended,
+        // is stopped: a restart never drives a plan (or a step of one) again.
+        let unfinished: Vec<TransferId> = self
+            .known
+            .iter()
+            .filter(|(_, p)| matches!(p, PlanPhase::Executing))
+            .map(|(t, _)| *t)
+            .collect();
+        for t in unfinished {
+            let reason = if executing == Some(t) {
+                "restarted_mid_execution"
+            } else {
+                "restarted_before_execution"
+            };
+            self.known.insert(
+                t,
+                PlanPhase::Stopped {
+                    reason: reason.into(),
+                },
+            );
+            self.record(
+                0,
+                "stopped",
+                json!({ "transfer": hex(&t), "reason": reason }),
+            );
+            self.current = Some((
+                t,
+                PlanPhase::Stopped {
+                    reason: reason.into(),
+                },
+            ));
+        }
+        for (plan, acked) in logs {
+            if !acked {
+                self.queue_backfill(&plan);
+            }
+        }
+        Ok(())
+    }
+
+    pub fn backend(&self) -> &B {
+        &self.backend
+    }
+
+    /// Where the current plan stands.
+    pub fn current(&self) -> Option<&(TransferId, PlanPhase)> {
+        self.current.as_ref()
+    }
+
+    /// Whether a plan is being driven.
+    pub fn is_executing(&self) -> bool {
+        self.running.is_some()
+    }
+
+    /// Logs not yet acknowledged by the master.
+    pub fn logs_pending(&self) -> usize {
+        self.backfills.len()
+    }
+
+    fn unix_now_s(&self, now_ns: u64) -> u64 {
+        (self.config.unix_time_at_zero_s + now_ns as f64 * 1e-9).max(0.0) as u64
+    }
+
+    fn record(&mut self, now_ns: u64, event: &str, details: serde_json::Value) {
+        let mut line = json!({
+            "t": now_ns as f64 * 1e-9,
+            "event": event,
+            "wheel_travel_rad": self.backend.wheel_travel_rad(),
+        });
+        if let (Some(map), serde_json::Value::Object(d)) = (line.as_object_mut(), details) {
+            map.extend(d);
+        }
+        if let Err(e) = self.journal.append(&line) {
+            self.journal_errors += 1;
+            tracing::error!(error = %e, event, "writing the journal");
+        }
+        tracing::info!(target: "twindrive::robot", "{line}");
+    }
+
+    fn set_phase(&mut self, transfer: TransferId, phase: PlanPhase) {
+        self.known.insert(transfer, phase.clone());
+        self.current = Some((transfer, phase));
+    }
+
+    /// Takes in a message from the master.
+    pub fn handle(&mut self, message: &Message, now_ns: u64) {
+        if let Some(r) = &mut self.running {
+            r.exec.heard_from_master(self.backend_t_s);
+        }
+        match &message.body {
+            Body::Offer(offer) => {
+                if let Some(phase) = self.known.get(&offer.transfer) {
+                    // Already whole here (the master restarted): say so
+                    // again, and where it stands.
+                    self.outbox.push_back(Body::Finished {
+                        transfer: offer.transfer,
+                    });
+                    let phase = phase.clone();
+                    if self.current.as_ref().is_none_or(|c| c.0 != offer.transfer) {
+                        self.current = Some((offer.transfer, phase));
+                    }
+                    self.next_status_ns = now_ns;
+                    return;
+                }
+                if self.running.is_some() {
+                    // One plan at a time: the offer is heard again once
+                    // this one ends.
+                    return;
+                }
+                self.receiver.handle(message, now_ns);
+            }
+            Body::Chunk { .. } | Body::EndOfFile { .. } => self.receiver.handle(message, now_ns),
+            Body::Nak { transfer, .. }
+            | Body::Finished { transfer }
+            | Body::Refused { transfer, .. } => {
+                if let Some(b) = self
+                    .backfills
+                    .iter_mut()
+                    .find(|b| b.sender.transfer() == *transfer)
+                {
+                    b.sender.handle(message, now_ns);
+                }
+            }
+            Body::HandbackAck { plan } => {
+                if self.handback.as_ref().is_some_and(|(h, _)| h.plan == *plan) {
+                    self.handback = None;
+                    self.record(
+                        now_ns,
+                        "handback_acknowledged",
+                        json!({ "transfer": hex(plan) }),
+                    );
+                }
+            }
+            Body::Heartbeat | Body::Status(_) | Body::Handback(_) => {}
+        }
+        self.receiver_events(now_ns);
+    }
+
+    fn receiver_events(&mut self, now_ns: u64) {
+        while let Some(event) = self.receiver.poll_event() {
+            match event {
+                ReceiverEvent::Progress { received, chunks } => {
+                    // The journal notes every tenth of the way.
+                    let step = (chunks / 10).max(1);
+                    if received == chunks
+                        || received >= self.last_progress_journaled + step
+                        || received < self.last_progress_journaled
+                    {
+                        self.last_progress_journaled = received;
+                        self.record(
+                            now_ns,
+                            "upload_progress",
+                            json!({ "received": received, "chunks": chunks }),
+                        );
+                    }
+                    if let Some(t) = self.receiver_transfer() {
+                        self.current = Some((t, PlanPhase::Receiving { received, chunks }));
+                    }
+                }
+                ReceiverEvent::Corrupted { index } => {
+                    self.record(now_ns, "chunk_corrupted", json!({ "index": index }));
+                }
+                ReceiverEvent::Refused { reason } => {
+                    self.record(now_ns, "upload_refused", json!({ "reason": reason }));
+                }
+                ReceiverEvent::StorageError(e) => {
+                    self.record(now_ns, "storage_error", json!({ "error": e }));
+                }
+                ReceiverEvent::Completed { transfer, file } => {
+                    self.consider(transfer, file, now_ns)
+                }
+            }
+        }
+    }
+
+    fn receiver_transfer(&self) -> Option<TransferId> {
+        self.current
+            .as_ref()
+            .filter(|c| matches!(c.1, PlanPhase::Receiving { .. }))
+            .map(|c| c.0)
+            .or_else(|| self.receiver.current_transfer())
+    }
+
+    /// A whole plan file arrived: through the gate, or refused.
+    fn consider(&mut self, transfer: TransferId, file: Vec<u8>, now_ns: u64) {
+        let now_unix = self.unix_now_s(now_ns);
+        match self.gate.check(&file, self.last_counter, now_unix) {
+            Err(rejection) => {
+                let reason = rejection.to_string();
+                self.record(
+                    now_ns,
+                    "plan_rejected",
+                    json!({ "transfer": hex(&transfer), "reason": reason }),
+                );
+                self.set_phase(transfer, PlanPhase::Rejected { reason });
+            }
+            Ok(accepted) => {
+                let sha = accepted.plan.sha256.clone();
+                let path = self
+                    .config
+                    .state_dir
+                    .join("plans")
+                    .join(format!("{sha}.json"));
+                let stored = twindrive_link::upload::write_durably(&path, &accepted.plan_json)
+                    .and_then(|()| self.counter.store(accepted.envelope.counter));
+                if let Err(e) = stored {
+                    let reason = format!("storing the plan: {e}");
+                    self.record(
+                        now_ns,
+                        "plan_rejected",
+                        json!({ "transfer": hex(&transfer), "reason": reason }),
+                    );
+                    self.set_phase(transfer, PlanPhase::Rejected { reason });
+                    return;
+                }
+                self.last_counter = accepted.envelope.counter;
+                self.record(
+                    now_ns,
+                    "plan_accepted",
+                    json!({
+                        "transfer": hex(&transfer),
+                        "plan_sha256": sha,
+                        "counter": accepted.envelope.counter,
+                        "samples": accepted.plan.samples.len(),
+                        "path": path,
+                    }),
+                );
+                let env = accepted.envelope;
+                self.start(transfer, Arc::new(accepted.plan), &env, now_ns);
+            }
+        }
+        self.next_status_ns = now_ns;
+    }
+
+    fn start(
+        &mut self,
+        transfer: TransferId,
+        plan: Arc<MissionPlan>,
+        envelope: &twindrive_link::envelope::Envelope,
+        now_ns: u64,
+    ) {
+        let max_wheel = self.backend.log_header().max_wheel_speed_rad_s;
+        let exec = match Executive::new(
+            plan.clone(),
+            envelope.tolerances,
+            envelope.supervision.dead_man_timeout_s,
+            max_wheel,
+        ) {
+            Ok(e) => e,
+            Err(e) => {
+                let reason = format!("the plan cannot be driven: {e}");
+                self.record(
+                    now_ns,
+                    "stopped",
+                    json!({ "transfer": hex(&transfer), "reason": reason }),
+                );
+                self.set_phase(transfer, PlanPhase::Stopped { reason });
+                return;
+            }
+        };
+        let mut header = self.backend.log_header();
+        header.nominal = plan.header.calibrated;
+        let rad_per_tick = std::f64::consts::TAU / f64::from(header.ticks_per_rev.max(1));
+        self.record(
+            now_ns,
+            "execution_started",
+            json!({ "transfer": hex(&transfer), "plan_sha256": plan.sha256 }),
+        );
+        self.set_phase(transfer, PlanPhase::Executing);
+        self.running = Some(Running {
+            transfer,
+            exec,
+            ekf: None,
+            rad_per_tick,
+            log: MissionLog::new(header),
+            t0_s: None,
+            wheels: [0.0, 0.0],
+            max_deviation_m: 0.0,
+            window: VecDeque::new(),
+            tick: 0,
+        });
+        self.next_tick_ns = now_ns;
+    }
+
+    fn tick_period_ns(&self) -> u64 {
+        ((self.backend.period_s() / self.config.time_scale.max(1e-6)) * 1e9).max(1.0) as u64
+    }
+
+    /// Runs every control tick due by `now_ns` (a process that fell behind
+    /// catches up, a bounded number of ticks at a time).
+    fn run_ticks(&mut self, now_ns: u64) {
+        let period = self.tick_period_ns();
+        let mut budget = 1_000;
+        while self.running.is_some() && self.next_tick_ns <= now_ns && budget > 0 {
+            budget -= 1;
+            self.next_tick_ns += period;
+            self.tick(now_ns);
+        }
+    }
+
+    fn tick(&mut self, now_ns: u64) {
+        let Some(r) = &mut self.running else {
+            return;
+        };
+        let Some(reading) = self.backend.step(r.wheels) else {
+            let reason = "the robot's backend stopped".to_string();
+            self.end(Some(Stop::DeadMan { silent_s: 0.0 }), Some(reason), now_ns);
+            return;
+        };
+        self.backend_t_s = reading.t_s;
+        let r = self.running.as_mut().expect("running");
+        let t0 = *r.t0_s.get_or_insert(reading.t_s - self.backend.period_s());
+        r.wheels = r.exec.tick(&reading);
+        r.tick += 1;
+        // The robot's own log of this period.
+        let mut record: StepRecord = reading.record;
+        record.t_ns = ((reading.t_s - t0).max(0.0) * 1e9).round() as u64;
+        r.log.steps.push(record);
+        r.log.ranges.extend_from_slice(&reading.fresh_ranges_m);
+        // Online calibration on encoders and absolute poses.
+        fuse(r, &reading);
+        let (pose, reference) = match &r.ekf {
+            Some(ekf) => {
+                let e = ekf.estimate();
+                ([e.state[0], e.state[1], e.state[2]], r.exec.reference())
+            }
+            None => (pose3(&r.exec.estimate()), r.exec.reference()),
+        };
+        let deviation = (pose[0] - reference.x_m).hypot(pose[1] - reference.y_m);
+        r.max_deviation_m = r.max_deviation_m.max(deviation);
+        // Every few ticks, and every tick with a contact or a stop.
+        if r.tick % WINDOW_EVERY == 0 || reading.bump || r.exec.stopped().is_some() {
+            r.window.push_back(WindowSample {
+                plan_t_s: reading.t_s - t0,
+                pose,
+                ranges_m: reading.ranges_m.iter().map(|&v| v as f32).collect(),
+                bump: reading.bump,
+            });
+            if r.window.len() > WINDOW_TICKS / WINDOW_EVERY as usize {
+                r.window.pop_front();
+            }
+        }
+        if let Some(ekf) = &r.ekf {
+            let e = ekf.estimate();
+            self.params = [e.state[3], e.state[4], e.state[5]];
+            self.params_std = [e.std(3), e.std(4), e.std(5)];
+        }
+        self.pose = pose;
+        if reading.bump && !self.last_bump {
+            self.bumps += 1;
+        }
+        self.last_bump = reading.bump;
+        if reading.blocked {
+            self.collisions += 1;
+        }
+        if let Some((_, stop)) = r.exec.stopped().cloned() {
+            self.end(Some(stop), None, now_ns);
+        }
+    }
+
+    /// The plan ended (or the backend did): record it, write the log, hand
+    /// back if reality departed from the plan.
+    fn end(&mut self, stop: Option<Stop>, note: Option<String>, now_ns: u64) {
+        let Some(r) = self.running.take() else {
+            return;
+        };
+        let plan = r.exec.plan().clone();
+        let t = hex(&r.transfer);
+        let plan_t_s = r.window.back().map_or(0.0, |w| w.plan_t_s);
+        let reason = match (&stop, &note) {
+            (_, Some(n)) => n.clone(),
+            (Some(s), None) => stop_reason(s),
+            (None, None) => "stopped".into(),
+        };
+        if matches!(stop, Some(Stop::Finished)) && note.is_none() {
+            self.record(
+                now_ns,
+                "execution_finished",
+                json!({ "transfer": t, "plan_t_s": plan_t_s, "max_deviation_m": r.max_deviation_m }),
+            );
+            self.set_phase(r.transfer, PlanPhase::Finished);
+        } else {
+            self.record(
+                now_ns,
+                "stopped",
+                json!({ "transfer": t, "reason": reason, "plan_t_s": plan_t_s, "stop": stop }),
+            );
+            self.set_phase(
+                r.transfer,
+                PlanPhase::Stopped {
+                    reason: reason.clone(),
+                },
+            );
+        }
+        if let Some(s) = stop.as_ref().filter(|s| s.is_handback()) {
+            let (params, covariance) = match &r.ekf {
+                Some(ekf) => {
+                    let e = ekf.estimate();
+                    let mut c = [0.0; 9];
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            c[3 * i + j] = e.covariance[(3 + i, 3 + j)];
+                        }
+                    }
+                    ([e.state[3], e.state[4], e.state[5]], c)
+                }
+                None => {
+                    let p = plan.header.calibrated;
+                    (
+                        [p.left_diameter_m, p.right_diameter_m, p.wheelbase_m],
+                        [
+                            f64::INFINITY,
+                            0.0,
+                            0.0,
+                            0.0,
+                            f64::INFINITY,
+                            0.0,
+                            0.0,
+                            0.0,
+                            f64::INFINITY,
+                        ],
+                    )
+                }
+            };
+            let handback = Handback {
+                plan: r.transfer,
+                reason: stop_reason(s),
+                plan_t_s,
+                progress: r.exec.progress() as u32,
+                pose: self.pose,
+                params,
+                params_covariance: covariance,
+                window: r.window.iter().cloned().collect(),
+            };
+            self.record(
+                now_ns,
+                "handback",
+                json!({
+                    "transfer": t,
+                    "reason": handback.reason,
+                    "plan_t_s": plan_t_s,
+                    "pose": handback.pose,
+                    "params": handback.params,
+                }),
+            );
+            self.handback = Some((handback, 0));
+        }
+        self.write_log(&plan.sha256, &r.log, now_ns);
+        self.next_status_ns = now_ns;
+    }
+
+    fn write_log(&mut self, plan_sha256: &str, log: &MissionLog, now_ns: u64) {
+        let dir = self.config.state_dir.join("logs").join(plan_sha256);
+        let result = (|| -> anyhow::Result<()> {
+            std::fs::create_dir_all(&dir)?;
+            let mut mcap = std::io::Cursor::new(Vec::new());
+            twindrive_log::write_mcap(log, &mut mcap)?;
+            let mut csv = Vec::new();
+            twindrive_log::write_csv(log, &mut csv)?;
+            let meta = serde_json::to_vec_pretty(&log.header)?;
+            twindrive_link::upload::write_durably(&dir.join("log.csv"), &csv)?;
+            twindrive_link::upload::write_durably(&dir.join("log.meta.json"), &meta)?;
+            twindrive_link::upload::write_durably(&dir.join("log.mcap"), mcap.get_ref())?;
+            Ok(())
+        })();
+        match result {
+            Ok(()) => {
+                self.record(
+                    now_ns,
+                    "log_written",
+                    json!({ "plan_sha256": plan_sha256, "steps": log.steps.len(), "dir": dir }),
+                );
+                self.queue_backfill(plan_sha256);
+            }
+            Err(e) => {
+                self.record(
+                    now_ns,
+                    "log_error",
+                    json!({ "plan_sha256": plan_sha256, "error": e.to_string() }),
+                );
+            }
+        }
+    }
+
+    fn queue_backfill(&mut self, plan_sha256: &str) {
+        if self.backfills.iter().any(|b| b.plan_sha256 == plan_sha256) {
+            return;
+        }
+        let path = self
+            .config
+            .state_dir
+            .join("logs")
+            .join(plan_sha256)
+            .join("log.mcap");
+        match std::fs::read(&path) {
+            Ok(file) => {
+                let pace = 8.0 * 0.7 * self.config.telemetry_budget_bytes_s;
+                let sender = Sender::resume(
+                    &self.config.robot_id,
+                    file,
+                    SenderConfig {
+                        pace_bit_s: Some(pace.max(800.0)),
+                        ..SenderConfig::default()
+                    },
+                );
+                self.backfills.push_back(Backfill {
+                    plan_sha256: plan_sha256.into(),
+                    sender,
+                });
+            }
+            Err(e) => {
+                tracing::error!(path = %path.display(), error = %e, "a robot log to back-fill")
+            }
+        }
+    }
+
+    fn status(&self) -> Status {
+        let (progress, plan_t_s, deviation_m, range_residual_m) = match &self.running {
+            Some(r) => (
+                (r.exec.progress() as u32, r.exec.plan().samples.len() as u32),
+                r.window.back().map_or(0.0, |w| w.plan_t_s),
+                r.max_deviation_m,
+                r.exec.range_residual_m().unwrap_or(f64::NAN),
+            ),
+            None => ((0, 0), 0.0, f64::NAN, f64::NAN),
+        };
+        Status {
+            plan: self.current.clone(),
+            progress,
+            plan_t_s,
+            pose: self.pose,
+            params: self.params,
+            params_std: self.params_std,
+            deviation_m,
+            range_residual_m,
+            wheel_travel_rad: self.backend.wheel_travel_rad(),
+            logs_pending: self.backfills.len() as u32,
+            bumps: self.bumps,
+            collisions: self.collisions,
+        }
+    }
+
+    /// The next message to send at `now_ns`; runs the control ticks due by
+    /// then first.
+    pub fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        self.run_ticks(now_ns);
+        if let Some(body) = self.outbox.pop_front() {
+            return Some(self.stamper.stamp(body, now_ns));
+        }
+        if let Some((h, last)) = &mut self.handback
+            && (*last == 0 || now_ns >= *last + (HANDBACK_RESEND_S * 1e9) as u64)
+        {
+            *last = now_ns.max(1);
+            let body = Body::Handback(Box::new(h.clone()));
+            return Some(self.stamper.stamp(body, now_ns));
+        }
+        if now_ns >= self.next_status_ns {
+            let message = self
+                .stamper
+                .stamp(Body::Status(Box::new(self.status())), now_ns);
+            let bytes = twindrive_link::wire::encode(&message).len() as f64;
+            // A status at most every `status_period_s`, and within a third
+            // of the budget.
+            let period_s = self
+                .config
+                .status_period_s
+                .max(bytes / (self.config.telemetry_budget_bytes_s / 3.0).max(1.0));
+            self.next_status_ns = now_ns + (period_s * 1e9) as u64;
+            return Some(message);
+        }
+        if let Some(m) = self.receiver.poll_transmit(now_ns) {
+            return Some(m);
+        }
+        // Logs back-fill one at a time, oldest first.
+        while let Some(b) = self.backfills.front_mut() {
+            if b.sender.is_finished() || b.sender.refused().is_some() {
+                let b = self.backfills.pop_front().expect("front");
+                let event = if b.sender.is_finished() {
+                    "log_acknowledged"
+                } else {
+                    "log_refused"
+                };
+                self.record(now_ns, event, json!({ "plan_sha256": b.plan_sha256 }));
+                continue;
+            }
+            return b.sender.poll_transmit(now_ns);
+        }
+        None
+    }
+
+    /// When the agent next wants `poll_transmit` called.
+    pub fn poll_timeout(&self) -> Option<u64> {
+        if !self.outbox.is_empty() {
+            return Some(0);
+        }
+        let handback = self.handback.as_ref().map(|(_, last)| {
+            if *last == 0 {
+                0
+            } else {
+                last + (HANDBACK_RESEND_S * 1e9) as u64
+            }
+        });
+        let backfill = self.backfills.front().and_then(|b| {
+            if b.sender.is_finished() || b.sender.refused().is_some() {
+                Some(0)
+            } else {
+                b.sender.poll_timeout()
+            }
+        });
+        [
+            self.running.as_ref().map(|_| self.next_tick_ns),
+            Some(self.next_status_ns),
+            handback,
+            self.receiver.poll_timeout(),
+            backfill,
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+}
+
+fn stop_reason(stop: &Stop) -> String {
+    match stop {
+        Stop::Finished => "finished",
+        Stop::UnexpectedBump => "unexpected_bump",
+        Stop::Deviation { .. } => "deviation",
+        Stop::RangeResidual { .. } => "range_residual",
+        Stop::DeadMan { .. } => "dead_man",
+    }
+    .into()
+}
+
+/// Feeds one period's encoders and absolute pose to the online EKF,
+/// starting it at the first absolute pose.
+fn fuse(r: &mut Running, reading: &Reading) {
+    let t = reading.t_s;
+    if r.ekf.is_none()
+        && let Some(p) = reading.pose
+    {
+        let c = r.exec.plan().header.calibrated;
+        let noise = NoiseModel::default();
+        let sample = PoseSample {
+            t_s: t,
+            x_m: p.x_m,
+            y_m: p.y_m,
+            heading_rad: Some(p.heading_rad),
+        };
+        let initial = initial_estimate(
+            &sample,
+            [c.left_diameter_m, c.right_diameter_m, c.wheelbase_m],
+            &noise,
+            0.03,
+        );
+        let mut ekf = OnlineCalibrator::new(initial, t, FilterConfig::default(), false);
+        if let Some(ticks) = reading.encoder_ticks {
+            let _ = ekf.push_wheels(WheelSample {
+                t_s: t,
+                left_rad: ticks[0] as f64 * r.rad_per_tick,
+                right_rad: ticks[1] as f64 * r.rad_per_tick,
+            });
+        }
+        r.ekf = Some(ekf);
+        return;
+    }
+    let Some(ekf) = &mut r.ekf else {
+        return;
+    };
+    if let Some(p) = reading.pose
+        && let Err(e) = ekf.push_pose(PoseSample {
+            t_s: t,
+            x_m: p.x_m,
+            y_m: p.y_m,
+            heading_rad: Some(p.heading_rad),
+        })
+    {
+        tracing::debug!(error = %e, "a pose the filter did not take");
+    }
+    if let Some(ticks) = reading.encoder_ticks
+        && let Err(e) = ekf.push_wheels(WheelSample {
+            t_s: t,
+            left_rad: ticks[0] as f64 * r.rad_per_tick,
+            right_rad: ticks[1] as f64 * r.rad_per_tick,
+        })
+    {
+        tracing::debug!(error = %e, "an encoder sample the filter did not take");
+    }
+}
