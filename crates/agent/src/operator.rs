@@ -129,7 +129,7 @@ struct SentPlan {
 pub struct Operator<S: ChunkStore> {
     pub master: Master<S>,
     twin: Option<Twin>,
-    key: SigningKey,
+    key: Option<SigningKey>,
     config: OperatorConfig,
     pub report: Report,
     plans: Vec<SentPlan>,
@@ -151,7 +151,7 @@ impl<S: ChunkStore> Operator<S> {
     pub fn new(
         master: Master<S>,
         twin: Option<Twin>,
-        key: SigningKey,
+        key: Option<SigningKey>,
         config: OperatorConfig,
     ) -> Self {
         Self {
@@ -456,7 +456,11 @@ impl<S: ChunkStore> Operator<S> {
             supervision: self.config.supervision,
             tolerances: self.config.tolerances,
         };
-        let signed = sign_plan(&self.key, &plan_json, envelope)?;
+        let key = self
+            .key
+            .as_ref()
+            .ok_or_else(|| anyhow::anyhow!("no signing key to sign a continuation with"))?;
+        let signed = sign_plan(key, &plan_json, envelope)?;
         self.note(
             "continuation_planned",
             format!(

@@ -92,7 +92,7 @@ fn harness(
     let op = Operator::new(
         master,
         Some(twin),
-        master_key.clone(),
+        Some(master_key.clone()),
         OperatorConfig {
             robot_id: "rover".into(),
             on_handback,

@@ -32,6 +32,10 @@ pub struct LinkProfile {
     pub bandwidth_bit_s: Option<f64>,
     /// Times (from the start of the run) when nothing gets through.
     pub outages: Vec<Outage>,
+    /// Probability that a message arrives with a byte changed (bit errors
+    /// the link layer did not catch).
+    #[serde(default)]
+    pub corrupt: f64,
 }
 
 /// `[start_s, end_s)`: messages that would leave then are lost.
@@ -46,7 +50,7 @@ pub struct Outage {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ProfileError {
     #[error(
-        "unknown link profile `{0}`: expected lan, wifi, satellite-lossy, lunar, mars-relay or key=value pairs (latency_s, jitter_s, loss, bandwidth_bit_s, outage=START..END)"
+        "unknown link profile `{0}`: expected lan, wifi, satellite-lossy, lunar, mars-relay or key=value pairs (latency_s, jitter_s, loss, bandwidth_bit_s, corrupt, outage=START..END)"
     )]
     Unknown(String),
     #[error("link profile field `{field}`: {message}")]
@@ -67,6 +71,7 @@ impl LinkProfile {
             loss,
             bandwidth_bit_s: bandwidth,
             outages: Vec::new(),
+            corrupt: 0.0,
         }
     }
 
@@ -105,6 +110,12 @@ impl LinkProfile {
                     "must not exceed latency_s ({}), got {}",
                     self.latency_s, self.jitter_s
                 ),
+            ));
+        }
+        if !(0.0..1.0).contains(&self.corrupt) {
+            return Err(bad(
+                "corrupt",
+                format!("must be in [0, 1), got {}", self.corrupt),
             ));
         }
         if !(0.0..1.0).contains(&self.loss) {
@@ -162,6 +173,7 @@ impl FromStr for LinkProfile {
                 "jitter_s" => profile.jitter_s = number(value)?,
                 "loss" => profile.loss = number(value)?,
                 "bandwidth_bit_s" => profile.bandwidth_bit_s = Some(number(value)?),
+                "corrupt" => profile.corrupt = number(value)?,
                 "outage" => {
                     let (a, b) = value.split_once("..").ok_or_else(|| ProfileError::Field {
                         field: "outage".into(),
@@ -197,6 +209,9 @@ impl fmt::Display for LinkProfile {
         for o in &self.outages {
             write!(f, ", outage {}..{} s", o.start_s, o.end_s)?;
         }
+        if self.corrupt > 0.0 {
+            write!(f, ", {} % corrupted", self.corrupt * 100.0)?;
+        }
         Ok(())
     }
 }
@@ -218,6 +233,7 @@ pub struct LinkStats {
     pub bytes_sent: u64,
     pub messages_lost: u64,
     pub messages_in_outage: u64,
+    pub messages_corrupted: u64,
 }
 
 impl LinkEmulator {
@@ -269,6 +285,22 @@ impl LinkEmulator {
         }
         let flight = ((p.latency_s + jitter).max(0.0) * 1e9).round() as u64;
         Some(leaves + flight)
+    }
+
+    /// Like [`LinkEmulator::send`], for the message's bytes: with the
+    /// profile's `corrupt` probability one byte arrives changed.
+    pub fn send_bytes(&mut self, now_ns: u64, bytes: &mut [u8]) -> Option<u64> {
+        let at = self.send(now_ns, bytes.len())?;
+        if self.profile.corrupt > 0.0 && !bytes.is_empty() {
+            let hit = self.rng.random::<f64>() < self.profile.corrupt;
+            let at_byte = self.rng.random_range(0..bytes.len());
+            let flip = self.rng.random_range(1..=255u8);
+            if hit {
+                bytes[at_byte] ^= flip;
+                self.stats.messages_corrupted += 1;
+            }
+        }
+        Some(at)
     }
 
     /// When the transmitter will be free: a sender that paces itself waits

@@ -13,7 +13,8 @@
 
 use ed25519_dalek::pkcs8::spki::der::pem::LineEnding;
 use ed25519_dalek::pkcs8::{DecodePrivateKey, DecodePublicKey, EncodePrivateKey, EncodePublicKey};
-use ed25519_dalek::{Signature, Signer, SigningKey, VerifyingKey};
+use ed25519_dalek::{Signature, Signer};
+pub use ed25519_dalek::{SigningKey, VerifyingKey};
 use serde::{Deserialize, Serialize};
 use twindrive_mission::plan::MissionPlan;
 pub use twindrive_mission::plan::sha256_hex;
@@ -218,6 +219,15 @@ pub fn peek_envelope(bytes: &[u8]) -> Result<Envelope, Rejection> {
     let parts = split(bytes)?;
     serde_json::from_slice(parts.envelope_bytes)
         .map_err(|e| Rejection::Malformed(format!("envelope: {e}")))
+}
+
+/// The plan document inside a signed plan, with nothing checked: for the
+/// master that signed it (the robot only ever uses [`PlanGate::check`]).
+pub fn open_unchecked(bytes: &[u8]) -> Result<Vec<u8>, Rejection> {
+    let envelope = peek_envelope(bytes)?;
+    let parts = split(bytes)?;
+    zstd::bulk::decompress(parts.compressed, envelope.plan_bytes as usize)
+        .map_err(|e| Rejection::Malformed(format!("the compressed plan: {e}")))
 }
 
 /// What a robot accepts plans by.

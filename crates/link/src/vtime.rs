@@ -80,7 +80,7 @@ impl VirtualLink {
     fn send(&mut self, to_b: bool, message: &Message) {
         let mut bytes = wire::encode(message);
         let link = if to_b { &mut self.up } else { &mut self.down };
-        if let Some(at) = link.send(self.now_ns, bytes.len()) {
+        if let Some(at) = link.send_bytes(self.now_ns, &mut bytes) {
             if to_b && let Some(tamper) = &mut self.tamper_up {
                 tamper(&mut bytes);
             }

@@ -45,6 +45,8 @@ pub struct SessionOptions {
     /// A zenoh JSON5 configuration file; when given, it decides everything
     /// (`listen` and `connect` are added to it).
     pub config_file: Option<std::path::PathBuf>,
+    /// `peer` (default), `client` (through a router) or `router`.
+    pub mode: Option<String>,
 }
 
 /// Opens a zenoh session as `options` say: by default peer mode, multicast
@@ -59,6 +61,9 @@ pub async fn open_session(options: &SessionOptions) -> anyhow::Result<zenoh::Ses
             c
         }
     };
+    if let Some(mode) = &options.mode {
+        set(&mut config, "mode", &format!("{mode:?}"))?;
+    }
     if !options.listen.is_empty() {
         set(&mut config, "listen/endpoints", &json_list(&options.listen))?;
     }
@@ -151,11 +156,11 @@ pub async fn drive<E: Endpoint>(
             }
         }
         while let Some(message) = endpoint.poll_transmit(now) {
-            let bytes = wire::encode(&message);
+            let mut bytes = wire::encode(&message);
             stats.messages_sent += 1;
             match &mut emulation {
                 Some(e) => {
-                    if let Some(at) = e.outgoing.send(now, bytes.len()) {
+                    if let Some(at) = e.outgoing.send_bytes(now, &mut bytes) {
                         order += 1;
                         delayed.push(Reverse((at, order, true, bytes)));
                     }
@@ -191,11 +196,11 @@ pub async fn drive<E: Endpoint>(
         tokio::select! {
             sample = subscriber.recv_async() => {
                 let sample = sample.map_err(|e| anyhow::anyhow!("the subscriber on {rx_key} closed: {e}"))?;
-                let bytes = sample.payload().to_bytes().into_owned();
+                let mut bytes = sample.payload().to_bytes().into_owned();
                 let now = now_ns();
                 match &mut emulation {
                     Some(e) => {
-                        if let Some(at) = e.incoming.send(now, bytes.len()) {
+                        if let Some(at) = e.incoming.send_bytes(now, &mut bytes) {
                             order += 1;
                             delayed.push(Reverse((at, order, false, bytes)));
                         }

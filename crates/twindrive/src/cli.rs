@@ -119,6 +119,135 @@ pub enum Command {
     /// world, the supervision policy) signed with ed25519, and the plan
     /// document compressed. A robot accepts it only if every part checks.
     Sign(SignArgs),
+    /// Run the robot agent: receive signed plans over zenoh, drive them on
+    /// the robot (a site simulator today) and hand control back when
+    /// reality departs from the twin.
+    ///
+    /// Keeps its journal (journal.jsonl), accepted plans (plans/<sha256>.json),
+    /// uploads in progress and its own logs in --state-dir, so a restart
+    /// resumes an upload and never drives a plan twice. Runs until stopped
+    /// (Ctrl-C) or --run-for.
+    Robot(RobotArgs),
+    /// Run the master: upload a plan to a robot over zenoh, supervise it,
+    /// receive telemetry and the robot's log, handle hand-backs (update the
+    /// twin; stop or replan) and write DIR/report.json.
+    ///
+    /// Exits 0 when the mission completed, 3 when it ended handed back, 4
+    /// when the robot rejected the plan, 1 when it failed.
+    Master(MasterArgs),
+    /// Run a zenoh router for a fleet: robots and masters connect to it
+    /// (`--connect tcp/HOST:PORT`) instead of to each other.
+    Router {
+        /// Endpoint to listen on.
+        #[arg(long, value_name = "ENDPOINT", default_value = "tcp/127.0.0.1:7447")]
+        listen: Vec<String>,
+        /// A zenoh JSON5 configuration file (mode is set to router).
+        #[arg(long, value_name = "FILE")]
+        zenoh_config: Option<PathBuf>,
+    },
+}
+
+/// Where and how to reach the other side over zenoh.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ZenohArgs {
+    /// Listen on this zenoh endpoint (`tcp/0.0.0.0:7447`); repeatable.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Connect to this zenoh endpoint (the other process, or a router); repeatable.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// A standard zenoh JSON5 configuration (TLS, QUIC, client mode through
+    /// a router); --listen and --connect are added to it.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct RobotArgs {
+    /// This robot's id (the key expressions are twindrive/ID/up and /down).
+    #[arg(long, value_name = "ID")]
+    pub id: String,
+    /// The site: the scenario the robot's simulator backend runs (its true
+    /// kinematics, noise and world, which the master never sees).
+    #[arg(long, value_name = "SITE.toml")]
+    pub site: PathBuf,
+    /// A master's public key (from `twindrive keygen`) whose plans this
+    /// robot accepts; repeatable.
+    #[arg(long, value_name = "master.pub", required = true)]
+    pub trust: Vec<PathBuf>,
+    /// The robot's durable state (journal, plans, uploads, logs).
+    #[arg(long, value_name = "DIR")]
+    pub state_dir: PathBuf,
+    #[command(flatten)]
+    pub zenoh: ZenohArgs,
+    /// Bytes per second the robot may send (status, hand-back, log back-fill).
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0)]
+    pub telemetry_budget: f64,
+    /// Run the simulated site this many times faster than real time.
+    #[arg(long, default_value_t = 1.0)]
+    pub time_scale: f64,
+    /// Exit after this many seconds (default: run until stopped).
+    #[arg(long, value_name = "SECONDS")]
+    pub run_for: Option<f64>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct MasterArgs {
+    /// The plan JSON to sign and send (with --key).
+    #[arg(
+        long,
+        value_name = "PLAN.json",
+        conflicts_with = "signed",
+        requires = "key"
+    )]
+    pub plan: Option<PathBuf>,
+    /// The master's private key: signs --plan and every continuation.
+    #[arg(long, value_name = "master.key")]
+    pub key: Option<PathBuf>,
+    /// A plan signed beforehand (`twindrive sign`).
+    #[arg(long, value_name = "PLAN.signed", required_unless_present = "plan")]
+    pub signed: Option<PathBuf>,
+    /// The robot to send it to.
+    #[arg(long, value_name = "ID")]
+    pub robot: String,
+    /// Output directory (report.json, plans, the robot's logs).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub zenoh: ZenohArgs,
+    /// Emulate this link on all traffic with the robot, both ways: a
+    /// profile (lan, wifi, satellite-lossy, lunar, mars-relay) with optional
+    /// `key=value` overrides, e.g. `lunar,loss=0.1,outage=20..80`.
+    #[arg(long, value_name = "PROFILE")]
+    pub link: Option<String>,
+    /// Seed of the link emulator.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Plans this master signs are valid for this long, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]
+    pub expires_in: u64,
+    /// Plans this master signs stop the robot when it has heard nothing
+    /// for this long, seconds (default: unsupervised).
+    #[arg(long, value_name = "SECONDS")]
+    pub supervise: Option<f64>,
+    /// What to do when the robot hands control back.
+    #[arg(long, value_enum, default_value_t = OnHandbackArg::Stop)]
+    pub on_handback: OnHandbackArg,
+    /// The twin's scenario (default: the built-in one the plan names).
+    #[arg(long, value_name = "S.toml")]
+    pub scenario: Option<PathBuf>,
+    /// Give up (outcome `failed`) after this many seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0)]
+    pub timeout: f64,
+    /// Wait this long for the robot's logs once the mission is decided, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 120.0)]
+    pub log_wait: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OnHandbackArg {
+    Stop,
+    Replan,
 }
 
 #[derive(Debug, clap::Args)]

@@ -64,7 +64,34 @@ fn write_new(path: &Path, bytes: &[u8], mode: u32) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn since_epoch() -> anyhow::Result<std::time::Duration> {
+/// The bytes of the twin's world a plan was rehearsed in: `scenario` if
+/// given, else the built-in scenario the plan names.
+pub fn world_bytes(
+    plan_json: &[u8],
+    plan_path: &Path,
+    scenario: Option<&Path>,
+) -> anyhow::Result<Vec<u8>> {
+    let scenario_name = serde_json::from_slice::<serde_json::Value>(plan_json)
+        .ok()
+        .and_then(|v| v["header"]["robot"]["scenario"].as_str().map(str::to_owned));
+    Ok(match (scenario, &scenario_name) {
+        (Some(path), _) => {
+            std::fs::read(path).with_context(|| format!("reading {}", path.display()))?
+        }
+        (None, Some(name)) => match twindrive_sim::builtin::ALL.iter().find(|(n, _)| n == name) {
+            Some((_, text)) => text.as_bytes().to_vec(),
+            None => bail!(
+                "the plan's scenario `{name}` is not built in; pass --scenario with the TOML it was rehearsed in"
+            ),
+        },
+        (None, None) => bail!(
+            "{}: not a plan document (no header.robot.scenario)",
+            plan_path.display()
+        ),
+    })
+}
+
+pub fn since_epoch() -> anyhow::Result<std::time::Duration> {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .context("the system clock is before 1970")
@@ -89,25 +116,7 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
     {
         bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
     }
-    // The world the plan was rehearsed in.
-    let scenario_name = serde_json::from_slice::<serde_json::Value>(&plan_json)
-        .ok()
-        .and_then(|v| v["header"]["robot"]["scenario"].as_str().map(str::to_owned));
-    let world = match (&args.scenario, &scenario_name) {
-        (Some(path), _) => {
-            std::fs::read(path).with_context(|| format!("reading {}", path.display()))?
-        }
-        (None, Some(name)) => match twindrive_sim::builtin::ALL.iter().find(|(n, _)| n == name) {
-            Some((_, text)) => text.as_bytes().to_vec(),
-            None => bail!(
-                "the plan's scenario `{name}` is not built in; pass --scenario with the TOML it was rehearsed in"
-            ),
-        },
-        (None, None) => bail!(
-            "{}: not a plan document (no header.robot.scenario)",
-            args.plan.display()
-        ),
-    };
+    let world = world_bytes(&plan_json, &args.plan, args.scenario.as_deref())?;
     let now = since_epoch()?;
     let envelope = Envelope {
         format: String::new(),
@@ -128,10 +137,12 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
     };
     let signed = sign_plan(&key, &plan_json, envelope)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
-    let (dir, _, file_name) = crate::output::split_out_path(&args.out, "plan")?;
-    let staging = crate::output::Staging::new(&dir, "sign")?;
-    staging.write_with(&file_name, |w| Ok(w.write_all(&signed)?))?;
-    staging.commit()?;
+    // One file: written beside its place, synced, renamed (other signed
+    // plans in the directory are left alone).
+    let (dir, _, _) = crate::output::split_out_path(&args.out, "plan")?;
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    twindrive_link::upload::write_durably(&args.out, &signed)
+        .with_context(|| format!("writing {}", args.out.display()))?;
     let env = twindrive_link::envelope::peek_envelope(&signed).expect("just signed");
     writeln!(
         std::io::stdout().lock(),

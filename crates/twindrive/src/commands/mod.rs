@@ -4,6 +4,7 @@ mod calibrate;
 mod demo;
 mod draw_map;
 mod keys;
+mod ops;
 mod plan;
 mod prune;
 mod simulate;
@@ -31,5 +32,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::DrawMap { dir } => draw_map::run(&dir),
         Command::Keygen { out } => keys::keygen(&out),
         Command::Sign(a) => keys::sign(&a),
+        Command::Robot(a) => ops::robot(&a),
+        Command::Master(a) => ops::master(&a),
+        Command::Router {
+            listen,
+            zenoh_config,
+        } => ops::router(listen, zenoh_config),
     }
 }

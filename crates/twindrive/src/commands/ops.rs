@@ -1,0 +1,484 @@
+//! `twindrive robot`, `twindrive master` and `twindrive router`: the two
+//! ends of decoupled operation as processes over zenoh, and a router for a
+//! fleet. The protocol is twindrive-agent's state machines; this file reads
+//! inputs, opens the session, drives them and writes what they produce.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use twindrive_agent::backend::SimBackend;
+use twindrive_agent::master::{Master, MasterConfig};
+use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
+use twindrive_agent::robot::{AgentConfig, RobotAgent};
+use twindrive_agent::twin::Twin;
+use twindrive_link::emulator::{LinkEmulator, LinkProfile};
+use twindrive_link::envelope::{
+    Envelope, Supervision, Tolerances, peek_envelope, read_private_key_pem, read_public_key_pem,
+    sha256_hex, sign_plan,
+};
+use twindrive_link::upload::{DirStore, SenderConfig, write_durably};
+use twindrive_mission::pipeline::PipelineSettings;
+use twindrive_mission::plan::MissionPlan;
+use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_net::{Emulation, SessionOptions, down_key, open_session, up_key};
+use twindrive_sim::Scenario;
+
+use crate::cli::{MasterArgs, OnHandbackArg, RobotArgs, ZenohArgs};
+
+fn session_options(z: &ZenohArgs, mode: Option<&str>) -> SessionOptions {
+    SessionOptions {
+        listen: z.listen.clone(),
+        connect: z.connect.clone(),
+        config_file: z.zenoh_config.clone(),
+        mode: mode.map(str::to_owned),
+    }
+}
+
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+}
+
+fn unix_now_s() -> anyhow::Result<f64> {
+    Ok(super::keys::since_epoch()?.as_secs_f64())
+}
+
+fn check_robot_id(id: &str, flag: &str) -> anyhow::Result<()> {
+    if id.is_empty()
+        || id.len() > twindrive_link::wire::MAX_ROBOT_ID_BYTES
+        || !id
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        bail!(
+            "{flag}: a robot id of 1 to {} letters, digits, `-` or `_`, got `{id}`",
+            twindrive_link::wire::MAX_ROBOT_ID_BYTES
+        );
+    }
+    Ok(())
+}
+
+/// `twindrive robot`.
+pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
+    check_robot_id(&args.id, "--id")?;
+    if !(args.time_scale.is_finite() && args.time_scale > 0.0) {
+        bail!("--time-scale: a number > 0, got {}", args.time_scale);
+    }
+    if !(args.telemetry_budget.is_finite() && args.telemetry_budget >= 100.0) {
+        bail!(
+            "--telemetry-budget: at least 100 bytes per second, got {}",
+            args.telemetry_budget
+        );
+    }
+    let mut trusted = Vec::new();
+    for path in &args.trust {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("--trust: reading {}", path.display()))?;
+        trusted.push(
+            read_public_key_pem(&text)
+                .map_err(|e| anyhow::anyhow!("--trust {}: {e}", path.display()))?,
+        );
+    }
+    let site = Scenario::load(&args.site).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
+    let start = site.robot.start;
+    // The site runs as long as the robot does.
+    let backend = SimBackend::new(site, start, 1e6).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
+    let mut config = AgentConfig::new(&args.id, &args.state_dir, trusted);
+    config.unix_time_at_zero_s = unix_now_s()?;
+    config.telemetry_budget_bytes_s = args.telemetry_budget;
+    config.time_scale = args.time_scale;
+    let mut agent = RobotAgent::new(config, backend)
+        .with_context(|| format!("--state-dir {}", args.state_dir.display()))?;
+    let rt = runtime()?;
+    let options = session_options(&args.zenoh, None);
+    let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
+    rt.block_on(async {
+        let session = open_session(&options).await?;
+        eprintln!(
+            "robot {}: listening on {} for plans signed by {} trusted key(s)",
+            args.id,
+            up_key(&args.id),
+            args.trust.len()
+        );
+        let (tx, rx) = (down_key(&args.id), up_key(&args.id));
+        let drive = twindrive_net::drive(
+            &mut agent,
+            &session,
+            &args.id,
+            &tx,
+            &rx,
+            None,
+            deadline,
+            |_| false,
+        );
+        tokio::select! {
+            r = drive => {
+                if args.run_for.is_none() {
+                    r?;
+                }
+            }
+            _ = tokio::signal::ctrl_c() => eprintln!("robot {}: stopping", args.id),
+        }
+        let _ = session.close().await;
+        anyhow::Ok(())
+    })
+}
+
+/// `twindrive router`.
+pub fn router(listen: Vec<String>, zenoh_config: Option<PathBuf>) -> anyhow::Result<()> {
+    let options = SessionOptions {
+        listen: listen.clone(),
+        connect: Vec::new(),
+        config_file: zenoh_config,
+        mode: Some("router".into()),
+    };
+    runtime()?.block_on(async {
+        let session = open_session(&options).await?;
+        eprintln!("router: listening on {}", listen.join(", "));
+        tokio::signal::ctrl_c().await.ok();
+        let _ = session.close().await;
+        anyhow::Ok(())
+    })
+}
+
+/// The signed plan the master starts with, the plan inside it, and whether
+/// it resumes an upload an earlier run of this master began.
+struct FirstPlan {
+    plan: Arc<MissionPlan>,
+    plan_json: Vec<u8>,
+    signed: Vec<u8>,
+    counter: u64,
+    resume: bool,
+}
+
+fn first_plan(
+    args: &MasterArgs,
+    key: Option<&twindrive_link::envelope::SigningKey>,
+    world: &[u8],
+) -> anyhow::Result<FirstPlan> {
+    let pending = args.out.join("state").join("uploading.signed");
+    let (signed, resume) = if let Ok(bytes) = std::fs::read(&pending) {
+        eprintln!("master: resuming the upload in {}", pending.display());
+        (bytes, true)
+    } else if let Some(path) = &args.signed {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("--signed: reading {}", path.display()))?;
+        (bytes, false)
+    } else {
+        let path = args.plan.as_ref().expect("clap: --plan or --signed");
+        let plan_json =
+            std::fs::read(path).with_context(|| format!("--plan: reading {}", path.display()))?;
+        let key = key.expect("clap: --plan requires --key");
+        let now = super::keys::since_epoch()?;
+        let envelope = Envelope {
+            format: String::new(),
+            version: 0,
+            plan_sha256: String::new(),
+            plan_file_sha256: String::new(),
+            plan_bytes: 0,
+            robot_id: args.robot.clone(),
+            counter: now.as_millis() as u64,
+            not_before_unix_s: now.as_secs().saturating_sub(60),
+            expires_unix_s: now.as_secs().saturating_add(args.expires_in),
+            world_sha256: sha256_hex(world),
+            supervision: Supervision {
+                dead_man_timeout_s: args.supervise,
+            },
+            tolerances: Tolerances::default(),
+        };
+        let signed = sign_plan(key, &plan_json, envelope)
+            .map_err(|e| anyhow::anyhow!("--plan {}: {e}", path.display()))?;
+        (signed, false)
+    };
+    let envelope = peek_envelope(&signed).map_err(|e| anyhow::anyhow!("the signed plan: {e}"))?;
+    if envelope.robot_id != args.robot {
+        bail!(
+            "the signed plan is for robot `{}`, not --robot {}",
+            envelope.robot_id,
+            args.robot
+        );
+    }
+    // The plan inside, for the report and for continuations.
+    let plan_json = twindrive_link::envelope::open_unchecked(&signed)
+        .map_err(|e| anyhow::anyhow!("the signed plan: {e}"))?;
+    let plan: MissionPlan =
+        serde_json::from_slice(&plan_json).context("the signed plan's document")?;
+    Ok(FirstPlan {
+        plan: Arc::new(plan),
+        plan_json,
+        signed,
+        counter: envelope.counter,
+        resume,
+    })
+}
+
+/// `twindrive master`.
+pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
+    check_robot_id(&args.robot, "--robot")?;
+    if let Some(s) = args.supervise
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
+    }
+    let profile: Option<LinkProfile> = args
+        .link
+        .as_deref()
+        .map(|p| p.parse().map_err(|e| anyhow::anyhow!("--link {p}: {e}")))
+        .transpose()?;
+    let key = match &args.key {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("--key: reading {}", path.display()))?;
+            Some(
+                read_private_key_pem(&text)
+                    .map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))?,
+            )
+        }
+        None => None,
+    };
+    if args.on_handback == OnHandbackArg::Replan && key.is_none() {
+        bail!("--on-handback replan signs continuations: it needs --key");
+    }
+    std::fs::create_dir_all(args.out.join("state"))
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let first = first_plan(args, key.as_ref(), &[])?;
+    // The twin: the scenario the plan was rehearsed in.
+    let plan_hint = args
+        .plan
+        .as_deref()
+        .or(args.signed.as_deref())
+        .unwrap_or(Path::new("plan"));
+    let twin_scenario = match &args.scenario {
+        Some(p) => Some(Scenario::load(p).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?),
+        None => {
+            twindrive_sim::builtin::load(&first.plan.header.robot.scenario).and_then(Result::ok)
+        }
+    };
+    if twin_scenario.is_none() && args.on_handback == OnHandbackArg::Replan {
+        bail!(
+            "the plan's scenario `{}` is not built in; pass --scenario (the twin) to replan",
+            first.plan.header.robot.scenario
+        );
+    }
+    let world = super::keys::world_bytes(&first.plan_json, plan_hint, args.scenario.as_deref())
+        .unwrap_or_default();
+    // Keep what is being uploaded, so a restarted master resumes it.
+    write_durably(
+        &args.out.join("state").join("uploading.signed"),
+        &first.signed,
+    )
+    .context("keeping the upload's state")?;
+    write_plan_files(&args.out, &first.plan, &first.plan_json, &first.signed)?;
+
+    let upload = SenderConfig {
+        pace_bit_s: profile.as_ref().and_then(|p| p.bandwidth_bit_s),
+        rtt_hint_ns: profile.as_ref().map_or(1_000_000_000, |p| {
+            ((2.0 * p.latency_s).max(0.05) * 1e9) as u64
+        }),
+        ..SenderConfig::default()
+    };
+    let master = Master::new(
+        &args.robot,
+        MasterConfig {
+            upload,
+            heartbeat_period_s: 1.0,
+        },
+        DirStore::new(args.out.join("state").join("log_chunks")),
+    );
+    let calibrated = first.plan.header.calibrated;
+    let mut op = Operator::new(
+        master,
+        twin_scenario.map(|s| Twin::new(s, calibrated)),
+        key.clone(),
+        OperatorConfig {
+            robot_id: args.robot.clone(),
+            on_handback: match args.on_handback {
+                OnHandbackArg::Stop => OnHandback::Stop,
+                OnHandbackArg::Replan => OnHandback::Replan,
+            },
+            expires_in_s: args.expires_in,
+            supervision: Supervision {
+                dead_man_timeout_s: args.supervise,
+            },
+            tolerances: Tolerances::default(),
+            unix_time_at_zero_s: unix_now_s()?,
+            first_counter: first.counter,
+            world_sha256: sha256_hex(&world),
+            log_wait_s: args.log_wait,
+            max_continuations: 10,
+            min_continuation_s: 10.0,
+            pipeline: PipelineSettings {
+                planner: Default::default(),
+                redundancy: RedundancyConfig::with_pinch_distance(
+                    first.plan.header.robot.footprint_radius_m,
+                ),
+                filter: Default::default(),
+            },
+        },
+    );
+    op.start(
+        first.plan.clone(),
+        first.signed.clone(),
+        first.counter,
+        first.resume,
+        0,
+    );
+    let emulation = profile.map(|p| Emulation {
+        outgoing: LinkEmulator::new(p.clone(), args.seed, 0),
+        incoming: LinkEmulator::new(p, args.seed, 1),
+    });
+    let out = args.out.clone();
+    let mut logs_written = 0usize;
+    let mut write_error: Option<anyhow::Error> = None;
+    let rt = runtime()?;
+    let options = session_options(&args.zenoh, None);
+    let result = rt.block_on(async {
+        let session = open_session(&options).await?;
+        eprintln!(
+            "master: uploading plan {} ({} bytes) to robot {}",
+            &first.plan.sha256[..12],
+            first.signed.len(),
+            args.robot
+        );
+        let r = twindrive_net::drive(
+            &mut op,
+            &session,
+            &args.robot,
+            &up_key(&args.robot),
+            &down_key(&args.robot),
+            emulation,
+            Duration::from_secs_f64(args.timeout),
+            |op| {
+                if op.master.upload_finished() {
+                    let _ = std::fs::remove_file(out.join("state").join("uploading.signed"));
+                }
+                while let Some((plan, json, signed)) = op.new_plans.pop_front() {
+                    if let Err(e) = write_plan_files(&out, &plan, &json, &signed) {
+                        write_error.get_or_insert(e);
+                    }
+                }
+                while let Some((plan, mcap)) = op.new_logs.pop_front() {
+                    logs_written += 1;
+                    match write_robot_log(&out, logs_written, plan.as_deref(), &mcap) {
+                        Ok(dir) => op.report.robot_logs.push(dir.display().to_string()),
+                        Err(e) => {
+                            write_error.get_or_insert(e);
+                        }
+                    }
+                }
+                op.is_done()
+            },
+        )
+        .await;
+        let _ = session.close().await;
+        r
+    });
+    if let Err(e) = result {
+        op.fail(format!("{e:#}"), 0);
+    }
+    let report = serde_json::to_vec_pretty(&op.report)?;
+    write_durably(&args.out.join("report.json"), &report).context("writing report.json")?;
+    if let Some(e) = write_error {
+        return Err(e);
+    }
+    let outcome = op.report.outcome.unwrap_or(Outcome::Failed);
+    writeln!(
+        std::io::stdout().lock(),
+        "outcome: {outcome:?}; {} upload(s), {} hand-back(s), {} robot log(s); report: {}",
+        op.report.uploads.len(),
+        op.report.handbacks.len(),
+        op.report.robot_logs.len(),
+        args.out.join("report.json").display()
+    )?;
+    match outcome {
+        Outcome::Completed => Ok(()),
+        Outcome::HandedBack => std::process::exit(3),
+        Outcome::Rejected => std::process::exit(4),
+        Outcome::Failed => bail!(
+            "the mission failed: {}",
+            op.report.failure.as_deref().unwrap_or("see report.json")
+        ),
+    }
+}
+
+/// `plans/<sha256>.json` (the document, byte for byte what was signed) and
+/// `plans/<sha256>.signed`.
+fn write_plan_files(
+    out: &Path,
+    plan: &MissionPlan,
+    json: &[u8],
+    signed: &[u8],
+) -> anyhow::Result<()> {
+    let dir = out.join("plans");
+    std::fs::create_dir_all(&dir)?;
+    write_durably(&dir.join(format!("{}.json", plan.sha256)), json)?;
+    write_durably(&dir.join(format!("{}.signed", plan.sha256)), signed)?;
+    Ok(())
+}
+
+/// A robot log as received: the MCAP, the CSV and header, the real track
+/// (TUM), the plan's (TUM), and range residuals against the plan over time.
+fn write_robot_log(
+    out: &Path,
+    n: usize,
+    plan: Option<&MissionPlan>,
+    mcap: &[u8],
+) -> anyhow::Result<PathBuf> {
+    let name = match plan {
+        Some(p) => format!("{n:02}_{}", &p.sha256[..12]),
+        None => format!("{n:02}"),
+    };
+    let dir = out.join("robot_logs").join(name);
+    std::fs::create_dir_all(&dir)?;
+    let mcap_path = dir.join("log.mcap");
+    write_durably(&mcap_path, mcap)?;
+    let log = twindrive_log::read_mcap(&mcap_path)
+        .with_context(|| format!("reading the robot's log {}", mcap_path.display()))?;
+    let mut csv = Vec::new();
+    twindrive_log::write_csv(&log, &mut csv)?;
+    write_durably(&dir.join("log.csv"), &csv)?;
+    write_durably(
+        &dir.join("log.meta.json"),
+        &serde_json::to_vec_pretty(&log.header)?,
+    )?;
+    let mut tum = Vec::new();
+    twindrive_log::write_tum(log.steps.iter().map(|s| (s.t_ns, s.ground_truth)), &mut tum)?;
+    write_durably(&dir.join("real.tum"), &tum)?;
+    if let Some(plan) = plan {
+        let mut predicted = Vec::new();
+        plan.write_tum(&mut predicted)?;
+        write_durably(&dir.join("predicted.tum"), &predicted)?;
+        // Range readings against the plan's prediction at the same time.
+        let mut rows = String::from("t_s,beam,measured_m,predicted_m,residual_m\n");
+        let beams = log.beams_per_step();
+        let t0 = plan.samples[0].t_s;
+        let mut k = 0;
+        for (i, step) in log.steps.iter().enumerate() {
+            let t = step.t_s() + t0;
+            while k + 1 < plan.samples.len() && plan.samples[k + 1].t_s <= t {
+                k += 1;
+            }
+            for b in 0..beams {
+                let m = log.ranges[i * beams + b];
+                let Some(&p) = plan.samples[k].expected_ranges_m.get(b) else {
+                    continue;
+                };
+                if m.is_finite() {
+                    rows.push_str(&format!(
+                        "{:.3},{b},{m:.4},{p:.4},{:.4}\n",
+                        step.t_s(),
+                        m - p
+                    ));
+                }
+            }
+        }
+        write_durably(&dir.join("range_residuals.csv"), rows.as_bytes())?;
+    }
+    Ok(dir)
+}

@@ -1,0 +1,546 @@
+//! Decoupled operation with two real processes on loopback and zenoh in
+//! between: `twindrive robot` (a simulated site, run faster than real time)
+//! and `twindrive master`. Faults: an outage mid-upload, the robot killed
+//! mid-upload and mid-execution, the master killed, plans the robot must
+//! refuse, corrupted messages, and an obstacle the twin lacks. Every wait is
+//! bounded and every child is killed by its process id.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use common::{repo, text, twindrive};
+
+const BOX: &str = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A child process killed (by pid) when dropped.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A case-study plan (a 30 s mission) and a key pair, made once.
+struct Fixture {
+    dir: tempfile::TempDir,
+}
+
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let out = twindrive(&[
+            "simulate",
+            "scenarios/wall_following.toml",
+            "--duration-s",
+            "30",
+            "--out",
+            s(&d.join("wf")),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        std::fs::write(
+            d.join("calib.json"),
+            r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678}"#,
+        )
+        .unwrap();
+        let out = twindrive(&[
+            "plan",
+            s(&d.join("wf")),
+            "--calibration",
+            s(&d.join("calib.json")),
+            "--out",
+            s(&d.join("plan/plan.json")),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        for k in ["keys", "other"] {
+            let out = twindrive(&["keygen", "--out", s(&d.join(k))]);
+            assert!(out.status.success(), "{}", text(&out.stderr));
+        }
+        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
+        std::fs::write(
+            d.join("site_box.toml"),
+            site.replace("[world]\n", &format!("[world]\n{BOX}\n")),
+        )
+        .unwrap();
+        Fixture { dir }
+    })
+}
+
+impl Fixture {
+    fn path(&self, p: &str) -> PathBuf {
+        self.dir.path().join(p)
+    }
+}
+
+/// A free loopback port.
+fn port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+struct Mission {
+    tmp: tempfile::TempDir,
+    port: u16,
+    site: PathBuf,
+    trust: PathBuf,
+    time_scale: f64,
+}
+
+impl Mission {
+    fn new(site: &str, trust: &str, time_scale: f64) -> Self {
+        let f = fixture();
+        Self {
+            tmp: tempfile::tempdir().unwrap(),
+            port: port(),
+            site: if site.is_empty() {
+                repo().join("scenarios/wall_following.toml")
+            } else {
+                f.path(site)
+            },
+            trust: f.path(trust).join("master.pub"),
+            time_scale,
+        }
+    }
+
+    fn robot_dir(&self) -> PathBuf {
+        self.tmp.path().join("robot")
+    }
+
+    fn out(&self) -> PathBuf {
+        self.tmp.path().join("master")
+    }
+
+    fn robot(&self) -> Proc {
+        let child = Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args([
+                "robot",
+                "--id",
+                "rover",
+                "--site",
+                s(&self.site),
+                "--trust",
+                s(&self.trust),
+                "--state-dir",
+                s(&self.robot_dir()),
+                "--listen",
+                &format!("tcp/127.0.0.1:{}", self.port),
+                "--time-scale",
+                &self.time_scale.to_string(),
+                "--run-for",
+                "300",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        Proc(child)
+    }
+
+    fn master(&self, extra: &[&str]) -> Proc {
+        let f = fixture();
+        let mut args = vec![
+            "master".to_string(),
+            "--robot".into(),
+            "rover".into(),
+            "--out".into(),
+            s(&self.out()).into(),
+            "--connect".into(),
+            format!("tcp/127.0.0.1:{}", self.port),
+            "--timeout".into(),
+            "240".into(),
+            "--log-wait".into(),
+            "60".into(),
+        ];
+        if !extra.contains(&"--signed") {
+            args.extend([
+                "--plan".into(),
+                s(&f.path("plan/plan.json")).into(),
+                "--key".into(),
+                s(&f.path("keys/master.key")).into(),
+            ]);
+        }
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let child = Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        Proc(child)
+    }
+
+    fn journal(&self) -> Vec<serde_json::Value> {
+        let text =
+            std::fs::read_to_string(self.robot_dir().join("journal.jsonl")).unwrap_or_default();
+        text.lines()
+            .filter_map(|l| serde_json::from_str(l).ok())
+            .collect()
+    }
+
+    fn events(&self, event: &str) -> Vec<serde_json::Value> {
+        self.journal()
+            .into_iter()
+            .filter(|l| l["event"] == event)
+            .collect()
+    }
+
+    /// Waits (at most `limit_s`) until the journal has `event`.
+    fn wait_for(&self, event: &str, limit_s: f64) {
+        let start = Instant::now();
+        while self.events(event).is_empty() {
+            assert!(
+                start.elapsed().as_secs_f64() < limit_s,
+                "no `{event}` in the robot's journal after {limit_s} s"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn report(&self) -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(self.out().join("report.json")).unwrap()).unwrap()
+    }
+}
+
+/// Waits for the master to exit (bounded); its exit code and stderr.
+fn finish(mut p: Proc, limit_s: f64) -> (Option<i32>, String) {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = p.0.try_wait().unwrap() {
+            let mut err = String::new();
+            if let Some(mut e) = p.0.stderr.take() {
+                use std::io::Read;
+                let _ = e.read_to_string(&mut err);
+            }
+            return (status.code(), err);
+        }
+        assert!(
+            start.elapsed().as_secs_f64() < limit_s,
+            "the master did not finish in {limit_s} s"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn plan_sha() -> String {
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(fixture().path("plan/plan.json")).unwrap()).unwrap();
+    plan["sha256"].as_str().unwrap().to_string()
+}
+
+fn assert_plan_identical(m: &Mission) {
+    let sha = plan_sha();
+    let robot = std::fs::read(m.robot_dir().join("plans").join(format!("{sha}.json"))).unwrap();
+    assert_eq!(
+        robot,
+        std::fs::read(fixture().path("plan/plan.json")).unwrap()
+    );
+}
+
+fn assert_no_wheel_moved(m: &Mission) {
+    assert!(m.events("execution_started").is_empty());
+    for line in m.journal() {
+        assert_eq!(line["wheel_travel_rad"].as_f64(), Some(0.0), "{line}");
+    }
+}
+
+#[test]
+fn an_obstacle_the_twin_lacks_is_handed_back_and_the_continuation_completes() {
+    let m = Mission::new("site_box.toml", "keys", 10.0);
+    let _robot = m.robot();
+    let (code, err) = finish(m.master(&["--on-handback", "replan"]), 240.0);
+    assert_eq!(code, Some(0), "{err}");
+    let r = m.report();
+    assert_eq!(r["outcome"], "completed");
+    assert!(!r["handbacks"].as_array().unwrap().is_empty());
+    let updates = r["twin_updates"].as_array().unwrap();
+    assert!(
+        updates
+            .iter()
+            .any(|u| !u["obstacles_added"].as_array().unwrap().is_empty())
+    );
+    assert_plan_identical(&m);
+    // Every continuation the robot holds is the master's, byte for byte.
+    for u in r["uploads"].as_array().unwrap() {
+        let sha = u["plan_sha256"].as_str().unwrap();
+        let name = format!("{sha}.json");
+        assert_eq!(
+            std::fs::read(m.robot_dir().join("plans").join(&name)).unwrap(),
+            std::fs::read(m.out().join("plans").join(&name)).unwrap()
+        );
+    }
+    assert!(!r["robot_logs"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn an_outage_mid_upload_delays_it_and_the_plan_arrives_byte_identical() {
+    let m = Mission::new("", "keys", 10.0);
+    let _robot = m.robot();
+    // ~250 kB at 1 Mbit/s takes ~2 s; nothing gets through from 0.5 s to 4 s.
+    let (code, err) = finish(
+        m.master(&["--link", "lan,bandwidth_bit_s=1e6,outage=0.5..4"]),
+        240.0,
+    );
+    assert_eq!(code, Some(0), "{err}");
+    assert_plan_identical(&m);
+    let r = m.report();
+    assert!(r["uploads"][0]["duration_s"].as_f64().unwrap() > 4.0);
+}
+
+#[test]
+fn a_robot_killed_mid_upload_resumes_where_it_stood() {
+    let m = Mission::new("", "keys", 10.0);
+    let robot = m.robot();
+    let master = m.master(&["--link", "lan,bandwidth_bit_s=4e5"]);
+    m.wait_for("upload_progress", 60.0);
+    let held_before = m.events("upload_progress").last().unwrap()["received"]
+        .as_u64()
+        .unwrap();
+    drop(robot);
+    std::thread::sleep(Duration::from_millis(500));
+    let _robot = m.robot();
+    let (code, err) = finish(master, 240.0);
+    assert_eq!(code, Some(0), "{err}");
+    assert_plan_identical(&m);
+    // The restarted robot still held its chunks.
+    let lines = m.journal();
+    let restart = lines
+        .iter()
+        .rposition(|l| l["event"] == "agent_started")
+        .unwrap();
+    assert!(restart > 0);
+    let first = lines[restart..]
+        .iter()
+        .find(|l| l["event"] == "upload_progress")
+        .unwrap();
+    assert!(first["received"].as_u64().unwrap() >= held_before);
+}
+
+#[test]
+fn a_robot_killed_mid_execution_stays_stopped_and_reports() {
+    let m = Mission::new("", "keys", 2.0);
+    let robot = m.robot();
+    let master = m.master(&[]);
+    m.wait_for("execution_started", 60.0);
+    std::thread::sleep(Duration::from_millis(1500));
+    drop(robot);
+    let _robot = m.robot();
+    let (code, err) = finish(master, 240.0);
+    assert_eq!(code, Some(1), "{err}");
+    let r = m.report();
+    assert_eq!(r["outcome"], "failed");
+    assert!(
+        r["failure"]
+            .as_str()
+            .unwrap()
+            .contains("restarted_mid_execution"),
+        "{r}"
+    );
+    assert_eq!(m.events("execution_started").len(), 1);
+}
+
+#[test]
+fn when_the_master_is_killed_a_supervised_plan_stops_on_its_dead_man() {
+    let m = Mission::new("", "keys", 1.0);
+    let _robot = m.robot();
+    let master = m.master(&["--supervise", "2"]);
+    m.wait_for("execution_started", 60.0);
+    std::thread::sleep(Duration::from_millis(1000));
+    drop(master);
+    m.wait_for("stopped", 30.0);
+    assert_eq!(m.events("stopped")[0]["reason"], "dead_man");
+    assert!(m.events("execution_finished").is_empty());
+}
+
+#[test]
+fn when_the_master_is_killed_an_unsupervised_plan_runs_to_its_end() {
+    let m = Mission::new("", "keys", 10.0);
+    let _robot = m.robot();
+    let master = m.master(&[]);
+    m.wait_for("execution_started", 60.0);
+    drop(master);
+    m.wait_for("execution_finished", 60.0);
+    assert!(m.events("stopped").is_empty());
+}
+
+#[test]
+fn a_plan_signed_by_an_unknown_key_is_rejected_and_no_wheel_moves() {
+    let m = Mission::new("", "other", 10.0);
+    let _robot = m.robot();
+    let (code, err) = finish(m.master(&[]), 120.0);
+    assert_eq!(code, Some(4), "{err}");
+    assert_eq!(m.report()["outcome"], "rejected");
+    assert!(
+        m.events("plan_rejected")[0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("signature")
+    );
+    assert_no_wheel_moved(&m);
+}
+
+fn sign(m: &Mission, name: &str, extra: &[&str]) -> PathBuf {
+    let f = fixture();
+    let out = m.tmp.path().join(name);
+    let (plan, key) = (f.path("plan/plan.json"), f.path("keys/master.key"));
+    let mut args = vec![
+        "sign",
+        s(&plan),
+        "--key",
+        s(&key),
+        "--robot",
+        "rover",
+        "--out",
+        s(&out),
+    ];
+    args.extend_from_slice(extra);
+    let o = twindrive(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    out
+}
+
+#[test]
+fn a_replayed_or_expired_plan_is_rejected_and_no_wheel_moves() {
+    let m = Mission::new("", "keys", 10.0);
+    // The robot once accepted counter 10 (its state survives restarts).
+    std::fs::create_dir_all(m.robot_dir()).unwrap();
+    twindrive_link::envelope::CounterFile::new(m.robot_dir().join("counter"))
+        .store(10)
+        .unwrap();
+    let _robot = m.robot();
+    let old = sign(&m, "old.signed", &["--counter", "5"]);
+    let expired = sign(
+        &m,
+        "expired.signed",
+        &["--counter", "50", "--expires-in", "0"],
+    );
+    for (file, expect) in [(&old, "replay"), (&expired, "expired")] {
+        let _ = std::fs::remove_dir_all(m.out());
+        let (code, err) = finish(m.master(&["--signed", s(file)]), 120.0);
+        assert_eq!(code, Some(4), "{err}");
+        let rejected = m.events("plan_rejected");
+        let last = rejected.last().unwrap()["reason"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        assert!(last.contains(expect), "{last}");
+    }
+    assert_no_wheel_moved(&m);
+}
+
+#[test]
+fn corrupted_messages_are_dropped_and_asked_again_and_the_plan_arrives_whole() {
+    let m = Mission::new("", "keys", 10.0);
+    let _robot = m.robot();
+    let (code, err) = finish(m.master(&["--link", "lan,corrupt=0.2"]), 240.0);
+    assert_eq!(code, Some(0), "{err}");
+    assert_plan_identical(&m);
+    assert!(!m.events("chunk_corrupted").is_empty());
+}
+
+#[test]
+fn bad_input_is_a_clear_error() {
+    let f = fixture();
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(
+        tmp.path().join("bad.toml"),
+        "[simulation]\nduration_s = -1\n",
+    )
+    .unwrap();
+    let out = twindrive(&[
+        "robot",
+        "--id",
+        "rover",
+        "--site",
+        s(&tmp.path().join("bad.toml")),
+        "--trust",
+        s(&f.path("keys/master.pub")),
+        "--state-dir",
+        s(&tmp.path().join("r")),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--site"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = twindrive(&[
+        "robot",
+        "--id",
+        "rover",
+        "--site",
+        "scenarios/wall_following.toml",
+        "--trust",
+        s(&f.path("keys/master.key")),
+        "--state-dir",
+        s(&tmp.path().join("r")),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--trust"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = twindrive(&[
+        "master",
+        "--plan",
+        s(&f.path("plan/plan.json")),
+        "--key",
+        s(&tmp.path().join("missing.key")),
+        "--robot",
+        "rover",
+        "--out",
+        s(&tmp.path().join("m")),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("missing.key"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = twindrive(&[
+        "master",
+        "--signed",
+        s(&f.path("plan/plan.json")),
+        "--robot",
+        "rover",
+        "--out",
+        s(&tmp.path().join("m")),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("signed plan"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = twindrive(&[
+        "master",
+        "--signed",
+        s(&f.path("plan/plan.json")),
+        "--robot",
+        "rover",
+        "--link",
+        "moon",
+        "--out",
+        s(&tmp.path().join("m")),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--link"),
+        "{}",
+        text(&out.stderr)
+    );
+}
