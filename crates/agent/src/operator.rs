@@ -448,6 +448,7 @@ impl<S: ChunkStore> Operator<S> {
             plan_sha256: String::new(),
             plan_file_sha256: String::new(),
             plan_bytes: 0,
+            plan_encoding: String::new(),
             robot_id: self.config.robot_id.clone(),
             counter,
             not_before_unix_s: now_unix.saturating_sub(60),

@@ -30,6 +30,7 @@ fn envelope(counter: u64, expires_unix_s: u64, dead_man: Option<f64>) -> Envelop
         plan_sha256: String::new(),
         plan_file_sha256: String::new(),
         plan_bytes: 0,
+        plan_encoding: String::new(),
         robot_id: "rover".into(),
         counter,
         not_before_unix_s: 0,

@@ -40,6 +40,10 @@ pub struct Envelope {
     pub plan_file_sha256: String,
     /// Length of the plan document.
     pub plan_bytes: u64,
+    /// How the document travels: `twdplan1` (columns, see
+    /// [`crate::plan_codec`]) or `zstd-json`; filled in by [`sign_plan`].
+    #[serde(default)]
+    pub plan_encoding: String,
     pub robot_id: String,
     /// Only grows: a robot accepts a plan only above the last it accepted.
     pub counter: u64,
@@ -150,6 +154,29 @@ pub fn read_public_key_pem(text: &str) -> Result<VerifyingKey, String> {
         .map_err(|e| format!("not an ed25519 public key in PEM: {e}"))
 }
 
+/// `plan_encoding` of a plan that travels as columns ([`crate::plan_codec`]).
+pub const ENCODING_COLUMNS: &str = "twdplan1";
+/// `plan_encoding` of a plan that travels as zstd-compressed JSON.
+pub const ENCODING_JSON: &str = "zstd-json";
+
+/// The plan document from a signed file's payload, as its envelope says it
+/// travels; nothing beyond the envelope's `plan_bytes` is decompressed.
+fn unpack(envelope: &Envelope, payload: &[u8]) -> Result<Vec<u8>, Rejection> {
+    match envelope.plan_encoding.as_str() {
+        ENCODING_COLUMNS => {
+            // The columns take about as much room as the JSON, and never
+            // more than three times it.
+            crate::plan_codec::decode(payload, envelope.plan_bytes.saturating_mul(3))
+                .map_err(|e| Rejection::PlanMismatch(e.to_string()))
+        }
+        ENCODING_JSON | "" => zstd::bulk::decompress(payload, envelope.plan_bytes as usize)
+            .map_err(|e| Rejection::PlanMismatch(format!("the compressed plan: {e}"))),
+        other => Err(Rejection::Malformed(format!(
+            "plan encoding `{other}`, expected `{ENCODING_COLUMNS}` or `{ENCODING_JSON}`"
+        ))),
+    }
+}
+
 /// Signs a plan document (the bytes of `plan.json`) into a signed plan
 /// file. `envelope.plan_*` are filled in from the document.
 pub fn sign_plan(
@@ -166,10 +193,19 @@ pub fn sign_plan(
     envelope.plan_sha256 = plan.sha256.clone();
     envelope.plan_file_sha256 = sha256_hex(plan_json);
     envelope.plan_bytes = plan_json.len() as u64;
+    let compressed = match crate::plan_codec::encode(plan_json) {
+        Some(c) => {
+            envelope.plan_encoding = ENCODING_COLUMNS.into();
+            c
+        }
+        None => {
+            envelope.plan_encoding = ENCODING_JSON.into();
+            zstd::bulk::compress(plan_json, 19)
+                .map_err(|e| Rejection::Malformed(format!("compressing the plan: {e}")))?
+        }
+    };
     let env_bytes = serde_json::to_vec(&envelope).expect("an envelope serialises");
     let signature = key.sign(&signed_bytes(&env_bytes));
-    let compressed = zstd::bulk::compress(plan_json, 19)
-        .map_err(|e| Rejection::Malformed(format!("compressing the plan: {e}")))?;
     let mut out = Vec::with_capacity(12 + env_bytes.len() + 64 + compressed.len());
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&(env_bytes.len() as u32).to_le_bytes());
@@ -226,8 +262,7 @@ pub fn peek_envelope(bytes: &[u8]) -> Result<Envelope, Rejection> {
 pub fn open_unchecked(bytes: &[u8]) -> Result<Vec<u8>, Rejection> {
     let envelope = peek_envelope(bytes)?;
     let parts = split(bytes)?;
-    zstd::bulk::decompress(parts.compressed, envelope.plan_bytes as usize)
-        .map_err(|e| Rejection::Malformed(format!("the compressed plan: {e}")))
+    unpack(&envelope, parts.compressed)
 }
 
 /// What a robot accepts plans by.
@@ -313,8 +348,7 @@ impl PlanGate {
                 max: self.max_plan_bytes as usize,
             });
         }
-        let plan_json = zstd::bulk::decompress(parts.compressed, envelope.plan_bytes as usize)
-            .map_err(|e| Rejection::PlanMismatch(format!("the compressed plan: {e}")))?;
+        let plan_json = unpack(&envelope, parts.compressed)?;
         if plan_json.len() as u64 != envelope.plan_bytes
             || sha256_hex(&plan_json) != envelope.plan_file_sha256
         {

@@ -5,6 +5,7 @@
 //! - [`emulator`]: a userspace link emulator (latency, jitter, loss,
 //!   bandwidth, outages; named profiles), deterministic under a seed;
 //! - [`envelope`]: signed plans (ed25519) and the robot's rules for accepting one;
+//! - [`plan_codec`]: the compact, lossless form plans travel in;
 //! - [`wire`]: the versioned messages and their bytes (any bytes decode to a
 //!   message or an error, never a panic);
 //! - [`upload`]: chunked, resumable upload with NAKs (sender and receiver
@@ -13,6 +14,7 @@
 
 pub mod emulator;
 pub mod envelope;
+pub mod plan_codec;
 pub mod upload;
 pub mod vtime;
 pub mod wire;

@@ -59,6 +59,7 @@ fn envelope(robot: &str, counter: u64) -> Envelope {
         plan_sha256: String::new(),
         plan_file_sha256: String::new(),
         plan_bytes: 0,
+        plan_encoding: String::new(),
         robot_id: robot.into(),
         counter,
         not_before_unix_s: 1_000,
@@ -201,4 +202,40 @@ fn the_counter_survives_a_restart() {
     );
     std::fs::write(tmp.path().join("accepted_counter"), "x").unwrap();
     assert!(file.load().is_err());
+}
+
+#[test]
+fn plans_travel_as_columns_and_other_json_as_compressed_text() {
+    let key = generate_key().unwrap();
+    // The canonical document: columns, rebuilt byte for byte.
+    let json = plan_json();
+    let signed = sign_plan(&key, &json, envelope("rover", 5)).unwrap();
+    let env = twindrive_link::envelope::peek_envelope(&signed).unwrap();
+    assert_eq!(
+        env.plan_encoding,
+        twindrive_link::envelope::ENCODING_COLUMNS
+    );
+    let packed = twindrive_link::plan_codec::encode(&json).unwrap();
+    assert_eq!(
+        twindrive_link::plan_codec::decode(&packed, 1 << 24).unwrap(),
+        json
+    );
+    assert_eq!(gate(&key).check(&signed, 4, 1_500).unwrap().plan_json, json);
+    // The same plan written compactly by another tool: it cannot be
+    // rebuilt from columns, so it travels as text, still byte for byte.
+    let plan: serde_json::Value = serde_json::from_slice(&json).unwrap();
+    let compact = serde_json::to_vec(&plan).unwrap();
+    assert!(twindrive_link::plan_codec::encode(&compact).is_none());
+    let signed = sign_plan(&key, &compact, envelope("rover", 6)).unwrap();
+    let env = twindrive_link::envelope::peek_envelope(&signed).unwrap();
+    assert_eq!(env.plan_encoding, twindrive_link::envelope::ENCODING_JSON);
+    assert_eq!(
+        gate(&key).check(&signed, 4, 1_500).unwrap().plan_json,
+        compact
+    );
+    // Truncated or garbled columns are an error, not a panic.
+    for cut in [0, 8, 16, packed.len() / 2, packed.len() - 1] {
+        assert!(twindrive_link::plan_codec::decode(&packed[..cut], 1 << 24).is_err());
+    }
+    assert!(twindrive_link::plan_codec::decode(&packed, 10).is_err());
 }

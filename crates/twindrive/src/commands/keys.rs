@@ -124,6 +124,7 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
         plan_sha256: String::new(),
         plan_file_sha256: String::new(),
         plan_bytes: 0,
+        plan_encoding: String::new(),
         robot_id: args.robot.clone(),
         counter: args.counter.unwrap_or(now.as_millis() as u64),
         // A minute of slack for the robot's clock.

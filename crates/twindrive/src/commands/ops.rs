@@ -182,6 +182,7 @@ fn first_plan(
             plan_sha256: String::new(),
             plan_file_sha256: String::new(),
             plan_bytes: 0,
+            plan_encoding: String::new(),
             robot_id: args.robot.clone(),
             counter: now.as_millis() as u64,
             not_before_unix_s: now.as_secs().saturating_sub(60),
