@@ -179,7 +179,7 @@ impl<S: ChunkStore> Master<S> {
                     self.upload_events(now_ns);
                 }
             }
-            Body::Offer(_) | Body::Chunk { .. } | Body::EndOfFile { .. } => {
+            Body::Offer(_) | Body::Chunk { .. } | Body::Repair { .. } | Body::EndOfFile { .. } => {
                 self.logs.handle(message, now_ns);
                 while let Some(e) = self.logs.poll_event() {
                     match e {

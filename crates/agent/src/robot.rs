@@ -410,7 +410,9 @@ impl<B: RobotBackend> RobotAgent<B> {
                 }
                 self.receiver.handle(message, now_ns);
             }
-            Body::Chunk { .. } | Body::EndOfFile { .. } => self.receiver.handle(message, now_ns),
+            Body::Chunk { .. } | Body::Repair { .. } | Body::EndOfFile { .. } => {
+                self.receiver.handle(message, now_ns)
+            }
             Body::Nak { transfer, .. }
             | Body::Finished { transfer }
             | Body::Refused { transfer, .. } => {

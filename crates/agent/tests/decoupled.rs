@@ -83,6 +83,7 @@ fn harness(
             upload: SenderConfig {
                 pace_bit_s: profile.bandwidth_bit_s,
                 rtt_hint_ns: (2.0 * profile.latency_s * 1e9) as u64,
+                loss_hint: profile.loss,
                 ..SenderConfig::default()
             },
             heartbeat_period_s: 1.0,

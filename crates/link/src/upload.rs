@@ -42,6 +42,10 @@ pub struct SenderConfig {
     pub pace_bit_s: Option<f64>,
     /// A first guess of the round trip, until one is measured.
     pub rtt_hint_ns: u64,
+    /// The link's expected loss (0 to 1): sizes the repair shards that
+    /// protect the tail of the file, so its last chunks need no round trip
+    /// to be asked again. 0: no repair shards.
+    pub loss_hint: f64,
 }
 
 impl Default for SenderConfig {
@@ -50,6 +54,7 @@ impl Default for SenderConfig {
             chunk_bytes: DEFAULT_CHUNK_BYTES,
             pace_bit_s: None,
             rtt_hint_ns: 1_000_000_000,
+            loss_hint: 0.0,
         }
     }
 }
@@ -63,6 +68,8 @@ pub struct SenderStats {
     /// Chunks the receiver reported holding.
     pub chunks_confirmed: u32,
     pub naks_received: u64,
+    /// Reed-Solomon repair shards sent for the tail block.
+    pub repairs_sent: u64,
 }
 
 /// The master's side of one upload.
@@ -86,7 +93,31 @@ pub struct Sender {
     rtt_ns: u64,
     finished: bool,
     refused: Option<String>,
+    /// Repair shards still to send (built when the first pass ends).
+    repairs: VecDeque<(u32, Vec<u8>)>,
+    repairs_built: bool,
     pub stats: SenderStats,
+}
+
+/// The tail block a sender protects, and how many repair shards: enough
+/// for the block's expected losses plus two and a third standard
+/// deviations and one, over at least two round trips of chunks.
+fn tail_block(chunks: u32, chunk_bytes: u32, config: &SenderConfig) -> (u32, u32) {
+    let p = config.loss_hint;
+    if !(p > 0.0 && p < 1.0) || chunks == 0 {
+        return (chunks, 0);
+    }
+    let in_two_rtt = match config.pace_bit_s {
+        Some(rate) => {
+            let per_chunk_bits = 8.0 * (f64::from(chunk_bytes) + 64.0);
+            (2.0 * config.rtt_hint_ns as f64 * 1e-9 * rate / per_chunk_bits).ceil() as u32
+        }
+        None => 256,
+    };
+    let block = chunks.min(in_two_rtt.clamp(16, 4096));
+    let n = f64::from(block);
+    let repairs = (n * p / (1.0 - p) + 2.33 * (n * p).sqrt()).ceil() as u32 + 1;
+    (chunks - block, repairs.min(4096))
 }
 
 impl Sender {
@@ -102,11 +133,16 @@ impl Sender {
     }
 
     fn start(robot_id: &str, file: Vec<u8>, config: SenderConfig, optimistic: bool) -> Self {
-        let chunk_bytes = config.chunk_bytes.max(1);
+        // Repair shards need an even size.
+        let chunk_bytes = config.chunk_bytes.max(2).next_multiple_of(2);
+        let chunks = (file.len() as u64).div_ceil(u64::from(chunk_bytes)) as u32;
+        let (fec_from, fec_repairs) = tail_block(chunks, chunk_bytes, &config);
         let offer = Offer {
             transfer: transfer_id(&file),
             size: file.len() as u64,
             chunk_size: chunk_bytes,
+            fec_from,
+            fec_repairs,
         };
         let n = offer.chunks() as usize;
         let mut sender = Self {
@@ -129,6 +165,9 @@ impl Sender {
             rtt_ns: config.rtt_hint_ns.max(1),
             finished: false,
             refused: None,
+            repairs: VecDeque::new(),
+            // A resumed upload asks again for what is missing instead.
+            repairs_built: !optimistic,
             stats: SenderStats {
                 chunks: n as u32,
                 ..SenderStats::default()
@@ -264,6 +303,25 @@ impl Sender {
             self.pace(now_ns, crate::wire::encode(&message).len());
             return Some(message);
         }
+        // The first pass is over: the tail block's repair shards, once.
+        if !self.repairs_built {
+            self.repairs_built = true;
+            self.build_repairs();
+        }
+        if let Some((index, data)) = self.repairs.pop_front() {
+            self.stats.repairs_sent += 1;
+            let message = self.stamper.stamp(
+                Body::Repair {
+                    transfer: self.offer.transfer,
+                    index,
+                    crc32: crc32fast::hash(&data),
+                    data,
+                },
+                now_ns,
+            );
+            self.pace(now_ns, crate::wire::encode(&message).len());
+            return Some(message);
+        }
         // Everything sent: say so, and again each round trip until done.
         let eof_due = self
             .eof_sent_at
@@ -280,6 +338,31 @@ impl Sender {
             return Some(message);
         }
         None
+    }
+
+    fn build_repairs(&mut self) {
+        let o = self.offer;
+        if o.fec_repairs == 0 || o.fec_from >= o.chunks() {
+            return;
+        }
+        let size = o.chunk_size as usize;
+        let originals = (o.fec_from..o.chunks()).map(|k| {
+            let from = k as usize * size;
+            let mut shard = self.file[from..(from + size).min(self.file.len())].to_vec();
+            shard.resize(size, 0);
+            shard
+        });
+        match reed_solomon_simd::encode(
+            (o.chunks() - o.fec_from) as usize,
+            o.fec_repairs as usize,
+            originals,
+        ) {
+            Ok(shards) => {
+                self.repairs = (0..).zip(shards).collect();
+            }
+            // Without repairs the NAKs still bring every chunk.
+            Err(_) => self.repairs.clear(),
+        }
     }
 
     fn pace(&mut self, now_ns: u64, bytes: usize) {
@@ -300,14 +383,14 @@ impl Sender {
                 if !self.optimistic {
                     return Some(retry);
                 }
-                if self.queue.is_empty() {
+                if self.queue.is_empty() && self.repairs_built && self.repairs.is_empty() {
                     return Some(retry.min(self.eof_due_at()));
                 }
                 return Some(retry.min(self.next_send_ns));
             }
             _ => {}
         }
-        if !self.queue.is_empty() {
+        if !self.queue.is_empty() || !self.repairs_built || !self.repairs.is_empty() {
             return Some(self.next_send_ns);
         }
         Some(self.eof_due_at().max(self.next_send_ns))
@@ -325,6 +408,8 @@ pub trait ChunkStore {
     fn open(&mut self, offer: &Offer) -> std::io::Result<Vec<bool>>;
     /// Keeps one chunk; once this returns, a restart still has it.
     fn put(&mut self, offer: &Offer, index: u32, data: &[u8]) -> std::io::Result<()>;
+    /// One chunk held.
+    fn get(&mut self, offer: &Offer, index: u32) -> std::io::Result<Vec<u8>>;
     /// The whole file, chunks in order.
     fn assemble(&mut self, offer: &Offer) -> std::io::Result<Vec<u8>>;
     /// Drops what is kept for the transfer (done, or to start over).
@@ -379,6 +464,9 @@ struct Transfer {
     /// The next NAK lists every chunk (an answer to an offer).
     full: bool,
     done: bool,
+    /// Repair shards of the tail block held (kept in memory: after a
+    /// restart the NAKs ask for the originals instead).
+    repairs: std::collections::BTreeMap<u32, Vec<u8>>,
 }
 
 /// The robot's side of uploads.
@@ -445,6 +533,12 @@ impl<S: ChunkStore> Receiver<S> {
                 crc32,
                 data,
             } => self.chunk(*transfer, *index, *crc32, data),
+            Body::Repair {
+                transfer,
+                index,
+                crc32,
+                data,
+            } => self.repair(*transfer, *index, *crc32, data),
             Body::EndOfFile { transfer } => {
                 if let Some(t) = &mut self.current
                     && t.offer.transfer == *transfer
@@ -517,6 +611,7 @@ impl<S: ChunkStore> Receiver<S> {
             nak_now: true,
             full: true,
             done: false,
+            repairs: std::collections::BTreeMap::new(),
         });
         self.events.push_back(ReceiverEvent::Progress {
             received,
@@ -560,7 +655,96 @@ impl<S: ChunkStore> Receiver<S> {
             received: t.received,
             chunks: t.offer.chunks(),
         });
+        self.try_repair();
         self.check_complete();
+    }
+
+    fn repair(&mut self, transfer: TransferId, index: u32, crc32: u32, data: &[u8]) {
+        let Some(t) = &mut self.current else {
+            return;
+        };
+        if t.offer.transfer != transfer || t.done || index >= t.offer.fec_repairs {
+            return;
+        }
+        if crc32fast::hash(data) != crc32 || data.len() != t.offer.chunk_size as usize {
+            self.events.push_back(ReceiverEvent::Corrupted {
+                index: t.offer.chunks() + index,
+            });
+            return;
+        }
+        t.repairs.insert(index, data.to_vec());
+        self.try_repair();
+        self.check_complete();
+    }
+
+    /// Rebuilds the tail block's missing chunks once as many repair shards
+    /// as missing chunks are in.
+    fn try_repair(&mut self) {
+        let Some(t) = &mut self.current else {
+            return;
+        };
+        let o = t.offer;
+        let (from, chunks) = (o.fec_from, o.chunks());
+        if t.done || o.fec_repairs == 0 || from >= chunks {
+            return;
+        }
+        let missing: Vec<u32> = (from..chunks).filter(|&k| !t.have[k as usize]).collect();
+        if missing.is_empty() || t.repairs.len() < missing.len() {
+            return;
+        }
+        let size = o.chunk_size as usize;
+        let mut originals = Vec::with_capacity((chunks - from) as usize);
+        for k in from..chunks {
+            if t.have[k as usize] {
+                match self.store.get(&o, k) {
+                    Ok(mut c) => {
+                        c.resize(size, 0);
+                        originals.push(((k - from) as usize, c));
+                    }
+                    Err(e) => {
+                        self.events
+                            .push_back(ReceiverEvent::StorageError(e.to_string()));
+                        return;
+                    }
+                }
+            }
+        }
+        let restored = match reed_solomon_simd::decode(
+            (chunks - from) as usize,
+            o.fec_repairs as usize,
+            originals,
+            t.repairs.iter().map(|(&i, d)| (i as usize, d)),
+        ) {
+            Ok(r) => r,
+            Err(e) => {
+                self.events.push_back(ReceiverEvent::StorageError(format!(
+                    "repairing the tail block: {e}"
+                )));
+                t.repairs.clear();
+                return;
+            }
+        };
+        for (i, mut data) in restored {
+            let k = from + i as u32;
+            if t.have[k as usize] {
+                continue;
+            }
+            if k + 1 == chunks {
+                data.truncate((o.size - u64::from(k) * u64::from(o.chunk_size)) as usize);
+            }
+            if let Err(e) = self.store.put(&o, k, &data) {
+                self.events
+                    .push_back(ReceiverEvent::StorageError(e.to_string()));
+                return;
+            }
+            t.have[k as usize] = true;
+            t.received += 1;
+        }
+        t.highest = Some(chunks - 1);
+        self.events.push_back(ReceiverEvent::Progress {
+            received: t.received,
+            chunks,
+        });
     }
 
     fn check_complete(&mut self) {
@@ -626,6 +810,37 @@ impl<S: ChunkStore> Receiver<S> {
             t.offer.chunks()
         } else {
             t.highest.map_or(0, |h| h + 1)
+        };
+        // The tail block's gaps are for its repair shards to fill: none
+        // asked before the end of the file, then only as many as the
+        // shards held cannot cover (the lowest).
+        let from = t.offer.fec_from.min(t.offer.chunks());
+        let upto = if t.offer.fec_repairs > 0 && upto > from {
+            if t.eof_seen {
+                let held = t.have[from as usize..].iter().filter(|&&h| h).count();
+                let deficit = (t.offer.chunks() - from) as usize
+                    - held
+                    - t.repairs
+                        .len()
+                        .min((t.offer.chunks() - from) as usize - held);
+                // Speak up to just past the `deficit`-th missing chunk.
+                let mut seen = 0;
+                let mut end = from;
+                for k in from..t.offer.chunks() {
+                    if seen == deficit {
+                        break;
+                    }
+                    if !t.have[k as usize] {
+                        seen += 1;
+                    }
+                    end = k + 1;
+                }
+                end
+            } else {
+                from
+            }
+        } else {
+            upto
         };
         let mut missing = Vec::new();
         let mut k = 0;
@@ -710,6 +925,15 @@ impl ChunkStore for MemoryStore {
         Ok(())
     }
 
+    fn get(&mut self, offer: &Offer, index: u32) -> std::io::Result<Vec<u8>> {
+        let inner = self.inner.lock().expect("store lock");
+        inner
+            .chunks
+            .get(&offer.transfer)
+            .and_then(|c| c.get(index as usize)?.clone())
+            .ok_or_else(|| std::io::Error::other("no such chunk"))
+    }
+
     fn assemble(&mut self, offer: &Offer) -> std::io::Result<Vec<u8>> {
         let inner = self.inner.lock().expect("store lock");
         let chunks = inner
@@ -782,6 +1006,10 @@ impl ChunkStore for DirStore {
             &self.transfer_dir(offer).join(format!("{index}.chunk")),
             data,
         )
+    }
+
+    fn get(&mut self, offer: &Offer, index: u32) -> std::io::Result<Vec<u8>> {
+        std::fs::read(self.transfer_dir(offer).join(format!("{index}.chunk")))
     }
 
     fn assemble(&mut self, offer: &Offer) -> std::io::Result<Vec<u8>> {

@@ -54,6 +54,15 @@ pub enum Body {
     },
     /// Robot → master: the whole file arrived and its SHA-256 matches.
     Finished { transfer: TransferId },
+    /// Master → robot: Reed-Solomon repair shard `index` of the offer's tail
+    /// block (any `fec_from..chunks` originals can be rebuilt from as many
+    /// shards, originals and repairs together). Sent once, after the block.
+    Repair {
+        transfer: TransferId,
+        index: u32,
+        crc32: u32,
+        data: Vec<u8>,
+    },
     /// Robot → master: the offer is refused (too large, say).
     Refused {
         transfer: TransferId,
@@ -149,6 +158,11 @@ pub struct Offer {
     pub transfer: TransferId,
     pub size: u64,
     pub chunk_size: u32,
+    /// The chunks from this index to the end form the tail block, which
+    /// Reed-Solomon repair shards protect (the number of chunks: none).
+    pub fec_from: u32,
+    /// Repair shards the sender sends after the tail block, once.
+    pub fec_repairs: u32,
 }
 
 /// At most this many missing ranges in one NAK.

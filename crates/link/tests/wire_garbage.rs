@@ -13,6 +13,8 @@ fn samples() -> Vec<Vec<u8>> {
             transfer: t,
             size: 450_000,
             chunk_size: 1024,
+            fec_from: 0,
+            fec_repairs: 0,
         }),
         Body::Chunk {
             transfer: t,
