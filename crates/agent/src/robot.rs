@@ -525,7 +525,7 @@ impl<B: RobotBackend> RobotAgent<B> {
                         "plan_sha256": sha,
                         "counter": accepted.envelope.counter,
                         "samples": accepted.plan.samples.len(),
-                        "path": path,
+                        "path": format!("plans/{sha}.json"),
                     }),
                 );
                 let env = accepted.envelope;
@@ -771,7 +771,11 @@ impl<B: RobotBackend> RobotAgent<B> {
                 self.record(
                     now_ns,
                     "log_written",
-                    json!({ "plan_sha256": plan_sha256, "steps": log.steps.len(), "dir": dir }),
+                    json!({
+                        "plan_sha256": plan_sha256,
+                        "steps": log.steps.len(),
+                        "dir": format!("logs/{plan_sha256}"),
+                    }),
                 );
                 self.queue_backfill(plan_sha256);
             }

@@ -119,6 +119,29 @@ fn demo_runs_from_any_directory() {
             .join("twindrive-out/wall_following/path.png")
             .is_file()
     );
+    // Decoupled operation: the box the twin lacked is handed back, learnt,
+    // and the continuation completes; the robot's plans are the master's.
+    let d = tmp.path().join("twindrive-out/decoupled");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["outcome"], "completed", "{report}");
+    assert!(!report["handbacks"].as_array().unwrap().is_empty());
+    assert!(
+        report["twin_updates"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|u| !u["obstacles_added"].as_array().unwrap().is_empty())
+    );
+    for f in ["twin.svg", "timeline.svg", "robot_journal.jsonl"] {
+        assert!(d.join(f).is_file(), "{f}");
+    }
+    let robot_logs = report["robot_logs"].as_array().unwrap();
+    assert!(!robot_logs.is_empty());
+    for l in robot_logs {
+        assert!(d.join(l.as_str().unwrap()).join("log.csv").is_file());
+    }
+    assert!(stdout.contains("outcome Completed"), "{stdout}");
 }
 
 /// Writes a broken variant of the wall-following scenario and checks that

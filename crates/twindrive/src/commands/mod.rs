@@ -2,6 +2,7 @@
 
 mod calibrate;
 mod demo;
+mod demo_decoupled;
 mod draw_map;
 mod keys;
 mod ops;

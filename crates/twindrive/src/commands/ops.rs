@@ -425,7 +425,7 @@ fn write_plan_files(
 
 /// A robot log as received: the MCAP, the CSV and header, the real track
 /// (TUM), the plan's (TUM), and range residuals against the plan over time.
-fn write_robot_log(
+pub(super) fn write_robot_log(
     out: &Path,
     n: usize,
     plan: Option<&MissionPlan>,

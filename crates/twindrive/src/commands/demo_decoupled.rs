@@ -1,0 +1,365 @@
+//! The demo's decoupled-operation section: the case-study plan, signed, goes
+//! over the `lunar` profile to a robot whose site has a box on the route
+//! that the twin lacks. Upload, execution, hand-back, twin update (the box
+//! appears in the twin), continuation, completion. It runs in virtual time
+//! with the protocol code the two processes run, in one process.
+
+use std::io::Write;
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::Context;
+use twindrive_agent::backend::SimBackend;
+use twindrive_agent::master::{Master, MasterConfig};
+use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome, Report};
+use twindrive_agent::robot::{AgentConfig, RobotAgent};
+use twindrive_agent::twin::Twin;
+use twindrive_link::emulator::{LinkEmulator, LinkProfile};
+use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, sign_plan};
+use twindrive_link::upload::{MemoryStore, SenderConfig};
+use twindrive_link::vtime::VirtualLink;
+use twindrive_mission::pipeline::PipelineSettings;
+use twindrive_mission::plan::{MissionPlan, sha256_hex};
+use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_plot::{Markers, Series, TimeFigure, WorldFigure, palette};
+use twindrive_sim::Scenario;
+
+use crate::figures::walls;
+use crate::output::Staging;
+
+/// The box on the site's route that the twin does not have.
+pub const SITE_BOX: ([f64; 2], [f64; 2]) = ([1.9, 0.9], [2.1, 1.2]);
+/// The link.
+pub const PROFILE: &str = "lunar";
+/// Unix time at the start of the virtual run (the plan's validity window
+/// is checked against it).
+const UNIX_AT_ZERO_S: f64 = 1.8e9;
+
+/// What the section found, for the printed summary and the report.
+pub struct Decoupled {
+    pub report: Report,
+    pub signed_bytes: usize,
+    pub plan_duration_s: f64,
+    pub virtual_s: f64,
+}
+
+/// Runs the section into `out` (the `decoupled/` directory).
+pub fn run(
+    plan: &MissionPlan,
+    plan_json: &[u8],
+    twin: &Scenario,
+    world_toml: &[u8],
+    out: &Path,
+) -> anyhow::Result<Decoupled> {
+    // A fixed key: the demo is deterministic (same seed, same bytes); a
+    // real master's key comes from `twindrive keygen`.
+    let key = SigningKey::from_bytes(&[7; 32]);
+    let robot_id = "rover";
+    let envelope = Envelope {
+        format: String::new(),
+        version: 0,
+        plan_sha256: String::new(),
+        plan_file_sha256: String::new(),
+        plan_bytes: 0,
+        plan_encoding: String::new(),
+        robot_id: robot_id.into(),
+        counter: 1,
+        not_before_unix_s: UNIX_AT_ZERO_S as u64 - 60,
+        expires_unix_s: UNIX_AT_ZERO_S as u64 + 86_400,
+        world_sha256: sha256_hex(world_toml),
+        supervision: Supervision {
+            dead_man_timeout_s: None,
+        },
+        tolerances: Tolerances::default(),
+    };
+    let signed = sign_plan(&key, plan_json, envelope).context("signing the demo plan")?;
+    let signed_bytes = signed.len();
+
+    let profile: LinkProfile = PROFILE.parse().expect("a named profile");
+    let mut link = VirtualLink::new(
+        LinkEmulator::new(profile.clone(), 1, 0),
+        LinkEmulator::new(profile.clone(), 1, 1),
+    );
+    let master = Master::new(
+        robot_id,
+        MasterConfig {
+            upload: SenderConfig {
+                pace_bit_s: profile.bandwidth_bit_s,
+                rtt_hint_ns: (2.0 * profile.latency_s * 1e9) as u64,
+                loss_hint: profile.loss,
+                ..SenderConfig::default()
+            },
+            heartbeat_period_s: 1.0,
+        },
+        MemoryStore::default(),
+    );
+    let mut op = Operator::new(
+        master,
+        Some(Twin::new(twin.clone(), plan.header.calibrated)),
+        Some(key.clone()),
+        OperatorConfig {
+            robot_id: robot_id.into(),
+            on_handback: OnHandback::Replan,
+            expires_in_s: 86_400,
+            supervision: Supervision {
+                dead_man_timeout_s: None,
+            },
+            tolerances: Tolerances::default(),
+            unix_time_at_zero_s: UNIX_AT_ZERO_S,
+            first_counter: 1,
+            world_sha256: sha256_hex(world_toml),
+            log_wait_s: 1_200.0,
+            max_continuations: 8,
+            min_continuation_s: 10.0,
+            pipeline: PipelineSettings {
+                planner: Default::default(),
+                redundancy: RedundancyConfig::with_pinch_distance(
+                    plan.header.robot.footprint_radius_m,
+                ),
+                filter: Default::default(),
+            },
+        },
+    );
+    // The robot's site: the twin's world and the box.
+    let mut site = twin.clone();
+    site.world = site.world.with_blocks(&[SITE_BOX]);
+    let backend = SimBackend::new(site.clone(), plan.samples[0].pose(), 3_600.0)
+        .map_err(|e| anyhow::anyhow!("the demo site: {e}"))?;
+    std::fs::create_dir_all(out.parent().unwrap_or(Path::new(".")))?;
+    let state = tempfile::Builder::new()
+        .prefix(".twindrive-robot-")
+        .tempdir_in(out.parent().unwrap_or(Path::new(".")))
+        .context("the demo robot's state directory")?;
+    let mut config = AgentConfig::new(robot_id, state.path(), vec![key.verifying_key()]);
+    config.unix_time_at_zero_s = UNIX_AT_ZERO_S;
+    let mut robot = RobotAgent::new(config, backend).context("the demo robot")?;
+
+    op.start(Arc::new(plan.clone()), signed, 1, false, 0);
+    let done = link.run(&mut op, &mut robot, 3_600 * 1_000_000_000, |op, _| {
+        op.is_done()
+    });
+    if !done {
+        op.fail(
+            "the virtual mission did not end within an hour".into(),
+            link.now_ns,
+        );
+    }
+    let virtual_s = link.now_ns as f64 * 1e-9;
+
+    let staging = Staging::new(out, "demo-decoupled")?;
+    let dir = staging.dir();
+    let mut real_paths: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut k = 0;
+    while let Some((p, mcap)) = op.new_logs.pop_front() {
+        k += 1;
+        let log_dir = super::ops::write_robot_log(dir, k, p.as_deref(), &mcap)?;
+        op.report.robot_logs.push(format!(
+            "robot_logs/{}",
+            log_dir.file_name().unwrap_or_default().to_string_lossy()
+        ));
+        let log = twindrive_log::read_mcap(&log_dir.join("log.mcap"))?;
+        real_paths.push(
+            log.steps
+                .iter()
+                .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m))
+                .collect(),
+        );
+    }
+    let mut plans: Vec<Vec<(f64, f64)>> =
+        vec![plan.samples.iter().map(|s| (s.x_m, s.y_m)).collect()];
+    std::fs::create_dir_all(dir.join("plans"))?;
+    while let Some((p, json, signed)) = op.new_plans.pop_front() {
+        plans.push(p.samples.iter().map(|s| (s.x_m, s.y_m)).collect());
+        staging.write_with(&format!("plans/{}.json", p.sha256), |w| {
+            Ok(w.write_all(&json)?)
+        })?;
+        staging.write_with(&format!("plans/{}.signed", p.sha256), |w| {
+            Ok(w.write_all(&signed)?)
+        })?;
+    }
+    staging.write_with("report.json", |w| {
+        serde_json::to_writer_pretty(w, &op.report).map_err(Into::into)
+    })?;
+    let journal = std::fs::read(state.path().join("journal.jsonl")).unwrap_or_default();
+    staging.write_with("robot_journal.jsonl", |w| Ok(w.write_all(&journal)?))?;
+
+    // The twin after the mission, with what it learnt, against the site.
+    let updated = op
+        .twin()
+        .map(|t| t.scenario.world.clone())
+        .unwrap_or_else(|| twin.world.clone());
+    let (min, max) = SITE_BOX;
+    let site_box = vec![
+        (min[0], min[1]),
+        (max[0], min[1]),
+        (max[0], max[1]),
+        (min[0], max[1]),
+        (min[0], min[1]),
+    ];
+    let mut series = vec![Series {
+        label: "the site's box (the twin never saw it)",
+        points: &site_box,
+        color: palette::BAD,
+    }];
+    let labels: Vec<String> = (1..=plans.len())
+        .map(|k| {
+            if k == 1 {
+                "plan".into()
+            } else {
+                format!("continuation {}", k - 1)
+            }
+        })
+        .collect();
+    for (k, p) in plans.iter().enumerate() {
+        series.push(Series {
+            label: &labels[k],
+            points: p,
+            color: if k == 0 {
+                palette::ALT
+            } else {
+                palette::PURPLE
+            },
+        });
+    }
+    let real: Vec<(f64, f64)> = real_paths.concat();
+    series.push(Series {
+        label: "robot (true path)",
+        points: &real,
+        color: palette::TRUTH,
+    });
+    let handbacks: Vec<(f64, f64)> = op
+        .report
+        .handbacks
+        .iter()
+        .map(|h| (h.pose[0], h.pose[1]))
+        .collect();
+    WorldFigure {
+        title: "decoupled operation: the twin's world after the mission (walls and learnt blocks)",
+        walls: &walls(&updated),
+        paths: &series,
+        markers: &[Markers {
+            label: "hand-back",
+            points: &handbacks,
+            color: palette::BAD,
+        }],
+    }
+    .write(&dir.join("twin"))?;
+    timeline_figure(&op.report, &dir.join("timeline"))?;
+    staging.commit()?;
+    Ok(Decoupled {
+        report: op.report,
+        signed_bytes,
+        plan_duration_s: plan.duration_s(),
+        virtual_s,
+    })
+}
+
+/// Lanes over mission time: the link up, each upload, each execution, each
+/// hand-back and each robot log received.
+fn timeline_figure(report: &Report, base: &Path) -> anyhow::Result<()> {
+    let at = |event: &str| -> Vec<f64> {
+        report
+            .timeline
+            .iter()
+            .filter(|e| e.event == event)
+            .map(|e| e.t_s)
+            .collect()
+    };
+    let end = report.timeline.last().map_or(1.0, |e| e.t_s);
+    let link = vec![(0.0, 4.0), (end, 4.0)];
+    let spans = |starts: &[f64], ends: &[f64], y: f64| -> Vec<Vec<(f64, f64)>> {
+        starts
+            .iter()
+            .map(|&a| {
+                let b = ends.iter().copied().find(|&b| b >= a).unwrap_or(end);
+                vec![(a, y), (b, y)]
+            })
+            .collect()
+    };
+    let uploads = spans(&at("upload_started"), &at("upload_finished"), 3.0);
+    let mut stops = at("stopped");
+    stops.extend(at("execution_finished"));
+    stops.sort_by(f64::total_cmp);
+    let executions = spans(&at("execution_started"), &stops, 2.0);
+    let handbacks: Vec<(f64, f64)> = at("handback").into_iter().map(|t| (t, 1.0)).collect();
+    let logs: Vec<(f64, f64)> = at("robot_log").into_iter().map(|t| (t, 0.0)).collect();
+    let mut series = vec![Series {
+        label: "link up (4)",
+        points: &link,
+        color: palette::TRUTH,
+    }];
+    for (k, u) in uploads.iter().enumerate() {
+        series.push(Series {
+            label: if k == 0 { "upload (3)" } else { "" },
+            points: u,
+            color: palette::ALT,
+        });
+    }
+    for (k, e) in executions.iter().enumerate() {
+        series.push(Series {
+            label: if k == 0 { "execution (2)" } else { "" },
+            points: e,
+            color: palette::GOOD,
+        });
+    }
+    TimeFigure {
+        title: "decoupled operation over the lunar link: timeline",
+        x_label: "mission time (s)",
+        y_label: "lane",
+        series: &series,
+        markers: &[
+            Markers {
+                label: "hand-back (1)",
+                points: &handbacks,
+                color: palette::BAD,
+            },
+            Markers {
+                label: "robot log received (0)",
+                points: &logs,
+                color: palette::TRUTH,
+            },
+        ],
+        bands: &[],
+    }
+    .write(base)?;
+    Ok(())
+}
+
+/// The printed summary.
+pub fn print(d: &Decoupled, out: &Path, w: &mut impl Write) -> anyhow::Result<()> {
+    let r = &d.report;
+    writeln!(
+        w,
+        "decoupled: plan signed {} bytes ({:.2} kB per second of mission), over {PROFILE}",
+        d.signed_bytes,
+        d.signed_bytes as f64 / 1e3 / d.plan_duration_s
+    )?;
+    for (k, u) in r.uploads.iter().enumerate() {
+        writeln!(
+            w,
+            "  upload {}: {} bytes in {:.1} s ({} chunks resent)",
+            k + 1,
+            u.bytes,
+            u.duration_s,
+            u.chunks_resent
+        )?;
+    }
+    for h in &r.handbacks {
+        writeln!(
+            w,
+            "  hand-back at {:.1} s: {} {:.1} s into its plan at ({:.2}, {:.2})",
+            h.t_s, h.reason, h.plan_t_s, h.pose[0], h.pose[1]
+        )?;
+    }
+    let learnt: usize = r.twin_updates.iter().map(|u| u.obstacles_added.len()).sum();
+    writeln!(
+        w,
+        "  outcome {:?} after {:.0} s of link time; the twin learnt {learnt} block(s); {} collision period(s), {} bump(s) -> {}/",
+        r.outcome.unwrap_or(Outcome::Failed),
+        d.virtual_s,
+        r.collisions,
+        r.bumps,
+        out.display()
+    )?;
+    Ok(())
+}
