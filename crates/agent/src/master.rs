@@ -69,6 +69,9 @@ pub struct MasterConfig {
     pub upload: SenderConfig,
     /// A heartbeat this often (s).
     pub heartbeat_period_s: f64,
+    /// Bytes per second the robot may send (it keeps to the lower of this
+    /// and its own limit).
+    pub telemetry_budget_bytes_s: f64,
 }
 
 impl Default for MasterConfig {
@@ -76,6 +79,7 @@ impl Default for MasterConfig {
         Self {
             upload: SenderConfig::default(),
             heartbeat_period_s: 1.0,
+            telemetry_budget_bytes_s: 8_000.0,
         }
     }
 }
@@ -94,6 +98,10 @@ pub struct Master<S: ChunkStore> {
     events: VecDeque<MasterEvent>,
     /// When the robot was last heard (the driving clock).
     pub last_heard_ns: Option<u64>,
+    pings: HashMap<u64, u64>,
+    next_nonce: u64,
+    /// Round trips measured (s).
+    pub rtt_s: Vec<f64>,
 }
 
 impl<S: ChunkStore> Master<S> {
@@ -118,6 +126,9 @@ impl<S: ChunkStore> Master<S> {
             latest: None,
             events: VecDeque::new(),
             last_heard_ns: None,
+            pings: HashMap::new(),
+            next_nonce: 0,
+            rtt_s: Vec::new(),
         }
     }
 
@@ -212,7 +223,14 @@ impl<S: ChunkStore> Master<S> {
                     self.events.push_back(MasterEvent::Handback(h.clone()));
                 }
             }
-            Body::Heartbeat | Body::HandbackAck { .. } => {}
+            Body::Ping { nonce } => self.outbox.push_back(Body::Pong { nonce: *nonce }),
+            Body::Pong { nonce } => {
+                if let Some(sent) = self.pings.remove(nonce) {
+                    let rtt_s = now_ns.saturating_sub(sent) as f64 * 1e-9;
+                    self.rtt_s.push(rtt_s);
+                }
+            }
+            Body::Heartbeat { .. } | Body::HandbackAck { .. } => {}
         }
     }
 
@@ -284,7 +302,27 @@ impl<S: ChunkStore> Master<S> {
         }
         if now_ns >= self.next_heartbeat_ns {
             self.next_heartbeat_ns = now_ns + (self.config.heartbeat_period_s * 1e9) as u64;
-            return Some(self.stamper.stamp(Body::Heartbeat, now_ns));
+            let budget = self
+                .config
+                .telemetry_budget_bytes_s
+                .clamp(0.0, f64::from(u32::MAX)) as u32;
+            // Every heartbeat carries a ping: the link's round trip, measured.
+            // (A ping unanswered for ten minutes is forgotten.)
+            self.pings
+                .retain(|_, sent| now_ns.saturating_sub(*sent) < 600_000_000_000);
+            if self.pings.len() < 1_024 {
+                self.next_nonce += 1;
+                self.pings.insert(self.next_nonce, now_ns);
+                self.outbox.push_back(Body::Ping {
+                    nonce: self.next_nonce,
+                });
+            }
+            return Some(self.stamper.stamp(
+                Body::Heartbeat {
+                    telemetry_budget_bytes_s: budget,
+                },
+                now_ns,
+            ));
         }
         None
     }

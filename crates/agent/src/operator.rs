@@ -115,6 +115,9 @@ pub struct Report {
     /// Directories of the robot's logs as received (filled by the owner).
     pub robot_logs: Vec<String>,
     pub status_messages: u64,
+    /// The link's round trip (median of the pings answered, s).
+    pub link_rtt_median_s: Option<f64>,
+    pub pings_answered: usize,
     pub timeline: Vec<TimelineEntry>,
 }
 
@@ -168,6 +171,8 @@ impl<S: ChunkStore> Operator<S> {
                 bumps: 0,
                 robot_logs: Vec::new(),
                 status_messages: 0,
+                link_rtt_median_s: None,
+                pings_answered: 0,
                 timeline: Vec::new(),
             },
             master,
@@ -477,6 +482,14 @@ impl<S: ChunkStore> Operator<S> {
         let now = self.now_ns;
         self.start(plan, signed, counter, false, now);
         Ok(())
+    }
+
+    /// Fills in the report's link figures (call before writing it).
+    pub fn finish_report(&mut self) {
+        let mut rtt = self.master.rtt_s.clone();
+        rtt.sort_by(f64::total_cmp);
+        self.report.pings_answered = rtt.len();
+        self.report.link_rtt_median_s = rtt.get(rtt.len() / 2).copied();
     }
 
     /// Takes in a message from the robot.

@@ -181,6 +181,8 @@ pub struct RobotAgent<B: RobotBackend> {
     last_bump: bool,
     /// Journal writes that failed (reported in the process log).
     pub journal_errors: u64,
+    /// The telemetry budget in force (the master may lower it).
+    budget_bytes_s: f64,
 }
 
 fn pose3(p: &twindrive_kinematics::Pose) -> [f64; 3] {
@@ -246,6 +248,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             collisions: 0,
             last_bump: false,
             journal_errors: 0,
+            budget_bytes_s: config.telemetry_budget_bytes_s,
             config,
             backend,
         };
@@ -434,7 +437,18 @@ impl<B: RobotBackend> RobotAgent<B> {
                     );
                 }
             }
-            Body::Heartbeat | Body::Status(_) | Body::Handback(_) => {}
+            Body::Heartbeat {
+                telemetry_budget_bytes_s,
+            } => {
+                let budget = f64::from(*telemetry_budget_bytes_s)
+                    .clamp(100.0, self.config.telemetry_budget_bytes_s);
+                if budget != self.budget_bytes_s {
+                    self.budget_bytes_s = budget;
+                    self.record(now_ns, "telemetry_budget", json!({ "bytes_per_s": budget }));
+                }
+            }
+            Body::Ping { nonce } => self.outbox.push_back(Body::Pong { nonce: *nonce }),
+            Body::Pong { .. } | Body::Status(_) | Body::Handback(_) => {}
         }
         self.receiver_events(now_ns);
     }
@@ -801,7 +815,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             .join("log.mcap");
         match std::fs::read(&path) {
             Ok(file) => {
-                let pace = 8.0 * 0.7 * self.config.telemetry_budget_bytes_s;
+                let pace = 8.0 * 0.7 * self.budget_bytes_s;
                 let sender = Sender::resume(
                     &self.config.robot_id,
                     file,
@@ -871,7 +885,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             let period_s = self
                 .config
                 .status_period_s
-                .max(bytes / (self.config.telemetry_budget_bytes_s / 3.0).max(1.0));
+                .max(bytes / (self.budget_bytes_s / 3.0).max(1.0));
             self.next_status_ns = now_ns + (period_s * 1e9) as u64;
             return Some(message);
         }

@@ -72,6 +72,29 @@ fn harness(
     extra: &str,
     on_handback: OnHandback,
 ) -> Harness {
+    harness_with_budget(
+        dir,
+        profile,
+        seed,
+        master_key,
+        robot_trusts,
+        extra,
+        on_handback,
+        8_000.0,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn harness_with_budget(
+    dir: &Path,
+    profile: &str,
+    seed: u64,
+    master_key: &SigningKey,
+    robot_trusts: &SigningKey,
+    extra: &str,
+    on_handback: OnHandback,
+    budget: f64,
+) -> Harness {
     let profile: LinkProfile = profile.parse().unwrap();
     let link = VirtualLink::new(
         LinkEmulator::new(profile.clone(), seed, 0),
@@ -87,6 +110,7 @@ fn harness(
                 ..SenderConfig::default()
             },
             heartbeat_period_s: 1.0,
+            telemetry_budget_bytes_s: budget,
         },
         MemoryStore::default(),
     );
@@ -497,5 +521,38 @@ impl twindrive_link::vtime::Endpoint for Silent {
     fn handle(&mut self, _: &twindrive_link::wire::Message, _: u64) {}
     fn poll_timeout(&self) -> Option<u64> {
         None
+    }
+}
+
+/// What the robot sends (status, hand-backs, NAKs, its logs) keeps to the
+/// master's budget, and every log still arrives.
+#[test]
+fn telemetry_keeps_to_its_budget_and_every_log_arrives() {
+    for budget in [1_000.0, 4_000.0] {
+        let dir = tempfile::tempdir().unwrap();
+        let key = generate_key().unwrap();
+        let mut h = harness_with_budget(
+            dir.path(),
+            "lunar",
+            51,
+            &key,
+            &key,
+            BOX,
+            OnHandback::Stop,
+            budget,
+        );
+        h.send(
+            sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+            1,
+        );
+        assert!(h.run_until(3_600.0));
+        let sent = h.link.down.stats.bytes_sent as f64;
+        let took = h.link.now_ns as f64 * 1e-9;
+        assert!(sent / took <= budget * 1.1, "{budget}: {} B/s", sent / took);
+        assert_eq!(h.op.new_logs.len(), 1, "{budget}");
+        assert!(h.op.report.status_messages > 10);
+        h.op.finish_report();
+        let rtt = h.op.report.link_rtt_median_s.unwrap();
+        assert!((2.5..2.7).contains(&rtt), "{rtt}");
     }
 }

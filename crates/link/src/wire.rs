@@ -42,7 +42,9 @@ pub enum Body {
         data: Vec<u8>,
     },
     /// Master → robot: every chunk has been sent at least once.
-    EndOfFile { transfer: TransferId },
+    EndOfFile {
+        transfer: TransferId,
+    },
     /// Robot → master: what it holds and what it still needs: of the
     /// chunks below `upto`, those in `missing` (inclusive index ranges, at
     /// most [`MAX_NAK_RANGES`]; more follow in later NAKs).
@@ -53,7 +55,9 @@ pub enum Body {
         missing: Vec<(u32, u32)>,
     },
     /// Robot → master: the whole file arrived and its SHA-256 matches.
-    Finished { transfer: TransferId },
+    Finished {
+        transfer: TransferId,
+    },
     /// Master → robot: Reed-Solomon repair shard `index` of the offer's tail
     /// block (any `fec_from..chunks` originals can be rebuilt from as many
     /// shards, originals and repairs together). Sent once, after the block.
@@ -69,15 +73,28 @@ pub enum Body {
         reason: String,
     },
     /// Master → robot: the master is there (a supervised plan's dead-man
-    /// counts from the last message heard, of any kind).
-    Heartbeat,
+    /// counts from the last message heard, of any kind), and the bytes per
+    /// second the robot may send it (the robot keeps to the lower of this
+    /// and its own limit).
+    Heartbeat {
+        telemetry_budget_bytes_s: u32,
+    },
+    /// Either way: answer with `Pong` at once (round-trip time).
+    Ping {
+        nonce: u64,
+    },
+    Pong {
+        nonce: u64,
+    },
     /// Robot → master: a live summary, at a low rate.
     Status(Box<Status>),
     /// Robot → master: reality departed from the plan; the robot stopped
     /// and control returns to the operator. Repeated until acknowledged.
     Handback(Box<Handback>),
     /// Master → robot: the hand-back of this plan arrived.
-    HandbackAck { plan: TransferId },
+    HandbackAck {
+        plan: TransferId,
+    },
 }
 
 /// Where the robot stands with one plan file.

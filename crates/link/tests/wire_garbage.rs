@@ -34,7 +34,11 @@ fn samples() -> Vec<Vec<u8>> {
             transfer: t,
             reason: "too large".into(),
         },
-        Body::Heartbeat,
+        Body::Heartbeat {
+            telemetry_budget_bytes_s: 8_000,
+        },
+        Body::Ping { nonce: 77 },
+        Body::Pong { nonce: 77 },
         Body::Status(Box::new(Status {
             plan: Some((
                 t,

@@ -239,6 +239,11 @@ pub struct MasterArgs {
     /// Give up (outcome `failed`) after this many seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0)]
     pub timeout: f64,
+    /// Bytes per second the robot may send this master (status, hand-back,
+    /// log back-fill); the robot keeps to the lower of this and its own
+    /// --telemetry-budget.
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0)]
+    pub telemetry_budget: f64,
     /// Wait this long for the robot's logs once the mission is decided, seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 120.0)]
     pub log_wait: f64,

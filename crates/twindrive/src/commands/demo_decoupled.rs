@@ -90,6 +90,7 @@ pub fn run(
                 ..SenderConfig::default()
             },
             heartbeat_period_s: 1.0,
+            telemetry_budget_bytes_s: 8_000.0,
         },
         MemoryStore::default(),
     );
@@ -177,6 +178,7 @@ pub fn run(
             Ok(w.write_all(&signed)?)
         })?;
     }
+    op.finish_report();
     staging.write_with("report.json", |w| {
         serde_json::to_writer_pretty(w, &op.report).map_err(Into::into)
     })?;

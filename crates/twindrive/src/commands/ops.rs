@@ -222,6 +222,12 @@ fn first_plan(
 /// `twindrive master`.
 pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     check_robot_id(&args.robot, "--robot")?;
+    if !(args.telemetry_budget.is_finite() && args.telemetry_budget >= 100.0) {
+        bail!(
+            "--telemetry-budget: at least 100 bytes per second, got {}",
+            args.telemetry_budget
+        );
+    }
     if let Some(s) = args.supervise
         && !(s.is_finite() && s > 0.0)
     {
@@ -289,6 +295,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         MasterConfig {
             upload,
             heartbeat_period_s: 1.0,
+            telemetry_budget_bytes_s: args.telemetry_budget,
         },
         DirStore::new(args.out.join("state").join("log_chunks")),
     );
@@ -383,6 +390,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     if let Err(e) = result {
         op.fail(format!("{e:#}"), 0);
     }
+    op.finish_report();
     let report = serde_json::to_vec_pretty(&op.report)?;
     write_durably(&args.out.join("report.json"), &report).context("writing report.json")?;
     if let Some(e) = write_error {
@@ -460,6 +468,7 @@ pub(super) fn write_robot_log(
         let beams = log.beams_per_step();
         let t0 = plan.samples[0].t_s;
         let mut k = 0;
+        let mut residuals: Vec<(f64, f64)> = Vec::new();
         for (i, step) in log.steps.iter().enumerate() {
             let t = step.t_s() + t0;
             while k + 1 < plan.samples.len() && plan.samples[k + 1].t_s <= t {
@@ -471,6 +480,7 @@ pub(super) fn write_robot_log(
                     continue;
                 };
                 if m.is_finite() {
+                    residuals.push((step.t_s(), m - p));
                     rows.push_str(&format!(
                         "{:.3},{b},{m:.4},{p:.4},{:.4}\n",
                         step.t_s(),
@@ -480,6 +490,57 @@ pub(super) fn write_robot_log(
             }
         }
         write_durably(&dir.join("range_residuals.csv"), rows.as_bytes())?;
+        comparison_figures(&log, plan, &residuals, &dir)?;
     }
     Ok(dir)
+}
+
+/// `comparison.svg|png`: the plan's path against the robot's true one;
+/// `range_residuals.svg|png`: measured minus predicted range over time.
+fn comparison_figures(
+    log: &twindrive_log::MissionLog,
+    plan: &MissionPlan,
+    residuals: &[(f64, f64)],
+    dir: &Path,
+) -> anyhow::Result<()> {
+    use twindrive_plot::{Series, TimeFigure, WorldFigure, palette};
+    let predicted: Vec<(f64, f64)> = plan.samples.iter().map(|s| (s.x_m, s.y_m)).collect();
+    let real: Vec<(f64, f64)> = log
+        .steps
+        .iter()
+        .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m))
+        .collect();
+    WorldFigure {
+        title: "predicted (the plan) against real (the robot)",
+        walls: &[],
+        paths: &[
+            Series {
+                label: "predicted",
+                points: &predicted,
+                color: palette::ALT,
+            },
+            Series {
+                label: "real",
+                points: &real,
+                color: palette::TRUTH,
+            },
+        ],
+        markers: &[],
+    }
+    .write(&dir.join("comparison"))?;
+    let thin = twindrive_plot::decimate(residuals, 0.0);
+    TimeFigure {
+        title: "range readings: measured minus the twin's prediction",
+        x_label: "time since the plan started (s)",
+        y_label: "residual (m)",
+        series: &[Series {
+            label: "residual",
+            points: &thin,
+            color: palette::BAD,
+        }],
+        markers: &[],
+        bands: &[],
+    }
+    .write(&dir.join("range_residuals"))?;
+    Ok(())
 }
