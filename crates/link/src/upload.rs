@@ -212,13 +212,27 @@ impl Sender {
                 missing,
             } if *transfer == self.offer.transfer => {
                 self.stats.naks_received += 1;
-                if !self.answered {
+                let first = !self.answered;
+                if first {
                     self.answered = true;
                     if let Some(t) = self.offer_sent_at {
                         self.rtt_ns = now_ns.saturating_sub(t).max(1);
                     }
                 }
-                self.apply_nak(*received, *upto, missing, now_ns);
+                // The answer to a fresh upload's offer lists every chunk not
+                // yet in, and the first pass is bringing them: it only
+                // confirms what the receiver held already.
+                let listed: &[(u32, u32)] = if first && self.optimistic {
+                    &[]
+                } else {
+                    missing
+                };
+                let upto = if first && self.optimistic {
+                    missing.first().map_or(*upto, |&(a, _)| a.min(*upto))
+                } else {
+                    *upto
+                };
+                self.apply_nak(*received, upto, listed, now_ns);
             }
             Body::Finished { transfer } if *transfer == self.offer.transfer => {
                 self.finished = true;
