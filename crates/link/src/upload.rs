@@ -492,7 +492,13 @@ pub struct Receiver<S: ChunkStore> {
     current: Option<Transfer>,
     outbox: VecDeque<Body>,
     events: VecDeque<ReceiverEvent>,
+    /// Chunks and repair shards that came before their offer (lost, or
+    /// overtaken), kept a while in memory: (transfer, repair?, index, data).
+    orphans: VecDeque<(TransferId, bool, u32, Vec<u8>)>,
 }
+
+/// At most this many chunks wait for their offer.
+const MAX_ORPHANS: usize = 4_096;
 
 impl<S: ChunkStore> Receiver<S> {
     /// A receiver; one that finds an unfinished transfer in its store (a
@@ -505,6 +511,7 @@ impl<S: ChunkStore> Receiver<S> {
             current: None,
             outbox: VecDeque::new(),
             events: VecDeque::new(),
+            orphans: VecDeque::new(),
         };
         match receiver.store.pending() {
             Ok(Some(offer)) => receiver.offer(offer),
@@ -631,14 +638,56 @@ impl<S: ChunkStore> Receiver<S> {
             received,
             chunks: offer.chunks(),
         });
+        self.adopt_orphans();
         self.check_complete();
+    }
+
+    /// Keeps a good chunk (or repair shard) of a transfer not on offer yet.
+    fn orphan(&mut self, transfer: TransferId, repair: bool, index: u32, crc32: u32, data: &[u8]) {
+        if self
+            .current
+            .as_ref()
+            .is_some_and(|t| t.offer.transfer == transfer)
+            || crc32fast::hash(data) != crc32
+        {
+            return;
+        }
+        if self.orphans.len() == MAX_ORPHANS {
+            self.orphans.pop_front();
+        }
+        self.orphans
+            .push_back((transfer, repair, index, data.to_vec()));
+    }
+
+    /// Feeds the current transfer what came before its offer.
+    fn adopt_orphans(&mut self) {
+        let Some(transfer) = self.current.as_ref().map(|t| t.offer.transfer) else {
+            return;
+        };
+        let (mine, others): (VecDeque<_>, VecDeque<_>) = std::mem::take(&mut self.orphans)
+            .into_iter()
+            .partition(|o| o.0 == transfer);
+        self.orphans = others;
+        for (_, repair, index, data) in mine {
+            let crc = crc32fast::hash(&data);
+            if repair {
+                self.repair(transfer, index, crc, &data);
+            } else {
+                self.chunk(transfer, index, crc, &data);
+            }
+        }
     }
 
     fn chunk(&mut self, transfer: TransferId, index: u32, crc32: u32, data: &[u8]) {
         let Some(t) = &mut self.current else {
+            self.orphan(transfer, false, index, crc32, data);
             return;
         };
-        if t.offer.transfer != transfer || t.done || index >= t.offer.chunks() {
+        if t.offer.transfer != transfer {
+            self.orphan(transfer, false, index, crc32, data);
+            return;
+        }
+        if t.done || index >= t.offer.chunks() {
             return;
         }
         let expected_len = if index + 1 == t.offer.chunks() {
@@ -675,9 +724,14 @@ impl<S: ChunkStore> Receiver<S> {
 
     fn repair(&mut self, transfer: TransferId, index: u32, crc32: u32, data: &[u8]) {
         let Some(t) = &mut self.current else {
+            self.orphan(transfer, true, index, crc32, data);
             return;
         };
-        if t.offer.transfer != transfer || t.done || index >= t.offer.fec_repairs {
+        if t.offer.transfer != transfer {
+            self.orphan(transfer, true, index, crc32, data);
+            return;
+        }
+        if t.done || index >= t.offer.fec_repairs {
             return;
         }
         if crc32fast::hash(data) != crc32 || data.len() != t.offer.chunk_size as usize {

@@ -95,6 +95,10 @@ fn json_list(items: &[String]) -> String {
     format!("[{}]", quoted.join(","))
 }
 
+/// How long [`drive`] waits for the other side's subscriber before it
+/// starts anyway.
+pub const STARTUP_WAIT: Duration = Duration::from_secs(3);
+
 /// What the driver saw on the way.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct DriveStats {
@@ -135,6 +139,20 @@ pub async fn drive<E: Endpoint>(
         .declare_subscriber(rx_key.to_owned())
         .await
         .map_err(|e| anyhow::anyhow!("declaring the subscriber on {rx_key}: {e}"))?;
+    // Messages put before zenoh has a route to the other side are lost:
+    // wait (a bounded while) until a subscriber matches. The protocol
+    // copes either way; this keeps a fresh upload's first pass whole.
+    let waiting = Instant::now();
+    while waiting.elapsed() < STARTUP_WAIT {
+        match publisher.matching_status().await {
+            Ok(m) if m.matching() => break,
+            Ok(_) => tokio::time::sleep(Duration::from_millis(20)).await,
+            Err(e) => {
+                tracing::warn!(error = %e, "the publisher's matching status");
+                break;
+            }
+        }
+    }
     let start = Instant::now();
     let now_ns = || start.elapsed().as_nanos() as u64;
     let mut stats = DriveStats::default();

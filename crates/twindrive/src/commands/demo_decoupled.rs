@@ -84,7 +84,8 @@ pub fn run(
         robot_id,
         MasterConfig {
             upload: SenderConfig {
-                pace_bit_s: profile.bandwidth_bit_s,
+                // Below the link's rate: control traffic shares the way up.
+                pace_bit_s: profile.bandwidth_bit_s.map(|b| 0.95 * b),
                 rtt_hint_ns: (2.0 * profile.latency_s * 1e9) as u64,
                 loss_hint: profile.loss,
                 ..SenderConfig::default()

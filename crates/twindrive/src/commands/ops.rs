@@ -284,10 +284,18 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     write_plan_files(&args.out, &first.plan, &first.plan_json, &first.signed)?;
 
     let upload = SenderConfig {
-        pace_bit_s: profile.as_ref().and_then(|p| p.bandwidth_bit_s),
+        // A little below the link's rate: heartbeats, pings and the NAKs
+        // of the robot's log share the way up, and a queue that never
+        // drains stretches the round trip until chunks are sent twice.
+        pace_bit_s: profile
+            .as_ref()
+            .and_then(|p| p.bandwidth_bit_s)
+            .map(|b| 0.95 * b),
         rtt_hint_ns: profile.as_ref().map_or(1_000_000_000, |p| {
             ((2.0 * p.latency_s).max(0.05) * 1e9) as u64
         }),
+        // Repair shards sized for the emulated link's loss.
+        loss_hint: profile.as_ref().map_or(0.0, |p| p.loss),
         ..SenderConfig::default()
     };
     let master = Master::new(
