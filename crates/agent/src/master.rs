@@ -159,6 +159,13 @@ impl<S: ChunkStore> Master<S> {
         self.upload.as_ref().map(|u| u.sender.transfer())
     }
 
+    /// Chunks of the current upload the robot has confirmed, of all.
+    pub fn upload_progress(&self) -> Option<(u32, u32)> {
+        self.upload
+            .as_ref()
+            .map(|u| (u.sender.stats.chunks_confirmed, u.sender.stats.chunks))
+    }
+
     /// Whether the current upload is on the robot whole.
     pub fn upload_finished(&self) -> bool {
         self.upload.as_ref().is_some_and(|u| u.done)

@@ -501,9 +501,13 @@ impl<B: RobotBackend> RobotAgent<B> {
     /// A whole plan file arrived: through the gate, or refused.
     fn consider(&mut self, transfer: TransferId, file: Vec<u8>, now_ns: u64) {
         let now_unix = self.unix_now_s(now_ns);
-        match self.gate.check(&file, self.last_counter, now_unix) {
-            Err(rejection) => {
-                let reason = rejection.to_string();
+        let checked = self
+            .gate
+            .check(&file, self.last_counter, now_unix)
+            .map_err(|r| r.to_string())
+            .and_then(|accepted| self.fits(&accepted.plan).map(|()| accepted));
+        match checked {
+            Err(reason) => {
                 self.record(
                     now_ns,
                     "plan_rejected",
@@ -547,6 +551,36 @@ impl<B: RobotBackend> RobotAgent<B> {
             }
         }
         self.next_status_ns = now_ns;
+    }
+
+    /// Whether a plan was made for this robot at this site: the site its
+    /// twin copies, the encoder resolution and the range beams it predicts.
+    fn fits(&self, plan: &MissionPlan) -> Result<(), String> {
+        let me = self.backend.log_header();
+        let robot = &plan.header.robot;
+        if robot.scenario != me.scenario {
+            return Err(format!(
+                "the plan was rehearsed for site `{}`, this robot is at `{}`",
+                robot.scenario, me.scenario
+            ));
+        }
+        if robot.ticks_per_rev != me.ticks_per_rev {
+            return Err(format!(
+                "the plan is for encoders of {} ticks per revolution, this robot's have {}",
+                robot.ticks_per_rev, me.ticks_per_rev
+            ));
+        }
+        let beams = |s: &[twindrive_log::RangeSensorInfo]| -> Vec<(String, u32)> {
+            s.iter().map(|r| (r.name.clone(), r.beams)).collect()
+        };
+        if beams(&robot.range_sensors) != beams(&me.range_sensors) {
+            return Err(format!(
+                "the plan predicts range sensors {:?}, this robot has {:?}",
+                beams(&robot.range_sensors),
+                beams(&me.range_sensors)
+            ));
+        }
+        Ok(())
     }
 
     fn start(

@@ -556,3 +556,34 @@ fn telemetry_keeps_to_its_budget_and_every_log_arrives() {
         assert!((2.5..2.7).contains(&rtt), "{rtt}");
     }
 }
+
+/// A plan rehearsed for another site is refused after its signature
+/// checks, and no wheel moves.
+#[test]
+fn a_plan_for_another_site_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = generate_key().unwrap();
+    let mut h = harness(dir.path(), "lan", 61, &key, &key, "", OnHandback::Stop);
+    let text = twindrive_sim::builtin::WALL_FOLLOWING
+        .replace("name = \"wall_following\"", "name = \"quarry\"");
+    let site = twindrive_sim::Scenario::from_toml(&text, Path::new("<quarry>.toml")).unwrap();
+    let backend = SimBackend::new(site, common::plan().samples[0].pose(), 100.0).unwrap();
+    let mut config = AgentConfig::new("rover", dir.path(), vec![key.verifying_key()]);
+    config.unix_time_at_zero_s = UNIX0;
+    h.agent = RobotAgent::new(config, backend).unwrap();
+    h.send(
+        sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+        1,
+    );
+    assert!(h.run_until(600.0));
+    assert_eq!(h.op.report.outcome, Some(Outcome::Rejected));
+    let reason = events(dir.path(), "plan_rejected")[0]["reason"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        reason.contains("site `wall_following`") && reason.contains("quarry"),
+        "{reason}"
+    );
+    assert_eq!(h.agent.backend().wheel_travel_rad(), 0.0);
+}

@@ -544,3 +544,102 @@ fn bad_input_is_a_clear_error() {
         text(&out.stderr)
     );
 }
+
+#[test]
+fn a_master_killed_mid_upload_resumes_it_when_restarted() {
+    let m = Mission::new("", "keys", 10.0);
+    let _robot = m.robot();
+    let link = ["--link", "lan,bandwidth_bit_s=3e5"];
+    let master = m.master(&link);
+    m.wait_for("upload_progress", 60.0);
+    std::thread::sleep(Duration::from_millis(1500));
+    drop(master);
+    let held = m.events("upload_progress").last().unwrap()["received"]
+        .as_u64()
+        .unwrap();
+    assert!(m.out().join("state/uploading.signed").is_file());
+    let (code, err) = finish(m.master(&link), 240.0);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("resuming the upload"), "{err}");
+    assert_plan_identical(&m);
+    // Resumed, not started over: the robot's count never went back.
+    let counts: Vec<u64> = m
+        .events("upload_progress")
+        .iter()
+        .map(|l| l["received"].as_u64().unwrap())
+        .collect();
+    assert!(
+        held > 0 && counts.windows(2).all(|w| w[1] >= w[0]),
+        "{counts:?}"
+    );
+    assert!(!m.out().join("state/uploading.signed").exists());
+}
+
+#[test]
+fn robot_and_master_meet_through_a_zenoh_router() {
+    let m = Mission::new("", "keys", 10.0);
+    let router_port = port();
+    let router = format!("tcp/127.0.0.1:{router_port}");
+    let _router = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args(["router", "--listen", &router])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    let f = fixture();
+    let _robot = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args([
+                "robot",
+                "--id",
+                "rover",
+                "--site",
+                s(&m.site),
+                "--trust",
+                s(&f.path("keys").join("master.pub")),
+                "--state-dir",
+                s(&m.robot_dir()),
+                "--connect",
+                &router,
+                "--time-scale",
+                "10",
+                "--run-for",
+                "300",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let master = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args([
+                "master",
+                "--plan",
+                s(&f.path("plan/plan.json")),
+                "--key",
+                s(&f.path("keys/master.key")),
+                "--robot",
+                "rover",
+                "--out",
+                s(&m.out()),
+                "--connect",
+                &router,
+                "--timeout",
+                "240",
+                "--log-wait",
+                "60",
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let (code, err) = finish(master, 240.0);
+    assert_eq!(code, Some(0), "{err}");
+    assert_plan_identical(&m);
+    assert_eq!(m.report()["outcome"], "completed");
+}

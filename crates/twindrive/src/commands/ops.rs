@@ -351,6 +351,8 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     });
     let out = args.out.clone();
     let mut logs_written = 0usize;
+    let mut bar = indicatif::ProgressBar::hidden();
+    let mut bar_for = None;
     let mut write_error: Option<anyhow::Error> = None;
     let rt = runtime()?;
     let options = session_options(&args.zenoh, None);
@@ -371,6 +373,19 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             emulation,
             Duration::from_secs_f64(args.timeout),
             |op| {
+                // Upload progress on a terminal (one bar per plan sent).
+                if let Some((confirmed, chunks)) = op.master.upload_progress() {
+                    let transfer = op.master.uploading();
+                    if bar_for != transfer {
+                        bar.finish_and_clear();
+                        bar = crate::progress::bar(u64::from(chunks), "upload");
+                        bar_for = transfer;
+                    }
+                    bar.set_position(u64::from(confirmed));
+                    if op.master.upload_finished() {
+                        bar.finish_and_clear();
+                    }
+                }
                 if op.master.upload_finished() {
                     let _ = std::fs::remove_file(out.join("state").join("uploading.signed"));
                 }
