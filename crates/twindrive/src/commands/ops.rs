@@ -160,43 +160,60 @@ struct FirstPlan {
 fn first_plan(
     args: &MasterArgs,
     key: Option<&twindrive_link::envelope::SigningKey>,
-    world: &[u8],
 ) -> anyhow::Result<FirstPlan> {
+    // An upload this master began and did not finish is resumed when it
+    // carries the same plan (a self-signed plan signs to new bytes each run).
     let pending = args.out.join("state").join("uploading.signed");
-    let (signed, resume) = if let Ok(bytes) = std::fs::read(&pending) {
-        eprintln!("master: resuming the upload in {}", pending.display());
-        (bytes, true)
-    } else if let Some(path) = &args.signed {
+    let unfinished = std::fs::read(&pending).ok();
+    let (signed, resume) = if let Some(path) = &args.signed {
         let bytes =
             std::fs::read(path).with_context(|| format!("--signed: reading {}", path.display()))?;
-        (bytes, false)
+        let resume = unfinished.as_deref() == Some(&bytes[..]);
+        (bytes, resume)
     } else {
         let path = args.plan.as_ref().expect("clap: --plan or --signed");
         let plan_json =
             std::fs::read(path).with_context(|| format!("--plan: reading {}", path.display()))?;
-        let key = key.expect("clap: --plan requires --key");
-        let now = super::keys::since_epoch()?;
-        let envelope = Envelope {
-            format: String::new(),
-            version: 0,
-            plan_sha256: String::new(),
-            plan_file_sha256: String::new(),
-            plan_bytes: 0,
-            plan_encoding: String::new(),
-            robot_id: args.robot.clone(),
-            counter: now.as_millis() as u64,
-            not_before_unix_s: now.as_secs().saturating_sub(60),
-            expires_unix_s: now.as_secs().saturating_add(args.expires_in),
-            world_sha256: sha256_hex(world),
-            supervision: Supervision {
-                dead_man_timeout_s: args.supervise,
-            },
-            tolerances: Tolerances::default(),
-        };
-        let signed = sign_plan(key, &plan_json, envelope)
-            .map_err(|e| anyhow::anyhow!("--plan {}: {e}", path.display()))?;
-        (signed, false)
+        let same = unfinished.as_deref().is_some_and(|u| {
+            twindrive_link::envelope::open_unchecked(u).is_ok_and(|j| j == plan_json)
+                && peek_envelope(u).is_ok_and(|e| e.robot_id == args.robot)
+        });
+        if same {
+            (unfinished.clone().expect("checked"), true)
+        } else {
+            let world = super::keys::world_bytes(&plan_json, path, args.scenario.as_deref())?;
+            let key = key.expect("clap: --plan requires --key");
+            let now = super::keys::since_epoch()?;
+            let envelope = Envelope {
+                format: String::new(),
+                version: 0,
+                plan_sha256: String::new(),
+                plan_file_sha256: String::new(),
+                plan_bytes: 0,
+                plan_encoding: String::new(),
+                robot_id: args.robot.clone(),
+                counter: now.as_millis() as u64,
+                not_before_unix_s: now.as_secs().saturating_sub(60),
+                expires_unix_s: now.as_secs().saturating_add(args.expires_in),
+                world_sha256: sha256_hex(&world),
+                supervision: Supervision {
+                    dead_man_timeout_s: args.supervise,
+                },
+                tolerances: Tolerances::default(),
+            };
+            let signed = sign_plan(key, &plan_json, envelope)
+                .map_err(|e| anyhow::anyhow!("--plan {}: {e}", path.display()))?;
+            (signed, false)
+        }
     };
+    if resume {
+        eprintln!("master: resuming the upload in {}", pending.display());
+    } else if unfinished.is_some() {
+        eprintln!(
+            "master: {} held an unfinished upload of another plan; starting this one",
+            pending.display()
+        );
+    }
     let envelope = peek_envelope(&signed).map_err(|e| anyhow::anyhow!("the signed plan: {e}"))?;
     if envelope.robot_id != args.robot {
         bail!(
@@ -254,7 +271,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(args.out.join("state"))
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let first = first_plan(args, key.as_ref(), &[])?;
+    let first = first_plan(args, key.as_ref())?;
     // The twin: the scenario the plan was rehearsed in.
     let plan_hint = args
         .plan
