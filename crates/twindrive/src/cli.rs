@@ -91,7 +91,10 @@ pub enum Command {
     /// calibration (calibration/calib.json), the paper's Table 1 and Section
     /// 6 (evidence/), the wall-following mission (wall_following/), the plan
     /// made from it (plan/), its verification on the twin (verification/),
-    /// and report.md / report.html that tell the story with the figures.
+    /// the plan signed and sent over an emulated lunar link to a robot whose
+    /// site has a box the twin lacks, with hand-backs, twin updates and
+    /// continuations in virtual time (decoupled/), and report.md /
+    /// report.html that tell the story with the figures.
     Demo {
         /// Output directory.
         #[arg(long, default_value = "twindrive-out")]
