@@ -18,7 +18,7 @@ echo "== upload efficiency (smoke)" >&2
 cargo run --release -q -p twindrive-link --example upload_efficiency -- --smoke
 # The criterion benches, each benchmark run once as a test (only the crates
 # that have benches, so the zenoh crate is not built in release for this).
-echo "== loopback, two processes over zenoh (smoke, dev build: the tests built zenoh already)" >&2
+echo "== loopback, two processes over zenoh (smoke; a dev build, the one the tests use)" >&2
 cargo run -q -p twindrive-net --example loopback -- --smoke
 echo "== cargo bench (test mode)" >&2
 cargo bench -q -p twindrive-sim -p twindrive-estimation -p twindrive-mission -p twindrive-link -- --test
