@@ -447,21 +447,15 @@ impl<S: ChunkStore> Operator<S> {
             .unwrap_or(self.config.first_counter)
             + 1;
         let now_unix = (self.config.unix_time_at_zero_s + self.now_ns as f64 * 1e-9) as u64;
-        let envelope = Envelope {
-            format: String::new(),
-            version: 0,
-            plan_sha256: String::new(),
-            plan_file_sha256: String::new(),
-            plan_bytes: 0,
-            plan_encoding: String::new(),
-            robot_id: self.config.robot_id.clone(),
+        let envelope = Envelope::new(
+            &self.config.robot_id,
             counter,
-            not_before_unix_s: now_unix.saturating_sub(60),
-            expires_unix_s: now_unix.saturating_add(self.config.expires_in_s),
-            world_sha256: sha256_hex(format!("{}{learnt}", self.config.world_sha256).as_bytes()),
-            supervision: self.config.supervision,
-            tolerances: self.config.tolerances,
-        };
+            now_unix,
+            self.config.expires_in_s,
+            sha256_hex(format!("{}{learnt}", self.config.world_sha256).as_bytes()),
+            self.config.supervision,
+            self.config.tolerances,
+        );
         let key = self
             .key
             .as_ref()

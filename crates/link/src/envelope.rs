@@ -87,6 +87,37 @@ impl Default for Tolerances {
     }
 }
 
+impl Envelope {
+    /// An envelope to sign for `robot_id`: valid from a minute before
+    /// `now_unix_s` (slack for the robot's clock) for `valid_for_s`. The
+    /// plan's own fields are filled in by [`sign_plan`].
+    pub fn new(
+        robot_id: &str,
+        counter: u64,
+        now_unix_s: u64,
+        valid_for_s: u64,
+        world_sha256: String,
+        supervision: Supervision,
+        tolerances: Tolerances,
+    ) -> Self {
+        Self {
+            format: String::new(),
+            version: 0,
+            plan_sha256: String::new(),
+            plan_file_sha256: String::new(),
+            plan_bytes: 0,
+            plan_encoding: String::new(),
+            robot_id: robot_id.into(),
+            counter,
+            not_before_unix_s: now_unix_s.saturating_sub(60),
+            expires_unix_s: now_unix_s.saturating_add(valid_for_s),
+            world_sha256,
+            supervision,
+            tolerances,
+        }
+    }
+}
+
 /// How the robot is to be watched while it drives.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -55,23 +55,17 @@ pub fn run(
     // real master's key comes from `twindrive keygen`.
     let key = SigningKey::from_bytes(&[7; 32]);
     let robot_id = "rover";
-    let envelope = Envelope {
-        format: String::new(),
-        version: 0,
-        plan_sha256: String::new(),
-        plan_file_sha256: String::new(),
-        plan_bytes: 0,
-        plan_encoding: String::new(),
-        robot_id: robot_id.into(),
-        counter: 1,
-        not_before_unix_s: UNIX_AT_ZERO_S as u64 - 60,
-        expires_unix_s: UNIX_AT_ZERO_S as u64 + 86_400,
-        world_sha256: sha256_hex(world_toml),
-        supervision: Supervision {
+    let envelope = Envelope::new(
+        robot_id,
+        1,
+        UNIX_AT_ZERO_S as u64,
+        86_400,
+        sha256_hex(world_toml),
+        Supervision {
             dead_man_timeout_s: None,
         },
-        tolerances: Tolerances::default(),
-    };
+        Tolerances::default(),
+    );
     let signed = sign_plan(&key, plan_json, envelope).context("signing the demo plan")?;
     let signed_bytes = signed.len();
 

@@ -118,24 +118,17 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
     }
     let world = world_bytes(&plan_json, &args.plan, args.scenario.as_deref())?;
     let now = since_epoch()?;
-    let envelope = Envelope {
-        format: String::new(),
-        version: 0,
-        plan_sha256: String::new(),
-        plan_file_sha256: String::new(),
-        plan_bytes: 0,
-        plan_encoding: String::new(),
-        robot_id: args.robot.clone(),
-        counter: args.counter.unwrap_or(now.as_millis() as u64),
-        // A minute of slack for the robot's clock.
-        not_before_unix_s: now.as_secs().saturating_sub(60),
-        expires_unix_s: now.as_secs().saturating_add(args.expires_in),
-        world_sha256: sha256_hex(&world),
-        supervision: Supervision {
+    let envelope = Envelope::new(
+        &args.robot,
+        args.counter.unwrap_or(now.as_millis() as u64),
+        now.as_secs(),
+        args.expires_in,
+        sha256_hex(&world),
+        Supervision {
             dead_man_timeout_s: args.supervise,
         },
-        tolerances: Default::default(),
-    };
+        Default::default(),
+    );
     let signed = sign_plan(&key, &plan_json, envelope)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
     // One file: written beside its place, synced, renamed (other signed

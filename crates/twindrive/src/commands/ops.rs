@@ -154,6 +154,8 @@ struct FirstPlan {
     plan_json: Vec<u8>,
     signed: Vec<u8>,
     counter: u64,
+    /// The hash of the twin's world in its envelope.
+    world_sha256: String,
     resume: bool,
 }
 
@@ -184,23 +186,17 @@ fn first_plan(
             let world = super::keys::world_bytes(&plan_json, path, args.scenario.as_deref())?;
             let key = key.expect("clap: --plan requires --key");
             let now = super::keys::since_epoch()?;
-            let envelope = Envelope {
-                format: String::new(),
-                version: 0,
-                plan_sha256: String::new(),
-                plan_file_sha256: String::new(),
-                plan_bytes: 0,
-                plan_encoding: String::new(),
-                robot_id: args.robot.clone(),
-                counter: now.as_millis() as u64,
-                not_before_unix_s: now.as_secs().saturating_sub(60),
-                expires_unix_s: now.as_secs().saturating_add(args.expires_in),
-                world_sha256: sha256_hex(&world),
-                supervision: Supervision {
+            let envelope = Envelope::new(
+                &args.robot,
+                now.as_millis() as u64,
+                now.as_secs(),
+                args.expires_in,
+                sha256_hex(&world),
+                Supervision {
                     dead_man_timeout_s: args.supervise,
                 },
-                tolerances: Tolerances::default(),
-            };
+                Tolerances::default(),
+            );
             let signed = sign_plan(key, &plan_json, envelope)
                 .map_err(|e| anyhow::anyhow!("--plan {}: {e}", path.display()))?;
             (signed, false)
@@ -232,6 +228,7 @@ fn first_plan(
         plan_json,
         signed,
         counter: envelope.counter,
+        world_sha256: envelope.world_sha256,
         resume,
     })
 }
@@ -273,11 +270,6 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     let first = first_plan(args, key.as_ref())?;
     // The twin: the scenario the plan was rehearsed in.
-    let plan_hint = args
-        .plan
-        .as_deref()
-        .or(args.signed.as_deref())
-        .unwrap_or(Path::new("plan"));
     let twin_scenario = match &args.scenario {
         Some(p) => Some(Scenario::load(p).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?),
         None => {
@@ -290,8 +282,6 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             first.plan.header.robot.scenario
         );
     }
-    let world = super::keys::world_bytes(&first.plan_json, plan_hint, args.scenario.as_deref())
-        .unwrap_or_default();
     // Keep what is being uploaded, so a restarted master resumes it.
     write_durably(
         &args.out.join("state").join("uploading.signed"),
@@ -342,7 +332,8 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             tolerances: Tolerances::default(),
             unix_time_at_zero_s: unix_now_s()?,
             first_counter: first.counter,
-            world_sha256: sha256_hex(&world),
+            // Continuations build on the world the first plan was signed for.
+            world_sha256: first.world_sha256.clone(),
             log_wait_s: args.log_wait,
             max_continuations: 10,
             min_continuation_s: 10.0,
