@@ -14,8 +14,8 @@ for script in sim_vs_irsim.sh ekf_vs_filterpy.sh prune_vs_distance_matrix.sh cal
     echo "== bench/$script (smoke, peers $PEERS)" >&2
     bash "bench/$script"
 done
-echo "== upload efficiency (smoke)" >&2
-cargo run --release -q -p twindrive-link --example upload_efficiency -- --smoke
+echo "== upload efficiency (smoke; twindrive experiment upload)" >&2
+cargo run -q -p twindrive -- experiment upload --smoke --seeds 1
 # The criterion benches, each benchmark run once as a test (only the crates
 # that have benches, so the zenoh crate is not built in release for this).
 echo "== loopback, two processes over zenoh (smoke; a dev build, the one the tests use)" >&2

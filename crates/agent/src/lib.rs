@@ -7,9 +7,12 @@
 //! - [`robot`]: the robot agent (uploads, plan gate, execution, online EKF,
 //!   journal, telemetry, hand-back, log back-fill);
 //! - [`master`]: the master's end (upload, supervision, telemetry, hand-backs, robot logs);
-//! - [`twin`]: updating the twin from a hand-back, and the continuation plan.
+//! - [`twin`]: updating the twin from a hand-back, and the continuation plan;
+//! - [`direct`]: direct tele-operation over the same link, the baseline
+//!   decoupled operation is measured against.
 
 pub mod backend;
+pub mod direct;
 pub mod executive;
 pub mod master;
 pub mod operator;

@@ -6,6 +6,7 @@
 
 use std::collections::{HashMap, HashSet, VecDeque};
 
+use twindrive_link::emulator::LinkProfile;
 use twindrive_link::upload::{
     ChunkStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
 };
@@ -72,6 +73,29 @@ pub struct MasterConfig {
     /// Bytes per second the robot may send (it keeps to the lower of this
     /// and its own limit).
     pub telemetry_budget_bytes_s: f64,
+}
+
+impl MasterConfig {
+    /// Settings for a master whose traffic crosses `link` (`None`: a link
+    /// of unknown character): the upload paced a little below the link's
+    /// rate (heartbeats, pings and the NAKs of the robot's log share the
+    /// way up, and a queue that never drains stretches the round trip
+    /// until chunks are sent twice), its round trip and repair shards sized
+    /// for the link's delay and loss.
+    pub fn for_link(link: Option<&LinkProfile>, telemetry_budget_bytes_s: f64) -> Self {
+        Self {
+            upload: SenderConfig {
+                pace_bit_s: link.and_then(|p| p.bandwidth_bit_s).map(|b| 0.95 * b),
+                rtt_hint_ns: link.map_or(1_000_000_000, |p| {
+                    ((2.0 * p.latency_s).max(0.05) * 1e9) as u64
+                }),
+                loss_hint: link.map_or(0.0, |p| p.loss),
+                ..SenderConfig::default()
+            },
+            heartbeat_period_s: 1.0,
+            telemetry_budget_bytes_s,
+        }
+    }
 }
 
 impl Default for MasterConfig {

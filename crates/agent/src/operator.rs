@@ -14,6 +14,7 @@ use twindrive_link::upload::ChunkStore;
 use twindrive_link::wire::{Message, PlanPhase, TransferId};
 use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::plan::{MissionPlan, hex, sha256_hex};
+use twindrive_mission::redundancy::RedundancyConfig;
 
 use crate::master::{Master, MasterEvent};
 use crate::twin::{LearnSettings, Twin, TwinUpdate, remaining_s};
@@ -61,6 +62,44 @@ pub struct OperatorConfig {
     /// The shortest continuation rehearsed (s).
     pub min_continuation_s: f64,
     pub pipeline: PipelineSettings,
+}
+
+impl OperatorConfig {
+    /// An operator that replans on a hand-back (up to ten continuations of
+    /// at least 10 s, with redundancy at the plan's footprint), for plans
+    /// valid a day and unsupervised, with the default tolerances, waiting
+    /// two minutes for the robot's logs. `first` is the plan the mission
+    /// starts with, signed for the world whose hash is `world_sha256`.
+    pub fn replanning(
+        robot_id: &str,
+        first: &MissionPlan,
+        first_counter: u64,
+        world_sha256: String,
+        unix_time_at_zero_s: f64,
+    ) -> Self {
+        Self {
+            robot_id: robot_id.into(),
+            on_handback: OnHandback::Replan,
+            expires_in_s: 86_400,
+            supervision: Supervision {
+                dead_man_timeout_s: None,
+            },
+            tolerances: Tolerances::default(),
+            unix_time_at_zero_s,
+            first_counter,
+            world_sha256,
+            log_wait_s: 120.0,
+            max_continuations: 10,
+            min_continuation_s: 10.0,
+            pipeline: PipelineSettings {
+                planner: Default::default(),
+                redundancy: RedundancyConfig::with_pinch_distance(
+                    first.header.robot.footprint_radius_m,
+                ),
+                filter: Default::default(),
+            },
+        }
+    }
 }
 
 /// The report's record of one plan sent.
@@ -187,6 +226,12 @@ impl<S: ChunkStore> Operator<S> {
             new_plans: VecDeque::new(),
             now_ns: 0,
         }
+    }
+
+    /// The settings, to change before the mission starts (what to do on
+    /// a hand-back is fixed at construction: the report records it).
+    pub fn config_mut(&mut self) -> &mut OperatorConfig {
+        &mut self.config
     }
 
     pub fn twin(&self) -> Option<&Twin> {

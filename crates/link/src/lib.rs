@@ -10,8 +10,10 @@
 //!   message or an error, never a panic);
 //! - [`upload`]: chunked, resumable upload with NAKs (sender and receiver
 //!   state machines, durable chunk stores);
-//! - [`vtime`]: two endpoints joined by emulated links in virtual time.
+//! - [`vtime`]: two endpoints joined by emulated links in virtual time;
+//! - [`efficiency`]: an upload's time against the ideal the link allows.
 
+pub mod efficiency;
 pub mod emulator;
 pub mod envelope;
 pub mod plan_codec;

@@ -99,25 +99,51 @@ pub struct Sender {
     pub stats: SenderStats,
 }
 
-/// The tail block a sender protects, and how many repair shards: enough
-/// for the block's expected losses plus two and a third standard
-/// deviations and one, over at least two round trips of chunks.
+/// The tail block a sender protects, and how many repair shards. The
+/// block spans four round trips of chunks: a chunk lost before it is
+/// NAKed and resent (twice, if need be) before the first pass ends (at
+/// least 64 chunks: on a fast link a round trip is a few chunks). A repair
+/// shard costs one chunk's time on the link; a shortfall costs about two
+/// round trips after the end: shards are added while the chance of a
+/// shortfall, times that, outweighs one more shard.
 fn tail_block(chunks: u32, chunk_bytes: u32, config: &SenderConfig) -> (u32, u32) {
     let p = config.loss_hint;
     if !(p > 0.0 && p < 1.0) || chunks == 0 {
         return (chunks, 0);
     }
-    let in_two_rtt = match config.pace_bit_s {
-        Some(rate) => {
-            let per_chunk_bits = 8.0 * (f64::from(chunk_bytes) + 64.0);
-            (2.0 * config.rtt_hint_ns as f64 * 1e-9 * rate / per_chunk_bits).ceil() as u32
-        }
-        None => 256,
+    let per_chunk_bits = 8.0 * (f64::from(chunk_bytes) + 64.0);
+    let rtt_s = config.rtt_hint_ns as f64 * 1e-9;
+    let (in_four_rtt, chunk_s) = match config.pace_bit_s {
+        Some(rate) => (
+            (4.0 * rtt_s * rate / per_chunk_bits).ceil() as u32,
+            per_chunk_bits / rate,
+        ),
+        None => (256, 0.0),
     };
-    let block = chunks.min(in_two_rtt.clamp(16, 4096));
+    let block = chunks.min(in_four_rtt.clamp(64, 4096));
     let n = f64::from(block);
-    let repairs = (n * p / (1.0 - p) + 2.33 * (n * p).sqrt()).ceil() as u32 + 1;
-    (chunks - block, repairs.min(4096))
+    let mut repairs = (n * p / (1.0 - p)).ceil() as u32;
+    // A shortfall is found at the end of the file, asked for and resent:
+    // about two round trips.
+    while repairs < 4096 && shortfall_probability(block, repairs, p) * 2.0 * rtt_s > chunk_s {
+        repairs += 1;
+    }
+    (chunks - block, repairs.max(1))
+}
+
+/// The chance that more than `repairs` of `block + repairs` shards are
+/// lost, each with probability `p`.
+fn shortfall_probability(block: u32, repairs: u32, p: f64) -> f64 {
+    let n = block + repairs;
+    // P(X <= repairs) for X ~ Binomial(n, p), term by term in logs.
+    let (ln_p, ln_q) = (p.ln(), (1.0 - p).ln());
+    let mut ln_term = f64::from(n) * ln_q;
+    let mut held = ln_term.exp();
+    for k in 1..=repairs.min(n) {
+        ln_term += (f64::from(n - k + 1) / f64::from(k)).ln() + ln_p - ln_q;
+        held += ln_term.exp();
+    }
+    (1.0 - held).max(0.0)
 }
 
 impl Sender {
@@ -215,8 +241,11 @@ impl Sender {
                 let first = !self.answered;
                 if first {
                     self.answered = true;
+                    // The first NAK answers the offer, unless that answer
+                    // was lost and this one reports a gap much later: a
+                    // round trip above the hint is not believed.
                     if let Some(t) = self.offer_sent_at {
-                        self.rtt_ns = now_ns.saturating_sub(t).max(1);
+                        self.rtt_ns = now_ns.saturating_sub(t).min(self.config.rtt_hint_ns).max(1);
                     }
                 }
                 // The answer to a fresh upload's offer lists every chunk not
@@ -264,12 +293,24 @@ impl Sender {
             }
         }
         self.stats.chunks_confirmed = received.min(n);
+        // Chunks sent before and lost go ahead of the first pass, lowest
+        // first: a loss repaired early costs no round trip at the end.
+        let mut again = Vec::new();
         for (k, &gone) in is_missing.iter().enumerate() {
-            // Not again if it is still on its way.
-            let in_flight = self.sent_at[k].is_some_and(|t| now_ns < t + self.rtt_ns);
+            // Not again if it may still be on its way, or the NAK left the
+            // receiver before it could have arrived.
+            let in_flight = self.sent_at[k].is_some_and(|t| now_ns < t + self.in_flight_ns());
             if gone && !in_flight {
-                self.enqueue(k as u32);
+                if self.sent_at[k].is_some() && !self.queued[k] && !self.confirmed[k] {
+                    again.push(k as u32);
+                } else {
+                    self.enqueue(k as u32);
+                }
             }
+        }
+        for &k in again.iter().rev() {
+            self.queued[k as usize] = true;
+            self.queue.push_front(k);
         }
     }
 
@@ -379,6 +420,19 @@ impl Sender {
         }
     }
 
+    /// How long after sending a chunk a NAK that lists it may be stale:
+    /// the round trip with a quarter of it for jitter, and the chunk's own
+    /// time on the link.
+    fn in_flight_ns(&self) -> u64 {
+        let tx_ns = self.config.pace_bit_s.map_or(0, |rate| {
+            (8.0 * (f64::from(self.offer.chunk_size) + 64.0) / rate * 1e9) as u64
+        });
+        // The hint, when the one sample taken is shorter: a sample caught
+        // two lucky draws of jitter.
+        let rtt = self.rtt_ns.max(self.config.rtt_hint_ns);
+        rtt + rtt / 4 + tx_ns
+    }
+
     fn pace(&mut self, now_ns: u64, bytes: usize) {
         if let Some(rate) = self.config.pace_bit_s {
             self.next_send_ns = now_ns + (8.0 * bytes as f64 / rate * 1e9).ceil() as u64;
@@ -474,6 +528,10 @@ struct Transfer {
     highest: Option<u32>,
     eof_seen: bool,
     last_nak_ns: Option<u64>,
+    /// Chunks held when the last NAK went.
+    received_at_last_nak: u32,
+    /// Every chunk below this one is held.
+    low_water: u32,
     nak_now: bool,
     /// The next NAK lists every chunk (an answer to an offer).
     full: bool,
@@ -629,6 +687,8 @@ impl<S: ChunkStore> Receiver<S> {
             highest,
             eof_seen: false,
             last_nak_ns: None,
+            received_at_last_nak: 0,
+            low_water: 0,
             nak_now: true,
             full: true,
             done: false,
@@ -709,9 +769,27 @@ impl<S: ChunkStore> Receiver<S> {
         }
         t.have[index as usize] = true;
         t.received += 1;
-        // A gap below a new highest chunk: NAK soon.
-        if t.highest.is_some_and(|h| index > h + 1) || (t.highest.is_none() && index > 0) {
-            t.nak_now = t.nak_now || t.last_nak_ns.is_none();
+        // A new gap below this chunk: NAK at once, so that the loss is
+        // repaired during the pass and not after its end (gaps in the tail
+        // block wait for its repair shards).
+        let gap_from = t.highest.map_or(0, |h| h + 1);
+        let protected_from = if t.offer.fec_repairs > 0 {
+            t.offer.fec_from
+        } else {
+            t.offer.chunks()
+        };
+        if index > gap_from && gap_from < protected_from {
+            t.nak_now = true;
+        }
+        // Gaps below the tail block still open after another 16 chunks (a
+        // resent chunk lost again): NAK again, at a pace set by the link's
+        // own rate, not a timer.
+        while t.low_water < t.offer.chunks() && t.have[t.low_water as usize] {
+            t.low_water += 1;
+        }
+        let open_gap = t.low_water < protected_from.min(t.highest.map_or(0, |h| h.max(index)));
+        if open_gap && t.received >= t.received_at_last_nak + 16 {
+            t.nak_now = true;
         }
         t.highest = Some(t.highest.map_or(index, |h| h.max(index)));
         self.events.push_back(ReceiverEvent::Progress {
@@ -871,6 +949,7 @@ impl<S: ChunkStore> Receiver<S> {
         }
         t.nak_now = false;
         t.last_nak_ns = Some(now_ns);
+        t.received_at_last_nak = t.received;
         // Missing ranges up to the highest chunk seen (all of them after
         // the end of the file), lowest first.
         let upto = if t.eof_seen || t.full || t.highest.is_none() {

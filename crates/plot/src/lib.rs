@@ -205,9 +205,44 @@ impl WorldFigure<'_> {
     }
 }
 
-impl TimeFigure<'_> {
+/// Time figures side by side in one file, each with its own axes (the
+/// same quantity under two conditions, say).
+#[derive(Debug, Clone, Copy)]
+pub struct Panels<'a> {
+    pub panels: &'a [TimeFigure<'a>],
+}
+
+impl Panels<'_> {
     /// Writes `<base>.svg` and `<base>.png`.
     pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+        let specs = self
+            .panels
+            .iter()
+            .map(TimeFigure::spec)
+            .collect::<Result<Vec<_>, _>>()?;
+        let n = specs.len().max(1) as u32;
+        write_both(
+            base,
+            (700 * n, 450),
+            |r| draw_panels(r, &specs),
+            |r| draw_panels(r, &specs),
+        )
+    }
+}
+
+fn draw_panels<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    specs: &[ChartSpec],
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    for (area, spec) in root.split_evenly((1, specs.len().max(1))).iter().zip(specs) {
+        draw_chart(area, spec)?;
+    }
+    Ok(())
+}
+
+impl<'a> TimeFigure<'a> {
+    fn spec(&self) -> Result<ChartSpec<'a>, PlotError> {
         let all = self
             .series
             .iter()
@@ -223,18 +258,24 @@ impl TimeFigure<'_> {
             message: "nothing to draw".into(),
         })?;
         let ypad = 0.05 * (y1 - y0).max(1e-6);
-        let range = (x0, x1.max(x0 + 1e-9), y0 - ypad, y1 + ypad);
-        let spec = ChartSpec {
+        Ok(ChartSpec {
             title: self.title,
             x_label: self.x_label,
             y_label: self.y_label,
-            range,
+            range: (x0, x1.max(x0 + 1e-9), y0 - ypad, y1 + ypad),
             walls: &[],
             series: self.series,
             markers: self.markers,
             bands: self.bands,
             marker_radius: 3,
-        };
+        })
+    }
+}
+
+impl TimeFigure<'_> {
+    /// Writes `<base>.svg` and `<base>.png`.
+    pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+        let spec = self.spec()?;
         write_both(
             base,
             (1100, 450),

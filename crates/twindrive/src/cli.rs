@@ -93,8 +93,10 @@ pub enum Command {
     /// made from it (plan/), its verification on the twin (verification/),
     /// the plan signed and sent over an emulated lunar link to a robot whose
     /// site has a box the twin lacks, with hand-backs, twin updates and
-    /// continuations in virtual time (decoupled/), and report.md /
-    /// report.html that tell the story with the figures.
+    /// continuations in virtual time (decoupled/), a short version of
+    /// `experiment latency` (direct against decoupled operation at 0, 0.5
+    /// and 2 s one way: experiment/), and report.md / report.html that tell
+    /// the story with the figures.
     Demo {
         /// Output directory.
         #[arg(long, default_value = "twindrive-out")]
@@ -138,6 +140,12 @@ pub enum Command {
     /// Exits 0 when the mission completed, 3 when it ended handed back, 4
     /// when the robot rejected the plan, 1 when it failed.
     Master(MasterArgs),
+    /// Measure what decoupling buys: direct against decoupled operation
+    /// over latency and loss, and the upload against the link's ideal.
+    Experiment {
+        #[command(subcommand)]
+        command: ExperimentCommand,
+    },
     /// Run a zenoh router for a fleet: robots and masters connect to it
     /// (`--connect tcp/HOST:PORT`) instead of to each other.
     Router {
@@ -148,6 +156,88 @@ pub enum Command {
         #[arg(long, value_name = "FILE")]
         zenoh_config: Option<PathBuf>,
     },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExperimentCommand {
+    /// Direct tele-operation (a: the robot holds the last command; b: it
+    /// zeroes its wheels after a timeout; c: move-and-wait) against
+    /// decoupled operation, on the same robot site, seeds and link, over a
+    /// grid of one-way latencies and losses, in virtual time.
+    ///
+    /// The twin rehearses the mission (default: the wall-following case
+    /// study) and the plan's path is the intended route. The site is the
+    /// twin with other true kinematics (wheel diameters x1.004 and x0.996,
+    /// wheelbase x1.01) unless --site. Per run: completion time (upload
+    /// included), collisions, bumps, time in contact, coverage of the route
+    /// within --coverage-radius, path error against the route, bytes each
+    /// way. Writes results.csv (one row per run), results.md (tables) and
+    /// the figures completion_time, collisions and paths (SVG and PNG) into
+    /// --out.
+    Latency(LatencyExperimentArgs),
+    /// Upload the case-study plan (140 kB signed) and a one-hour plan
+    /// (7.5 MB) over each named profile at 0, 1, 10 and 30 % loss, and
+    /// through a 60 s outage mid-upload, in virtual time; print the time
+    /// until the robot holds the file against the ideal
+    /// `D + S(1+h)/(B(1-p))`. The target: within 1.1x at loss up to 10 %.
+    Upload(UploadExperimentArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct LatencyExperimentArgs {
+    /// Output directory.
+    #[arg(long, default_value = "twindrive-out/experiment-latency")]
+    pub out: PathBuf,
+    /// The twin's scenario (its controller must be a wall follower).
+    #[arg(long, value_name = "S.toml")]
+    pub scenario: Option<PathBuf>,
+    /// The robot's site (default: the twin with other true kinematics).
+    #[arg(long, value_name = "SITE.toml")]
+    pub site: Option<PathBuf>,
+    /// The twin's calibration (from `twindrive calibrate`; default: the
+    /// built-in calibration drive with the twin's robot, calibrated).
+    #[arg(long, value_name = "CALIB.json")]
+    pub calibration: Option<PathBuf>,
+    /// One-way latencies, seconds, comma-separated.
+    #[arg(long, default_value = "0,0.25,0.5,1,2,5")]
+    pub latencies: String,
+    /// Loss rates (fractions), comma-separated.
+    #[arg(long, default_value = "0,0.1")]
+    pub losses: String,
+    /// Seeds per cell (the site's noise and the link's draws).
+    #[arg(long, default_value_t = 3)]
+    pub seeds: u64,
+    /// The link's rate, bit/s, both ways.
+    #[arg(long, value_name = "BIT_PER_S", default_value_t = 256_000.0)]
+    pub bandwidth: f64,
+    /// Direct (b): wheels zeroed after this long without a command, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.5)]
+    pub watchdog_timeout: f64,
+    /// Direct (c): the length of one move, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.5)]
+    pub move_s: f64,
+    /// The route counts as covered within this distance of the robot, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 0.15)]
+    pub coverage_radius: f64,
+    /// A direct run is complete once this share of the route is covered.
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.9)]
+    pub complete_at: f64,
+    /// Give a run up after this long, seconds of mission time.
+    #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0)]
+    pub max_duration: f64,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct UploadExperimentArgs {
+    /// Also write results.csv and results.md here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Seeds per row.
+    #[arg(long, default_value_t = 5)]
+    pub seeds: u64,
+    /// A quick run (one 20 kB file, loss up to 10 %) that only checks it works.
+    #[arg(long)]
+    pub smoke: bool,
 }
 
 /// Where and how to reach the other side over zenoh.

@@ -9,18 +9,16 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::Context;
-use twindrive_agent::backend::SimBackend;
+use twindrive_agent::backend::{RobotBackend, SimBackend};
 use twindrive_agent::master::{Master, MasterConfig};
-use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome, Report};
+use twindrive_agent::operator::{Operator, OperatorConfig, Outcome, Report};
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
 use twindrive_agent::twin::Twin;
 use twindrive_link::emulator::{LinkEmulator, LinkProfile};
 use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, sign_plan};
-use twindrive_link::upload::{MemoryStore, SenderConfig};
+use twindrive_link::upload::MemoryStore;
 use twindrive_link::vtime::VirtualLink;
-use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
-use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_plot::{Markers, Series, TimeFigure, WorldFigure, palette};
 use twindrive_sim::Scenario;
 
@@ -54,83 +52,34 @@ pub fn run(
     // A fixed key: the demo is deterministic (same seed, same bytes); a
     // real master's key comes from `twindrive keygen`.
     let key = SigningKey::from_bytes(&[7; 32]);
-    let robot_id = "rover";
-    let envelope = Envelope::new(
-        robot_id,
-        1,
-        UNIX_AT_ZERO_S as u64,
-        86_400,
-        sha256_hex(world_toml),
-        Supervision {
-            dead_man_timeout_s: None,
-        },
-        Tolerances::default(),
-    );
-    let signed = sign_plan(&key, plan_json, envelope).context("signing the demo plan")?;
-    let signed_bytes = signed.len();
-
     let profile: LinkProfile = PROFILE.parse().expect("a named profile");
-    let mut link = VirtualLink::new(
-        LinkEmulator::new(profile.clone(), 1, 0),
-        LinkEmulator::new(profile.clone(), 1, 1),
-    );
-    let master = Master::new(
-        robot_id,
-        MasterConfig {
-            upload: SenderConfig {
-                // Below the link's rate: control traffic shares the way up.
-                pace_bit_s: profile.bandwidth_bit_s.map(|b| 0.95 * b),
-                rtt_hint_ns: (2.0 * profile.latency_s * 1e9) as u64,
-                loss_hint: profile.loss,
-                ..SenderConfig::default()
-            },
-            heartbeat_period_s: 1.0,
-            telemetry_budget_bytes_s: 8_000.0,
-        },
-        MemoryStore::default(),
-    );
-    let mut op = Operator::new(
-        master,
-        Some(Twin::new(twin.clone(), plan.header.calibrated)),
-        Some(key.clone()),
-        OperatorConfig {
-            robot_id: robot_id.into(),
-            on_handback: OnHandback::Replan,
-            expires_in_s: 86_400,
-            supervision: Supervision {
-                dead_man_timeout_s: None,
-            },
-            tolerances: Tolerances::default(),
-            unix_time_at_zero_s: UNIX_AT_ZERO_S,
-            first_counter: 1,
-            world_sha256: sha256_hex(world_toml),
-            log_wait_s: 1_200.0,
-            max_continuations: 8,
-            min_continuation_s: 10.0,
-            pipeline: PipelineSettings {
-                planner: Default::default(),
-                redundancy: RedundancyConfig::with_pinch_distance(
-                    plan.header.robot.footprint_radius_m,
-                ),
-                filter: Default::default(),
-            },
-        },
-    );
     // The robot's site: the twin's world and the box.
     let mut site = twin.clone();
     site.world = site.world.with_blocks(&[SITE_BOX]);
     let backend = SimBackend::new(site.clone(), plan.samples[0].pose(), 3_600.0)
         .map_err(|e| anyhow::anyhow!("the demo site: {e}"))?;
     std::fs::create_dir_all(out.parent().unwrap_or(Path::new(".")))?;
-    let state = tempfile::Builder::new()
-        .prefix(".twindrive-robot-")
-        .tempdir_in(out.parent().unwrap_or(Path::new(".")))
-        .context("the demo robot's state directory")?;
-    let mut config = AgentConfig::new(robot_id, state.path(), vec![key.verifying_key()]);
-    config.unix_time_at_zero_s = UNIX_AT_ZERO_S;
-    let mut robot = RobotAgent::new(config, backend).context("the demo robot")?;
-
-    op.start(Arc::new(plan.clone()), signed, 1, false, 0);
+    let mut mission = Mission::new(
+        plan,
+        plan_json,
+        twin,
+        world_toml,
+        &key,
+        &profile,
+        1,
+        backend,
+        out.parent().unwrap_or(Path::new(".")),
+    )?;
+    mission.op.config_mut().max_continuations = 8;
+    mission.op.config_mut().log_wait_s = 1_200.0;
+    let signed_bytes = mission.signed_bytes;
+    let Mission {
+        mut op,
+        mut robot,
+        mut link,
+        state,
+        ..
+    } = mission;
     let done = link.run(&mut op, &mut robot, 3_600 * 1_000_000_000, |op, _| {
         op.is_done()
     });
@@ -249,6 +198,84 @@ pub fn run(
         plan_duration_s: plan.duration_s(),
         virtual_s,
     })
+}
+
+/// A decoupled mission in one process: the operator (master and twin) and
+/// the robot agent joined by an emulated link in virtual time, the plan
+/// signed and its upload started.
+pub struct Mission<B: RobotBackend> {
+    pub op: Operator<MemoryStore>,
+    pub robot: RobotAgent<B>,
+    pub link: VirtualLink,
+    /// The robot's state directory (removed on drop).
+    pub state: tempfile::TempDir,
+    pub signed_bytes: usize,
+}
+
+impl<B: RobotBackend> Mission<B> {
+    /// `plan` (its JSON `plan_json`), rehearsed on `twin` whose world file
+    /// is `world_toml`, signed with `key` for robot `rover` and on its way
+    /// over `profile` (seeded with `seed`) to a robot driving `backend`,
+    /// whose state directory is made in `state_parent`. The operator
+    /// replans on a hand-back.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        plan: &MissionPlan,
+        plan_json: &[u8],
+        twin: &Scenario,
+        world_toml: &[u8],
+        key: &SigningKey,
+        profile: &LinkProfile,
+        seed: u64,
+        backend: B,
+        state_parent: &Path,
+    ) -> anyhow::Result<Self> {
+        let robot_id = "rover";
+        let world_sha256 = sha256_hex(world_toml);
+        let envelope = Envelope::new(
+            robot_id,
+            1,
+            UNIX_AT_ZERO_S as u64,
+            86_400,
+            world_sha256.clone(),
+            Supervision {
+                dead_man_timeout_s: None,
+            },
+            Tolerances::default(),
+        );
+        let signed = sign_plan(key, plan_json, envelope).context("signing the plan")?;
+        let signed_bytes = signed.len();
+        let link = VirtualLink::new(
+            LinkEmulator::new(profile.clone(), seed, 0),
+            LinkEmulator::new(profile.clone(), seed, 1),
+        );
+        let master = Master::new(
+            robot_id,
+            MasterConfig::for_link(Some(profile), 8_000.0),
+            MemoryStore::default(),
+        );
+        let mut op = Operator::new(
+            master,
+            Some(Twin::new(twin.clone(), plan.header.calibrated)),
+            Some(key.clone()),
+            OperatorConfig::replanning(robot_id, plan, 1, world_sha256, UNIX_AT_ZERO_S),
+        );
+        let state = tempfile::Builder::new()
+            .prefix(".twindrive-robot-")
+            .tempdir_in(state_parent)
+            .context("the robot's state directory")?;
+        let mut config = AgentConfig::new(robot_id, state.path(), vec![key.verifying_key()]);
+        config.unix_time_at_zero_s = UNIX_AT_ZERO_S;
+        let robot = RobotAgent::new(config, backend).context("the robot agent")?;
+        op.start(Arc::new(plan.clone()), signed, 1, false, 0);
+        Ok(Self {
+            op,
+            robot,
+            link,
+            state,
+            signed_bytes,
+        })
+    }
 }
 
 /// Lanes over mission time: the link up, each upload, each execution, each

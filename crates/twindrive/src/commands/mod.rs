@@ -4,6 +4,7 @@ mod calibrate;
 mod demo;
 mod demo_decoupled;
 mod draw_map;
+mod experiment;
 mod keys;
 mod ops;
 mod plan;
@@ -35,6 +36,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Sign(a) => keys::sign(&a),
         Command::Robot(a) => ops::robot(&a),
         Command::Master(a) => ops::master(&a),
+        Command::Experiment { command } => experiment::run(&command),
         Command::Router {
             listen,
             zenoh_config,

@@ -19,10 +19,8 @@ use twindrive_link::envelope::{
     Envelope, Supervision, Tolerances, peek_envelope, read_private_key_pem, read_public_key_pem,
     sha256_hex, sign_plan,
 };
-use twindrive_link::upload::{DirStore, SenderConfig, write_durably};
-use twindrive_mission::pipeline::PipelineSettings;
+use twindrive_link::upload::{DirStore, write_durably};
 use twindrive_mission::plan::MissionPlan;
-use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_net::{Emulation, SessionOptions, down_key, open_session, up_key};
 use twindrive_sim::Scenario;
 
@@ -290,28 +288,9 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     .context("keeping the upload's state")?;
     write_plan_files(&args.out, &first.plan, &first.plan_json, &first.signed)?;
 
-    let upload = SenderConfig {
-        // A little below the link's rate: heartbeats, pings and the NAKs
-        // of the robot's log share the way up, and a queue that never
-        // drains stretches the round trip until chunks are sent twice.
-        pace_bit_s: profile
-            .as_ref()
-            .and_then(|p| p.bandwidth_bit_s)
-            .map(|b| 0.95 * b),
-        rtt_hint_ns: profile.as_ref().map_or(1_000_000_000, |p| {
-            ((2.0 * p.latency_s).max(0.05) * 1e9) as u64
-        }),
-        // Repair shards sized for the emulated link's loss.
-        loss_hint: profile.as_ref().map_or(0.0, |p| p.loss),
-        ..SenderConfig::default()
-    };
     let master = Master::new(
         &args.robot,
-        MasterConfig {
-            upload,
-            heartbeat_period_s: 1.0,
-            telemetry_budget_bytes_s: args.telemetry_budget,
-        },
+        MasterConfig::for_link(profile.as_ref(), args.telemetry_budget),
         DirStore::new(args.out.join("state").join("log_chunks")),
     );
     let calibrated = first.plan.header.calibrated;
@@ -320,7 +299,6 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         twin_scenario.map(|s| Twin::new(s, calibrated)),
         key.clone(),
         OperatorConfig {
-            robot_id: args.robot.clone(),
             on_handback: match args.on_handback {
                 OnHandbackArg::Stop => OnHandback::Stop,
                 OnHandbackArg::Replan => OnHandback::Replan,
@@ -329,21 +307,15 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             supervision: Supervision {
                 dead_man_timeout_s: args.supervise,
             },
-            tolerances: Tolerances::default(),
-            unix_time_at_zero_s: unix_now_s()?,
-            first_counter: first.counter,
-            // Continuations build on the world the first plan was signed for.
-            world_sha256: first.world_sha256.clone(),
             log_wait_s: args.log_wait,
-            max_continuations: 10,
-            min_continuation_s: 10.0,
-            pipeline: PipelineSettings {
-                planner: Default::default(),
-                redundancy: RedundancyConfig::with_pinch_distance(
-                    first.plan.header.robot.footprint_radius_m,
-                ),
-                filter: Default::default(),
-            },
+            // Continuations build on the world the first plan was signed for.
+            ..OperatorConfig::replanning(
+                &args.robot,
+                &first.plan,
+                first.counter,
+                first.world_sha256.clone(),
+                unix_now_s()?,
+            )
         },
     );
     op.start(

@@ -1,0 +1,159 @@
+//! `twindrive experiment`: the latency experiment end to end on a reduced
+//! grid, and the upload experiment in smoke mode.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::process::Command;
+
+fn twindrive() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_twindrive"))
+}
+
+/// `results.csv` as one map per row, by column name.
+fn read_csv(path: &Path) -> Vec<HashMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .cloned()
+                .zip(l.split(',').map(String::from))
+                .collect()
+        })
+        .collect()
+}
+
+fn num(row: &HashMap<String, String>, column: &str) -> f64 {
+    row[column]
+        .parse()
+        .unwrap_or_else(|_| panic!("{column} = {:?}", row[column]))
+}
+
+#[test]
+fn the_latency_experiment_fills_every_cell_and_decoupled_operation_never_collides() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = twindrive()
+        .args([
+            "experiment",
+            "latency",
+            "--latencies",
+            "0,2",
+            "--losses",
+            "0,0.1",
+            "--seeds",
+            "1",
+            "--max-duration",
+            "900",
+            "--out",
+        ])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = read_csv(&dir.path().join("results.csv"));
+    let methods = [
+        "direct (a) hold-last",
+        "direct (b) watchdog",
+        "direct (c) move-and-wait",
+        "decoupled",
+    ];
+    assert_eq!(rows.len(), methods.len() * 2 * 2);
+    let find = |method: &str, latency: f64, loss: f64| {
+        rows.iter()
+            .find(|r| {
+                r["method"] == method && num(r, "latency_s") == latency && num(r, "loss") == loss
+            })
+            .unwrap_or_else(|| panic!("no row for {method} at {latency} s, loss {loss}"))
+    };
+    for loss in [0.0, 0.1] {
+        for latency in [0.0, 2.0] {
+            for m in methods {
+                find(m, latency, loss);
+            }
+            // Decoupled: no contact at all, the mission completed and the
+            // route covered, whatever the link.
+            let d = find("decoupled", latency, loss);
+            assert_eq!(d["completed"], "true", "{d:?}");
+            assert_eq!(num(d, "collisions"), 0.0, "{d:?}");
+            assert_eq!(num(d, "bumps"), 0.0, "{d:?}");
+            assert!(num(d, "coverage_percent") > 95.0, "{d:?}");
+            assert!(num(d, "bytes_up") > 100_000.0, "the plan went up: {d:?}");
+        }
+        // Direct (a): the same controller, delayed, runs into walls more.
+        let contacts = |latency: f64| {
+            let r = find("direct (a) hold-last", latency, loss);
+            num(r, "collisions") + num(r, "bumps")
+        };
+        assert!(
+            contacts(2.0) > contacts(0.0),
+            "loss {loss}: {} contacts at 2 s against {} at 0 s",
+            contacts(2.0),
+            contacts(0.0)
+        );
+        // Move-and-wait completes, but pays a round trip per move.
+        let mw = |latency: f64| {
+            num(
+                find("direct (c) move-and-wait", latency, loss),
+                "completion_s",
+            )
+        };
+        assert!(
+            mw(2.0) > 3.0 * mw(0.0),
+            "{} s against {} s",
+            mw(2.0),
+            mw(0.0)
+        );
+    }
+    let md = std::fs::read_to_string(dir.path().join("results.md")).unwrap();
+    assert!(md.contains("Completion time (s), loss 10 %"), "{md}");
+    for f in [
+        "completion_time.svg",
+        "completion_time.png",
+        "collisions.svg",
+        "paths.png",
+    ] {
+        assert!(dir.path().join(f).is_file(), "{f} missing");
+    }
+}
+
+#[test]
+fn the_latency_experiment_refuses_a_bad_grid_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = twindrive()
+        .args(["experiment", "latency", "--latencies", "0,fast", "--out"])
+        .arg(dir.path().join("x"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--latencies") && err.contains("fast"), "{err}");
+    assert!(!dir.path().join("x").exists(), "nothing written");
+}
+
+#[test]
+fn the_upload_experiment_completes_every_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = twindrive()
+        .args(["experiment", "upload", "--smoke", "--seeds", "1", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = read_csv(&dir.path().join("results.csv"));
+    assert_eq!(rows.len(), 4 * 4, "four profiles, four losses");
+    for r in &rows {
+        assert!(num(r, "mean_time_s") > 0.0, "{r:?}");
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("60 s outage"), "{stdout}");
+}
