@@ -157,6 +157,8 @@ pub struct Report {
     /// The link's round trip (median of the pings answered, s).
     pub link_rtt_median_s: Option<f64>,
     pub pings_answered: usize,
+    /// Unix time (s) at the timeline's zero.
+    pub unix_time_at_zero_s: f64,
     pub timeline: Vec<TimelineEntry>,
 }
 
@@ -212,6 +214,7 @@ impl<S: ChunkStore> Operator<S> {
                 status_messages: 0,
                 link_rtt_median_s: None,
                 pings_answered: 0,
+                unix_time_at_zero_s: config.unix_time_at_zero_s,
                 timeline: Vec::new(),
             },
             master,

@@ -170,6 +170,10 @@ pub struct RobotAgent<B: RobotBackend> {
     next_status_ns: u64,
     handback: Option<(Handback, u64)>,
     backfills: VecDeque<Backfill>,
+    /// Logs of plans that just ended, written once the hand-back (if any)
+    /// has gone: a log takes a while to encode and sync, the hand-back
+    /// must not wait for it.
+    unwritten: VecDeque<(String, MissionLog)>,
     outbox: VecDeque<Body>,
     last_progress_journaled: u32,
     /// Latest EKF estimate (params and their standard deviations).
@@ -239,6 +243,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             next_status_ns: 0,
             handback: None,
             backfills: VecDeque::new(),
+            unwritten: VecDeque::new(),
             outbox: VecDeque::new(),
             last_progress_journaled: 0,
             params: [f64::NAN; 3],
@@ -358,7 +363,7 @@ impl<B: RobotBackend> RobotAgent<B> {
 
     /// Logs not yet acknowledged by the master.
     pub fn logs_pending(&self) -> usize {
-        self.backfills.len()
+        self.backfills.len() + self.unwritten.len()
     }
 
     fn unix_now_s(&self, now_ns: u64) -> u64 {
@@ -368,6 +373,7 @@ impl<B: RobotBackend> RobotAgent<B> {
     fn record(&mut self, now_ns: u64, event: &str, details: serde_json::Value) {
         let mut line = json!({
             "t": now_ns as f64 * 1e-9,
+            "unix_s": self.config.unix_time_at_zero_s + now_ns as f64 * 1e-9,
             "event": event,
             "wheel_travel_rad": self.backend.wheel_travel_rad(),
         });
@@ -796,7 +802,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             );
             self.handback = Some((handback, 0));
         }
-        self.write_log(&plan.sha256, &r.log, now_ns);
+        self.unwritten.push_back((plan.sha256.clone(), r.log));
         self.next_status_ns = now_ns;
     }
 
@@ -889,7 +895,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             deviation_m,
             range_residual_m,
             wheel_travel_rad: self.backend.wheel_travel_rad(),
-            logs_pending: self.backfills.len() as u32,
+            logs_pending: self.logs_pending() as u32,
             bumps: self.bumps,
             collisions: self.collisions,
         }
@@ -926,6 +932,10 @@ impl<B: RobotBackend> RobotAgent<B> {
         if let Some(m) = self.receiver.poll_transmit(now_ns) {
             return Some(m);
         }
+        // Everything urgent has gone: write the logs of plans that ended.
+        while let Some((sha, log)) = self.unwritten.pop_front() {
+            self.write_log(&sha, &log, now_ns);
+        }
         // Logs back-fill one at a time, oldest first.
         while let Some(b) = self.backfills.front_mut() {
             if b.sender.is_finished() || b.sender.refused().is_some() {
@@ -945,7 +955,7 @@ impl<B: RobotBackend> RobotAgent<B> {
 
     /// When the agent next wants `poll_transmit` called.
     pub fn poll_timeout(&self) -> Option<u64> {
-        if !self.outbox.is_empty() {
+        if !self.outbox.is_empty() || !self.unwritten.is_empty() {
             return Some(0);
         }
         let handback = self.handback.as_ref().map(|(_, last)| {

@@ -20,6 +20,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::path::Path;
 use std::time::{Duration, Instant};
+pub use zenoh::Session;
 
 use twindrive_link::LinkEmulator;
 use twindrive_link::vtime::{Endpoint, InFlight};
@@ -104,6 +105,8 @@ pub const STARTUP_WAIT: Duration = Duration::from_secs(3);
 pub struct DriveStats {
     pub messages_sent: u64,
     pub messages_received: u64,
+    /// Bytes of the messages received for this robot.
+    pub bytes_received: u64,
     /// Payloads that were not messages, or not for this robot: logged and
     /// dropped.
     pub garbage: u64,
@@ -127,10 +130,36 @@ pub async fn drive<E: Endpoint>(
     robot_id: &str,
     tx_key: &str,
     rx_key: &str,
+    emulation: Option<Emulation>,
+    deadline: Duration,
+    done: impl FnMut(&mut E) -> bool,
+) -> anyhow::Result<DriveStats> {
+    let mut stats = DriveStats::default();
+    let zero = Instant::now();
+    drive_counting(
+        endpoint, session, robot_id, tx_key, rx_key, emulation, deadline, zero, &mut stats, done,
+    )
+    .await
+    .map(|()| stats)
+}
+
+/// [`drive`] on a clock whose zero is `zero` (the endpoint's `now_ns`
+/// counts from it; an owner that also stamps Unix time takes both at one
+/// moment), counting into `stats` as it goes (they hold what happened when
+/// it fails too).
+#[allow(clippy::too_many_arguments)]
+pub async fn drive_counting<E: Endpoint>(
+    endpoint: &mut E,
+    session: &zenoh::Session,
+    robot_id: &str,
+    tx_key: &str,
+    rx_key: &str,
     mut emulation: Option<Emulation>,
     deadline: Duration,
+    zero: Instant,
+    stats: &mut DriveStats,
     mut done: impl FnMut(&mut E) -> bool,
-) -> anyhow::Result<DriveStats> {
+) -> anyhow::Result<()> {
     let publisher = session
         .declare_publisher(tx_key.to_owned())
         .await
@@ -153,9 +182,8 @@ pub async fn drive<E: Endpoint>(
             }
         }
     }
-    let start = Instant::now();
+    let start = zero;
     let now_ns = || start.elapsed().as_nanos() as u64;
-    let mut stats = DriveStats::default();
     // Emulated delays: (due time, order, outgoing?, bytes).
     let mut delayed: BinaryHeap<InFlight> = BinaryHeap::new();
     let mut order = 0u64;
@@ -170,7 +198,7 @@ pub async fn drive<E: Endpoint>(
                     .await
                     .map_err(|e| anyhow::anyhow!("publishing on {tx_key}: {e}"))?;
             } else {
-                deliver(endpoint, &bytes, robot_id, now, &mut stats);
+                deliver(endpoint, &bytes, robot_id, now, stats);
             }
         }
         while let Some(message) = endpoint.poll_transmit(now) {
@@ -190,7 +218,7 @@ pub async fn drive<E: Endpoint>(
             }
         }
         if done(endpoint) {
-            return Ok(stats);
+            return Ok(());
         }
         if start.elapsed() > deadline {
             anyhow::bail!(
@@ -223,7 +251,7 @@ pub async fn drive<E: Endpoint>(
                             delayed.push(Reverse((at, order, false, bytes)));
                         }
                     }
-                    None => deliver(endpoint, &bytes, robot_id, now, &mut stats),
+                    None => deliver(endpoint, &bytes, robot_id, now, stats),
                 }
             }
             _ = tokio::time::sleep(wake) => {}
@@ -241,6 +269,7 @@ fn deliver<E: Endpoint>(
     match wire::decode(bytes) {
         Ok(m) if m.robot_id == robot_id => {
             stats.messages_received += 1;
+            stats.bytes_received += bytes.len() as u64;
             endpoint.handle(&m, now_ns);
         }
         Ok(m) => {

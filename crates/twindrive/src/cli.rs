@@ -133,12 +133,14 @@ pub enum Command {
     /// resumes an upload and never drives a plan twice. Runs until stopped
     /// (Ctrl-C) or --run-for.
     Robot(RobotArgs),
-    /// Run the master: upload a plan to a robot over zenoh, supervise it,
-    /// receive telemetry and the robot's log, handle hand-backs (update the
-    /// twin; stop or replan) and write DIR/report.json.
+    /// Run the master: upload a plan to a robot (or to each of a fleet)
+    /// over zenoh, supervise it, receive telemetry and the robot's log,
+    /// handle hand-backs (update the twin; stop or replan) and write
+    /// DIR/report.json and DIR/fleet.json (a fleet: DIR/ID/ per robot).
     ///
     /// Exits 0 when the mission completed, 3 when it ended handed back, 4
-    /// when the robot rejected the plan, 1 when it failed.
+    /// when the robot rejected the plan, 1 when it failed (in a fleet, the
+    /// worst robot's).
     Master(MasterArgs),
     /// Measure what decoupling buys: direct against decoupled operation
     /// over latency and loss, and the upload against the link's ideal.
@@ -181,6 +183,45 @@ pub enum ExperimentCommand {
     /// until the robot holds the file against the ideal
     /// `D + S(1+h)/(B(1-p))`. The target: within 1.1x at loss up to 10 %.
     Upload(UploadExperimentArgs),
+    /// One master supervising N robot agents through a zenoh router: the
+    /// router, the master and N robot processes on loopback, each robot
+    /// with its own site (the case study with other true kinematics), id
+    /// and state directory; a plan uploaded to each and supervised to the
+    /// end (a hand-back and a continuation each). Prints and writes
+    /// (results.json) the master's CPU time and peak memory, the time to
+    /// upload to all, the hand-back reaction time, telemetry against the
+    /// budget and the logs back-filled; with --cost, the master's protocol
+    /// cost per robot in virtual time as N grows.
+    Fleet(FleetExperimentArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct FleetExperimentArgs {
+    /// Output directory (results.json; runs/ holds each run's processes'
+    /// files).
+    #[arg(long, default_value = "twindrive-out/experiment-fleet")]
+    pub out: PathBuf,
+    /// Fleet sizes to run, comma-separated (at most 200).
+    #[arg(long, value_delimiter = ',', default_value = "1,5,20,50")]
+    pub robots: Vec<usize>,
+    /// Run each robot's simulated site this many times faster than real time.
+    #[arg(long, default_value_t = 1.0)]
+    pub time_scale: f64,
+    /// Bytes per second each robot may send (its logs, ~1.8 MB for the
+    /// case study, come back at 0.7 of it).
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 32000.0)]
+    pub telemetry_budget: f64,
+    /// Give a run up after this many seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 600.0)]
+    pub timeout: f64,
+    /// Emulate this link at the master on every robot's traffic (default:
+    /// none, loopback as it is).
+    #[arg(long, value_name = "PROFILE")]
+    pub link: Option<String>,
+    /// Also measure the master's protocol cost in virtual time for these
+    /// fleet sizes, comma-separated (e.g. 1,10,100,1000).
+    #[arg(long, value_delimiter = ',')]
+    pub cost: Vec<usize>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -300,9 +341,11 @@ pub struct MasterArgs {
     /// A plan signed beforehand (`twindrive sign`).
     #[arg(long, value_name = "PLAN.signed", required_unless_present = "plan")]
     pub signed: Option<PathBuf>,
-    /// The robot to send it to.
-    #[arg(long, value_name = "ID")]
-    pub robot: String,
+    /// The robot to send it to; repeat for a fleet (one master, one
+    /// session, each robot its own operator and twin and its files in
+    /// --out/ID/, with --out/fleet.json; needs --plan and --key).
+    #[arg(long, value_name = "ID", required = true)]
+    pub robot: Vec<String>,
     /// Output directory (report.json, plans, the robot's logs).
     #[arg(long)]
     pub out: PathBuf,

@@ -157,3 +157,80 @@ fn the_upload_experiment_completes_every_row() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("60 s outage"), "{stdout}");
 }
+
+#[test]
+fn a_fleet_of_three_robot_processes_completes_through_a_router_with_every_log_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = twindrive()
+        .args([
+            "experiment",
+            "fleet",
+            "--robots",
+            "3",
+            "--time-scale",
+            "4",
+            "--timeout",
+            "400",
+            "--cost",
+            "1,2",
+            "--out",
+        ])
+        .arg(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Bounded: the experiment's own master gives up after --timeout.
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if started.elapsed() > std::time::Duration::from_secs(600) {
+            let _ = child.kill();
+            panic!("the fleet experiment did not end within 600 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    };
+    let mut err = String::new();
+    use std::io::Read;
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    assert!(status.success(), "{err}");
+    let results: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("results.json")).unwrap()).unwrap();
+    let run = &results["fleet"][0];
+    assert_eq!(run["robots"], 3);
+    assert_eq!(run["completed"], 3, "{run}");
+    // Each robot handed back once (its site's kinematics are not the
+    // twin's) and ran a continuation: two logs each, all back-filled.
+    assert!(run["handbacks"].as_u64().unwrap() >= 3, "{run}");
+    assert_eq!(run["logs_expected"], run["logs_backfilled"], "{run}");
+    assert!(run["logs_backfilled"].as_u64().unwrap() >= 6, "{run}");
+    assert!(run["master_cpu_s"].as_f64().unwrap() > 0.0, "{run}");
+    assert!(
+        run["handback_reaction_max_s"].as_f64().unwrap() < 5.0,
+        "{run}"
+    );
+    // Every robot's plan ran to its end on the robot.
+    for id in ["r001", "r002", "r003"] {
+        let journal = std::fs::read_to_string(
+            dir.path()
+                .join("runs/n3/robots")
+                .join(id)
+                .join("journal.jsonl"),
+        )
+        .unwrap();
+        assert!(
+            journal.contains("\"execution_finished\""),
+            "{id}: {journal}"
+        );
+    }
+    let cost = results["master_cost"].as_array().unwrap();
+    assert_eq!(cost.len(), 2);
+    assert!(cost[1]["messages"].as_u64().unwrap() > cost[0]["messages"].as_u64().unwrap());
+}

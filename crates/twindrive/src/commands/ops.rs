@@ -88,6 +88,8 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
     // The site runs as long as the robot does.
     let backend = SimBackend::new(site, start, 1e6).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
     let mut config = AgentConfig::new(&args.id, &args.state_dir, trusted);
+    // The agent's clock: zero now, in Unix time and for the driver alike.
+    let zero = std::time::Instant::now();
     config.unix_time_at_zero_s = unix_now_s()?;
     config.telemetry_budget_bytes_s = args.telemetry_budget;
     config.time_scale = args.time_scale;
@@ -105,7 +107,8 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
             args.trust.len()
         );
         let (tx, rx) = (down_key(&args.id), up_key(&args.id));
-        let drive = twindrive_net::drive(
+        let mut stats = twindrive_net::DriveStats::default();
+        let drive = twindrive_net::drive_counting(
             &mut agent,
             &session,
             &args.id,
@@ -113,6 +116,8 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
             &rx,
             None,
             deadline,
+            zero,
+            &mut stats,
             |_| false,
         );
         tokio::select! {
@@ -159,11 +164,13 @@ struct FirstPlan {
 
 fn first_plan(
     args: &MasterArgs,
+    robot: &str,
+    out: &Path,
     key: Option<&twindrive_link::envelope::SigningKey>,
 ) -> anyhow::Result<FirstPlan> {
     // An upload this master began and did not finish is resumed when it
     // carries the same plan (a self-signed plan signs to new bytes each run).
-    let pending = args.out.join("state").join("uploading.signed");
+    let pending = out.join("state").join("uploading.signed");
     let unfinished = std::fs::read(&pending).ok();
     let (signed, resume) = if let Some(path) = &args.signed {
         let bytes =
@@ -176,7 +183,7 @@ fn first_plan(
             std::fs::read(path).with_context(|| format!("--plan: reading {}", path.display()))?;
         let same = unfinished.as_deref().is_some_and(|u| {
             twindrive_link::envelope::open_unchecked(u).is_ok_and(|j| j == plan_json)
-                && peek_envelope(u).is_ok_and(|e| e.robot_id == args.robot)
+                && peek_envelope(u).is_ok_and(|e| e.robot_id == robot)
         });
         if same {
             (unfinished.clone().expect("checked"), true)
@@ -185,7 +192,7 @@ fn first_plan(
             let key = key.expect("clap: --plan requires --key");
             let now = super::keys::since_epoch()?;
             let envelope = Envelope::new(
-                &args.robot,
+                robot,
                 now.as_millis() as u64,
                 now.as_secs(),
                 args.expires_in,
@@ -209,11 +216,10 @@ fn first_plan(
         );
     }
     let envelope = peek_envelope(&signed).map_err(|e| anyhow::anyhow!("the signed plan: {e}"))?;
-    if envelope.robot_id != args.robot {
+    if envelope.robot_id != robot {
         bail!(
-            "the signed plan is for robot `{}`, not --robot {}",
+            "the signed plan is for robot `{}`, not --robot {robot}",
             envelope.robot_id,
-            args.robot
         );
     }
     // The plan inside, for the report and for continuations.
@@ -231,9 +237,32 @@ fn first_plan(
     })
 }
 
-/// `twindrive master`.
+/// One robot the master supervises.
+struct Supervised {
+    robot: String,
+    /// Its output directory (`--out`, or `--out/<id>` in a fleet).
+    out: PathBuf,
+    op: Operator<DirStore>,
+    stats: twindrive_net::DriveStats,
+}
+
+/// `twindrive master`: one robot, or a fleet (`--robot` repeated) over one
+/// zenoh session, each robot with its own operator, twin and output
+/// directory.
 pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
-    check_robot_id(&args.robot, "--robot")?;
+    let mut seen = std::collections::HashSet::new();
+    for id in &args.robot {
+        check_robot_id(id, "--robot")?;
+        if !seen.insert(id) {
+            bail!("--robot {id} is given twice");
+        }
+    }
+    let fleet = args.robot.len() > 1;
+    if fleet && args.signed.is_some() {
+        bail!(
+            "--signed holds a plan signed for one robot; a fleet needs --plan and --key (each robot gets its own signature)"
+        );
+    }
     if !(args.telemetry_budget.is_finite() && args.telemetry_budget >= 100.0) {
         bail!(
             "--telemetry-budget: at least 100 bytes per second, got {}",
@@ -264,159 +293,316 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     if args.on_handback == OnHandbackArg::Replan && key.is_none() {
         bail!("--on-handback replan signs continuations: it needs --key");
     }
-    std::fs::create_dir_all(args.out.join("state"))
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let first = first_plan(args, key.as_ref())?;
-    // The twin: the scenario the plan was rehearsed in.
-    let twin_scenario = match &args.scenario {
-        Some(p) => Some(Scenario::load(p).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?),
-        None => {
-            twindrive_sim::builtin::load(&first.plan.header.robot.scenario).and_then(Result::ok)
+    let unix_at_zero = unix_now_s()?;
+    let mut members = Vec::new();
+    for robot in &args.robot {
+        let out = if fleet {
+            args.out.join(robot)
+        } else {
+            args.out.clone()
+        };
+        std::fs::create_dir_all(out.join("state"))
+            .with_context(|| format!("creating {}", out.display()))?;
+        let first = first_plan(args, robot, &out, key.as_ref())?;
+        // The twin: the scenario the plan was rehearsed in.
+        let twin_scenario = match &args.scenario {
+            Some(p) => Some(Scenario::load(p).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?),
+            None => {
+                twindrive_sim::builtin::load(&first.plan.header.robot.scenario).and_then(Result::ok)
+            }
+        };
+        if twin_scenario.is_none() && args.on_handback == OnHandbackArg::Replan {
+            bail!(
+                "the plan's scenario `{}` is not built in; pass --scenario (the twin) to replan",
+                first.plan.header.robot.scenario
+            );
         }
-    };
-    if twin_scenario.is_none() && args.on_handback == OnHandbackArg::Replan {
-        bail!(
-            "the plan's scenario `{}` is not built in; pass --scenario (the twin) to replan",
-            first.plan.header.robot.scenario
+        // Keep what is being uploaded, so a restarted master resumes it.
+        write_durably(&out.join("state").join("uploading.signed"), &first.signed)
+            .context("keeping the upload's state")?;
+        write_plan_files(&out, &first.plan, &first.plan_json, &first.signed)?;
+        let master = Master::new(
+            robot,
+            MasterConfig::for_link(profile.as_ref(), args.telemetry_budget),
+            DirStore::new(out.join("state").join("log_chunks")),
         );
-    }
-    // Keep what is being uploaded, so a restarted master resumes it.
-    write_durably(
-        &args.out.join("state").join("uploading.signed"),
-        &first.signed,
-    )
-    .context("keeping the upload's state")?;
-    write_plan_files(&args.out, &first.plan, &first.plan_json, &first.signed)?;
-
-    let master = Master::new(
-        &args.robot,
-        MasterConfig::for_link(profile.as_ref(), args.telemetry_budget),
-        DirStore::new(args.out.join("state").join("log_chunks")),
-    );
-    let calibrated = first.plan.header.calibrated;
-    let mut op = Operator::new(
-        master,
-        twin_scenario.map(|s| Twin::new(s, calibrated)),
-        key.clone(),
-        OperatorConfig {
-            on_handback: match args.on_handback {
-                OnHandbackArg::Stop => OnHandback::Stop,
-                OnHandbackArg::Replan => OnHandback::Replan,
+        let calibrated = first.plan.header.calibrated;
+        let mut op = Operator::new(
+            master,
+            twin_scenario.map(|s| Twin::new(s, calibrated)),
+            key.clone(),
+            OperatorConfig {
+                on_handback: match args.on_handback {
+                    OnHandbackArg::Stop => OnHandback::Stop,
+                    OnHandbackArg::Replan => OnHandback::Replan,
+                },
+                expires_in_s: args.expires_in,
+                supervision: Supervision {
+                    dead_man_timeout_s: args.supervise,
+                },
+                log_wait_s: args.log_wait,
+                // Continuations build on the world the first plan was signed for.
+                ..OperatorConfig::replanning(
+                    robot,
+                    &first.plan,
+                    first.counter,
+                    first.world_sha256.clone(),
+                    unix_at_zero,
+                )
             },
-            expires_in_s: args.expires_in,
-            supervision: Supervision {
-                dead_man_timeout_s: args.supervise,
-            },
-            log_wait_s: args.log_wait,
-            // Continuations build on the world the first plan was signed for.
-            ..OperatorConfig::replanning(
-                &args.robot,
-                &first.plan,
-                first.counter,
-                first.world_sha256.clone(),
-                unix_now_s()?,
-            )
-        },
-    );
-    op.start(
-        first.plan.clone(),
-        first.signed.clone(),
-        first.counter,
-        first.resume,
-        0,
-    );
-    let emulation = profile.map(|p| Emulation {
-        outgoing: LinkEmulator::new(p.clone(), args.seed, 0),
-        incoming: LinkEmulator::new(p, args.seed, 1),
-    });
-    let out = args.out.clone();
-    let mut logs_written = 0usize;
-    let mut bar = indicatif::ProgressBar::hidden();
-    let mut bar_for = None;
-    let mut write_error: Option<anyhow::Error> = None;
-    let rt = runtime()?;
-    let options = session_options(&args.zenoh, None);
-    let result = rt.block_on(async {
-        let session = open_session(&options).await?;
+        );
+        op.start(
+            first.plan.clone(),
+            first.signed.clone(),
+            first.counter,
+            first.resume,
+            0,
+        );
         eprintln!(
-            "master: uploading plan {} ({} bytes) to robot {}",
+            "master: uploading plan {} ({} bytes) to robot {robot}",
             &first.plan.sha256[..12],
             first.signed.len(),
-            args.robot
         );
-        let r = twindrive_net::drive(
-            &mut op,
-            &session,
-            &args.robot,
-            &up_key(&args.robot),
-            &down_key(&args.robot),
-            emulation,
-            Duration::from_secs_f64(args.timeout),
-            |op| {
-                // Upload progress on a terminal (one bar per plan sent).
-                if let Some((confirmed, chunks)) = op.master.upload_progress() {
-                    let transfer = op.master.uploading();
-                    if bar_for != transfer {
-                        bar.finish_and_clear();
-                        bar = crate::progress::bar(u64::from(chunks), "upload");
-                        bar_for = transfer;
-                    }
-                    bar.set_position(u64::from(confirmed));
-                    if op.master.upload_finished() {
-                        bar.finish_and_clear();
-                    }
-                }
-                if op.master.upload_finished() {
-                    let _ = std::fs::remove_file(out.join("state").join("uploading.signed"));
-                }
-                while let Some((plan, json, signed)) = op.new_plans.pop_front() {
-                    if let Err(e) = write_plan_files(&out, &plan, &json, &signed) {
-                        write_error.get_or_insert(e);
-                    }
-                }
-                while let Some((plan, mcap)) = op.new_logs.pop_front() {
-                    logs_written += 1;
-                    match write_robot_log(&out, logs_written, plan.as_deref(), &mcap) {
-                        Ok(dir) => op.report.robot_logs.push(dir.display().to_string()),
-                        Err(e) => {
-                            write_error.get_or_insert(e);
-                        }
-                    }
-                }
-                op.is_done()
-            },
-        )
-        .await;
-        let _ = session.close().await;
-        r
-    });
-    if let Err(e) = result {
-        op.fail(format!("{e:#}"), 0);
+        members.push(Supervised {
+            robot: robot.clone(),
+            out,
+            op,
+            stats: Default::default(),
+        });
     }
-    op.finish_report();
-    let report = serde_json::to_vec_pretty(&op.report)?;
-    write_durably(&args.out.join("report.json"), &report).context("writing report.json")?;
-    if let Some(e) = write_error {
+    // The master's clock: zero now (every plan is ready), in Unix time and
+    // for the driver alike.
+    let zero = std::time::Instant::now();
+    let unix_at_zero = unix_now_s()?;
+    for m in &mut members {
+        m.op.config_mut().unix_time_at_zero_s = unix_at_zero;
+        m.op.report.unix_time_at_zero_s = unix_at_zero;
+    }
+    let rt = runtime()?;
+    let options = session_options(&args.zenoh, None);
+    let deadline = Duration::from_secs_f64(args.timeout);
+    let results: Vec<anyhow::Result<()>> = rt.block_on(async {
+        let session = match open_session(&options).await {
+            Ok(s) => s,
+            Err(e) => return vec![Err(e)],
+        };
+        let runs = members.iter_mut().enumerate().map(|(k, m)| {
+            // One emulator pair per robot, each its own random streams.
+            let emulation = profile.clone().map(|p| Emulation {
+                outgoing: LinkEmulator::new(p.clone(), args.seed, 2 * k as u64),
+                incoming: LinkEmulator::new(p, args.seed, 2 * k as u64 + 1),
+            });
+            supervise(m, &session, emulation, deadline, zero, !fleet)
+        });
+        let results = futures::future::join_all(runs).await;
+        let _ = session.close().await;
+        results
+    });
+    let mut first_error = None;
+    if results.len() != members.len() {
+        // The session did not open.
+        for m in &mut members {
+            m.op.fail(
+                format!("{:#}", results[0].as_ref().expect_err("an error")),
+                0,
+            );
+        }
+    } else {
+        for (m, r) in members.iter_mut().zip(results) {
+            match r {
+                Err(e) if e.is::<WriteError>() => {
+                    first_error.get_or_insert(e);
+                }
+                Err(e) => m.op.fail(format!("{e:#}"), 0),
+                Ok(()) => {}
+            }
+        }
+    }
+    let usage = process_usage();
+    let mut stdout = std::io::stdout().lock();
+    let mut worst = Outcome::Completed;
+    let mut summary = Vec::new();
+    for m in &mut members {
+        m.op.finish_report();
+        let report = serde_json::to_vec_pretty(&m.op.report)?;
+        write_durably(&m.out.join("report.json"), &report).context("writing report.json")?;
+        let outcome = m.op.report.outcome.unwrap_or(Outcome::Failed);
+        worst = worse(worst, outcome);
+        writeln!(
+            stdout,
+            "{}outcome: {outcome:?}; {} upload(s), {} hand-back(s), {} robot log(s); report: {}",
+            if fleet {
+                format!("{}: ", m.robot)
+            } else {
+                String::new()
+            },
+            m.op.report.uploads.len(),
+            m.op.report.handbacks.len(),
+            m.op.report.robot_logs.len(),
+            m.out.join("report.json").display()
+        )?;
+        summary.push(serde_json::json!({
+            "robot": m.robot,
+            "outcome": outcome,
+            "uploads": m.op.report.uploads.len(),
+            "handbacks": m.op.report.handbacks.len(),
+            "robot_logs": m.op.report.robot_logs.len(),
+            "status_messages": m.op.report.status_messages,
+            "messages_received": m.stats.messages_received,
+            "bytes_received": m.stats.bytes_received,
+            "garbage": m.stats.garbage,
+        }));
+    }
+    {
+        let fleet_json = serde_json::json!({
+            "robots": summary,
+            "unix_time_at_zero_s": unix_at_zero,
+            "telemetry_budget_bytes_s": args.telemetry_budget,
+            "process_cpu_s": usage.map(|u| u.0),
+            "process_peak_rss_bytes": usage.map(|u| u.1),
+        });
+        write_durably(
+            &args.out.join("fleet.json"),
+            &serde_json::to_vec_pretty(&fleet_json)?,
+        )
+        .context("writing fleet.json")?;
+        if fleet {
+            writeln!(
+                stdout,
+                "fleet: {} robot(s); worst outcome {worst:?}; {}",
+                members.len(),
+                args.out.join("fleet.json").display()
+            )?;
+        }
+    }
+    if let Some(e) = first_error {
         return Err(e);
     }
-    let outcome = op.report.outcome.unwrap_or(Outcome::Failed);
-    writeln!(
-        std::io::stdout().lock(),
-        "outcome: {outcome:?}; {} upload(s), {} hand-back(s), {} robot log(s); report: {}",
-        op.report.uploads.len(),
-        op.report.handbacks.len(),
-        op.report.robot_logs.len(),
-        args.out.join("report.json").display()
-    )?;
-    match outcome {
+    match worst {
         Outcome::Completed => Ok(()),
         Outcome::HandedBack => std::process::exit(3),
         Outcome::Rejected => std::process::exit(4),
         Outcome::Failed => bail!(
             "the mission failed: {}",
-            op.report.failure.as_deref().unwrap_or("see report.json")
+            members
+                .iter()
+                .find_map(|m| m.op.report.failure.clone())
+                .unwrap_or_else(|| "see report.json".into())
         ),
     }
+}
+
+/// The worse of two outcomes: failed, then rejected, then handed back.
+fn worse(a: Outcome, b: Outcome) -> Outcome {
+    let rank = |o: Outcome| match o {
+        Outcome::Completed => 0,
+        Outcome::HandedBack => 1,
+        Outcome::Rejected => 2,
+        Outcome::Failed => 3,
+    };
+    if rank(b) > rank(a) { b } else { a }
+}
+
+/// A file the master could not write (its mission may have gone well).
+#[derive(Debug)]
+struct WriteError(anyhow::Error);
+
+impl std::fmt::Display for WriteError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:#}", self.0)
+    }
+}
+
+impl std::error::Error for WriteError {}
+
+/// This process's CPU time (s, user and system) and peak resident memory
+/// (bytes), where the system tells (Linux's /proc).
+pub(crate) fn process_usage() -> Option<(f64, u64)> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces) in parentheses.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of the line, in clock ticks
+    // (USER_HZ, 100 on Linux).
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let hwm_kb: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some((ticks / 100.0, hwm_kb * 1024))
+}
+
+/// Drives one robot's operator over the session until its mission is
+/// decided and its logs are in; writes its plans and logs as they come.
+async fn supervise(
+    m: &mut Supervised,
+    session: &twindrive_net::Session,
+    emulation: Option<Emulation>,
+    deadline: Duration,
+    zero: std::time::Instant,
+    show_progress: bool,
+) -> anyhow::Result<()> {
+    let out = m.out.clone();
+    let robot = m.robot.clone();
+    let mut logs_written = 0usize;
+    let mut bar = indicatif::ProgressBar::hidden();
+    let mut bar_for = None;
+    let mut write_error: Option<anyhow::Error> = None;
+    let r = twindrive_net::drive_counting(
+        &mut m.op,
+        session,
+        &robot,
+        &up_key(&robot),
+        &down_key(&robot),
+        emulation,
+        deadline,
+        zero,
+        &mut m.stats,
+        |op| {
+            // Upload progress on a terminal (one bar per plan sent).
+            if show_progress && let Some((confirmed, chunks)) = op.master.upload_progress() {
+                let transfer = op.master.uploading();
+                if bar_for != transfer {
+                    bar.finish_and_clear();
+                    bar = crate::progress::bar(u64::from(chunks), "upload");
+                    bar_for = transfer;
+                }
+                bar.set_position(u64::from(confirmed));
+                if op.master.upload_finished() {
+                    bar.finish_and_clear();
+                }
+            }
+            if op.master.upload_finished() {
+                let _ = std::fs::remove_file(out.join("state").join("uploading.signed"));
+            }
+            while let Some((plan, json, signed)) = op.new_plans.pop_front() {
+                if let Err(e) = write_plan_files(&out, &plan, &json, &signed) {
+                    write_error.get_or_insert(e);
+                }
+            }
+            while let Some((plan, mcap)) = op.new_logs.pop_front() {
+                logs_written += 1;
+                match write_robot_log(&out, logs_written, plan.as_deref(), &mcap) {
+                    Ok(dir) => op.report.robot_logs.push(dir.display().to_string()),
+                    Err(e) => {
+                        write_error.get_or_insert(e);
+                    }
+                }
+            }
+            op.is_done()
+        },
+    )
+    .await;
+    bar.finish_and_clear();
+    if let Some(e) = write_error {
+        return Err(WriteError(e).into());
+    }
+    r
 }
 
 /// `plans/<sha256>.json` (the document, byte for byte what was signed) and
