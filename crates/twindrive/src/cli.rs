@@ -143,7 +143,8 @@ pub enum Command {
     /// worst robot's).
     Master(MasterArgs),
     /// Measure what decoupling buys: direct against decoupled operation
-    /// over latency and loss, and the upload against the link's ideal.
+    /// over latency and loss, the upload against the link's ideal, and one
+    /// master supervising a fleet through a zenoh router.
     Experiment {
         #[command(subcommand)]
         command: ExperimentCommand,
