@@ -26,7 +26,7 @@ use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::emulator::{LinkEmulator, LinkStats};
 use twindrive_link::wire::PROTOCOL_VERSION;
 use twindrive_sim::controller::{Controller, Observation};
-use twindrive_sim::{ControllerConfig, Scenario, Sensed, Simulator, StepOutput};
+use twindrive_sim::{Contacts, ControllerConfig, Scenario, Sensed, Simulator, StepOutput};
 
 /// How the operator drives.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -206,7 +206,7 @@ pub fn run(
     let resend_ns = |move_s: f64| ((2.0 * latency_s + move_s + 0.5) * 1e9) as u64;
 
     let mut run = DirectRun::default();
-    let (mut was_bumped, mut was_blocked) = (false, false);
+    let mut contacts = Contacts::default();
     let mut sensed_bump = false;
     let mut sensed_ticks = None;
     let mut sensed_ranges: Vec<f64> = Vec::new();
@@ -272,16 +272,7 @@ pub fn run(
         let t_s = now as f64 * 1e-9;
         let r = &out.record;
         run.path.push((t_s, r.ground_truth));
-        if r.bump && !was_bumped {
-            run.bumps += 1;
-        }
-        if out.blocked && !was_blocked {
-            run.collisions += 1;
-        }
-        if out.blocked {
-            run.contact_s += dt_ns as f64 * 1e-9;
-        }
-        (was_bumped, was_blocked) = (r.bump, out.blocked);
+        contacts.record(r.bump, out.blocked, dt_ns as f64 * 1e-9);
 
         // The robot reports what it sensed at the start of this step.
         let stream = !matches!(config.method, DirectMethod::MoveAndWait { .. });
@@ -407,6 +398,8 @@ pub fn run(
             break;
         }
     }
+    (run.bumps, run.collisions, run.contact_s) =
+        (contacts.bumps, contacts.collisions, contacts.contact_s);
     run.up = up.stats;
     run.down = down.stats;
     Ok(run)

@@ -147,7 +147,7 @@ fn replay(
     let mut sim = Simulator::new(scenario);
     let mut out = StepOutput::new(sim.beams());
     let mut deviation = PathCursor::new(samples);
-    let (mut collisions, mut bumps, mut was_blocked, mut was_bumped) = (0, 0, false, false);
+    let mut contacts = twindrive_sim::Contacts::default();
     let (mut max_dev, mut sum_dev, mut n) = (0.0f64, 0.0, 0usize);
     let mut track = vec![(0.0, sim.pose())];
     let mut length = 0.0;
@@ -167,13 +167,7 @@ fn replay(
         let t = out.record.t_s() + dt_s;
         length += pose.distance_to(&track.last().expect("non-empty").1);
         track.push((t, pose));
-        if out.blocked && !was_blocked {
-            collisions += 1;
-        }
-        if out.record.bump && !was_bumped {
-            bumps += 1;
-        }
-        (was_blocked, was_bumped) = (out.blocked, out.record.bump);
+        contacts.record(out.record.bump, out.blocked, dt_s);
         let d = deviation.advance((pose.x_m, pose.y_m), 0.5);
         max_dev = max_dev.max(d);
         sum_dev += d;
@@ -186,8 +180,8 @@ fn replay(
     let last = samples.last().expect("non-empty");
     Ok(Replay {
         report: ReplayReport {
-            collisions,
-            bumps,
+            collisions: u64::from(contacts.collisions),
+            bumps: u64::from(contacts.bumps),
             max_deviation_m: max_dev,
             mean_deviation_m: sum_dev / n.max(1) as f64,
             final_error_m: (end.x_m - last.x_m).hypot(end.y_m - last.y_m),

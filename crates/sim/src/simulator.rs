@@ -43,6 +43,35 @@ pub struct StepOutput {
     pub blocked: bool,
 }
 
+/// Contact over a run, step by step: bump presses and periods of contact
+/// that stopped the robot (each counted once, at its start), and the time
+/// spent stopped by contact.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Contacts {
+    pub bumps: u32,
+    pub collisions: u32,
+    pub contact_s: f64,
+    was_bumped: bool,
+    was_blocked: bool,
+}
+
+impl Contacts {
+    /// One step of `dt_s`: the bumper's state and whether contact stopped
+    /// the robot.
+    pub fn record(&mut self, bump: bool, blocked: bool, dt_s: f64) {
+        if bump && !self.was_bumped {
+            self.bumps += 1;
+        }
+        if blocked && !self.was_blocked {
+            self.collisions += 1;
+        }
+        if blocked {
+            self.contact_s += dt_s;
+        }
+        (self.was_bumped, self.was_blocked) = (bump, blocked);
+    }
+}
+
 /// A controller outside the simulator: sensor readings in, wheel commands
 /// [left, right] (rad/s) out.
 pub type ExternalControl<'c> = dyn FnMut(&Sensed) -> [f64; 2] + 'c;

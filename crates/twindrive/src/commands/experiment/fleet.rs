@@ -25,7 +25,7 @@ use twindrive_agent::backend::SimBackend;
 use twindrive_link::emulator::LinkProfile;
 use twindrive_link::envelope::SigningKey;
 
-use super::latency::{Mission0, SITE_SCALE, site_like};
+use super::latency::{Mission0, site_like};
 use crate::cli::FleetExperimentArgs;
 use crate::commands::demo_decoupled::Mission;
 use crate::output::Staging;
@@ -53,7 +53,9 @@ fn site_toml(k: usize) -> anyhow::Result<String> {
     let twin = twindrive_sim::builtin::load("wall_following")
         .expect("built in")
         .context("the built-in wall_following scenario")?;
-    let t = twin.robot.true_params;
+    // The site the latency experiment uses, with robot `k`'s seed.
+    let site = site_like(&twin);
+    let t = site.robot.true_params;
     let old_params = "true_params = { left_diameter_m = 0.0652, right_diameter_m = 0.0665, wheelbase_m = 0.2678 }";
     let old_seed = "seed = 2012";
     if !text.contains(old_params) || !text.contains(old_seed) {
@@ -64,12 +66,13 @@ fn site_toml(k: usize) -> anyhow::Result<String> {
             old_params,
             &format!(
                 "true_params = {{ left_diameter_m = {}, right_diameter_m = {}, wheelbase_m = {} }}",
-                t.left_diameter_m * SITE_SCALE[0],
-                t.right_diameter_m * SITE_SCALE[1],
-                t.wheelbase_m * SITE_SCALE[2]
+                t.left_diameter_m, t.right_diameter_m, t.wheelbase_m
             ),
         )
-        .replace(old_seed, &format!("seed = {}", 3012 + k)))
+        .replace(
+            old_seed,
+            &format!("seed = {}", site.seed.wrapping_add(k as u64)),
+        ))
 }
 
 /// What one fleet run measured.

@@ -36,7 +36,7 @@ use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
 use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_plot::{Series, TimeFigure, WorldFigure, palette};
-use twindrive_sim::{Scenario, Simulator};
+use twindrive_sim::{Contacts, Scenario, Simulator};
 
 use super::route::Route;
 use crate::cli::LatencyExperimentArgs;
@@ -195,10 +195,7 @@ impl Mission0 {
 struct Recorder<B> {
     inner: B,
     path: Vec<(f64, Pose)>,
-    bumps: u32,
-    collisions: u32,
-    contact_s: f64,
-    was: (bool, bool),
+    contacts: Contacts,
 }
 
 impl<B: RobotBackend> RobotBackend for Recorder<B> {
@@ -207,18 +204,9 @@ impl<B: RobotBackend> RobotBackend for Recorder<B> {
     }
     fn step(&mut self, wheels: [f64; 2]) -> Option<Reading> {
         let r = self.inner.step(wheels)?;
-        let (bump, blocked) = (r.record.bump, r.blocked);
         self.path.push((r.t_s, r.record.ground_truth));
-        if bump && !self.was.0 {
-            self.bumps += 1;
-        }
-        if blocked && !self.was.1 {
-            self.collisions += 1;
-        }
-        if blocked {
-            self.contact_s += self.period_s();
-        }
-        self.was = (bump, blocked);
+        let dt_s = self.period_s();
+        self.contacts.record(r.record.bump, r.blocked, dt_s);
         Some(r)
     }
     fn wheel_travel_rad(&self) -> f64 {
@@ -332,10 +320,7 @@ pub fn run_one(
             let recorder = Recorder {
                 inner: backend,
                 path: Vec::new(),
-                bumps: 0,
-                collisions: 0,
-                contact_s: 0.0,
-                was: (false, false),
+                contacts: Contacts::default(),
             };
             let mut mission = Mission::new(
                 &m.plan,
@@ -366,7 +351,8 @@ pub fn run_one(
             row.uploads = report.uploads.len();
             (row.bytes_up, row.bytes_down) = (link.up.stats.bytes_sent, link.down.stats.bytes_sent);
             let rec = robot.backend();
-            (row.collisions, row.bumps, row.contact_s) = (rec.collisions, rec.bumps, rec.contact_s);
+            let c = &rec.contacts;
+            (row.collisions, row.bumps, row.contact_s) = (c.collisions, c.bumps, c.contact_s);
             rec.path.clone()
         }
     };
