@@ -20,6 +20,9 @@ cargo run -q -p twindrive -- experiment upload --smoke --seeds 1
 # that have benches, so the zenoh crate is not built in release for this).
 echo "== loopback, two processes over zenoh (smoke; a dev build, the one the tests use)" >&2
 cargo run -q -p twindrive-net --example loopback -- --smoke
+echo "== the console: frame time in the browser, a fleet's telemetry to pages (smoke)" >&2
+bash bench/console_frame_time.sh
+bash bench/console_fleet.sh
 echo "== cargo bench (test mode)" >&2
 cargo bench -q -p twindrive-sim -p twindrive-estimation -p twindrive-mission -p twindrive-link -- --test
 echo "bench smoke: all benchmarks ran"

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The whole test suite: formatting, lints, every benchmark in smoke mode,
-# every test in the workspace. Needs only the Rust toolchain (with rustfmt and
-# clippy); run from anywhere.
+# every test in the workspace. Needs the Rust toolchain (with rustfmt and
+# clippy) and Node.js's npm (the console's pinned front-end libraries);
+# installs Debian's chromium and chromium-driver for the console's browser
+# tests when they are missing. Run from anywhere.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -10,4 +12,5 @@ cargo clippy --workspace --all-targets -- -D warnings
 # Every benchmark in smoke mode, twindrive's side (the Python peers stay out
 # of CI): a change that breaks a benchmark fails here.
 PEERS=0 bash bench/smoke.sh
+bash scripts/browser-deps.sh
 cargo test --workspace

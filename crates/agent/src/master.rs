@@ -190,6 +190,14 @@ impl<S: ChunkStore> Master<S> {
             .map(|u| (u.sender.stats.chunks_confirmed, u.sender.stats.chunks))
     }
 
+    /// The current (or last) upload's counts: chunks sent, resent,
+    /// confirmed, repair shards; its size in bytes and when it began.
+    pub fn upload_stats(&self) -> Option<(twindrive_link::upload::SenderStats, u64, u64)> {
+        self.upload
+            .as_ref()
+            .map(|u| (u.sender.stats, u.bytes, u.started_ns))
+    }
+
     /// Whether the current upload is on the robot whole.
     pub fn upload_finished(&self) -> bool {
         self.upload.as_ref().is_some_and(|u| u.done)

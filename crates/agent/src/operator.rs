@@ -28,6 +28,10 @@ pub enum OnHandback {
     /// Update the twin, rehearse a continuation on it from the hand-back
     /// pose, sign it and upload it; until the mission completes.
     Replan,
+    /// Update the twin, then wait for the operator (a console): they
+    /// continue with [`Operator::replan`] or end with
+    /// [`Operator::end_mission`].
+    Ask,
 }
 
 /// How the mission ended.
@@ -187,6 +191,11 @@ pub struct Operator<S: ChunkStore> {
     /// Continuation plans signed (document bytes, signed file) for the
     /// owner to keep.
     pub new_plans: VecDeque<(Arc<MissionPlan>, Vec<u8>, Vec<u8>)>,
+    /// With [`OnHandback::Ask`]: the hand-back waiting for the operator's
+    /// decision, and the plan time a continuation would still cover (s).
+    awaiting: Option<(HandbackEntry, f64)>,
+    /// The latest hand-back as the robot sent it (its sensor window).
+    last_handback: Option<Box<twindrive_link::wire::Handback>>,
     now_ns: u64,
 }
 
@@ -227,6 +236,8 @@ impl<S: ChunkStore> Operator<S> {
             status_after_decision: None,
             new_logs: VecDeque::new(),
             new_plans: VecDeque::new(),
+            awaiting: None,
+            last_handback: None,
             now_ns: 0,
         }
     }
@@ -420,6 +431,7 @@ impl<S: ChunkStore> Operator<S> {
 
     fn handback(&mut self, h: &twindrive_link::wire::Handback) {
         self.mark_executed(h.plan);
+        self.last_handback = Some(Box::new(h.clone()));
         let std = |i: usize| h.params_covariance[4 * i].max(0.0).sqrt();
         let sha = self
             .plan_of(&h.plan)
@@ -472,6 +484,12 @@ impl<S: ChunkStore> Operator<S> {
         }
         let duration = self.plan_of(&h.plan).map_or(0.0, |p| p.plan.duration_s());
         let remaining = remaining_s(duration, h.plan_t_s, self.config.min_continuation_s);
+        if self.config.on_handback == OnHandback::Ask {
+            let entry = self.report.handbacks.last().expect("pushed above").clone();
+            self.awaiting = Some((entry, remaining));
+            self.note("awaiting_operator", "continue or end the mission".into());
+            return;
+        }
         match self.continue_from(remaining) {
             Ok(()) => {}
             Err(e) => {
@@ -479,6 +497,59 @@ impl<S: ChunkStore> Operator<S> {
                 self.decide(Outcome::HandedBack);
             }
         }
+    }
+
+    /// The plan sent last (the one the robot runs or will run).
+    pub fn current_plan(&self) -> Option<&Arc<MissionPlan>> {
+        self.plans.last().map(|p| &p.plan)
+    }
+
+    /// The latest hand-back as the robot sent it, with its sensor window.
+    pub fn last_handback(&self) -> Option<&twindrive_link::wire::Handback> {
+        self.last_handback.as_deref()
+    }
+
+    /// The plan sent as `transfer`.
+    pub fn plan_for(&self, transfer: &TransferId) -> Option<&Arc<MissionPlan>> {
+        self.plan_of(transfer).map(|p| &p.plan)
+    }
+
+    /// The hand-back waiting for a decision ([`OnHandback::Ask`]).
+    pub fn awaiting_decision(&self) -> Option<&HandbackEntry> {
+        self.awaiting.as_ref().map(|(h, _)| h)
+    }
+
+    /// The operator's decision on a waiting hand-back: rehearse the rest of
+    /// the plan on the updated twin from the hand-back pose, sign it and
+    /// upload it. On failure the hand-back stays waiting.
+    pub fn replan(&mut self, now_ns: u64) -> anyhow::Result<()> {
+        self.now_ns = now_ns;
+        let Some((_, remaining)) = &self.awaiting else {
+            anyhow::bail!("no hand-back is waiting for a decision");
+        };
+        if self.twin.is_none() {
+            anyhow::bail!("this operator has no twin to rehearse a continuation on");
+        }
+        let remaining = *remaining;
+        self.continue_from(remaining)?;
+        self.awaiting = None;
+        Ok(())
+    }
+
+    /// The operator's decision on a waiting hand-back: the mission ends
+    /// there (handed back).
+    pub fn end_mission(&mut self, now_ns: u64) {
+        self.now_ns = now_ns;
+        if self.awaiting.take().is_some() {
+            self.note("operator_ended", "the mission ends at the hand-back".into());
+        }
+        self.decide(Outcome::HandedBack);
+    }
+
+    /// Gives the master back (a new mission on the same link keeps its
+    /// sequence numbers and round-trip times).
+    pub fn into_master(self) -> Master<S> {
+        self.master
     }
 
     /// Rehearses, signs and uploads a continuation of `duration_s`.

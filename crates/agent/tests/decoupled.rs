@@ -263,6 +263,60 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
 }
 
 #[test]
+fn on_handback_ask_waits_for_the_operator_who_continues_or_ends() {
+    let key = generate_key().unwrap();
+    for continue_it in [true, false] {
+        let dir = tempfile::tempdir().unwrap();
+        let mut h = harness(dir.path(), "lan", 5, &key, &key, BOX, OnHandback::Ask);
+        let signed = sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap();
+        h.send(signed, 1);
+        let limit = (600.0 * 1e9) as u64;
+        let waiting = {
+            let (op, agent) = (&mut h.op, &mut h.agent);
+            h.link
+                .run(op, agent, limit, |op, _| op.awaiting_decision().is_some())
+        };
+        assert!(waiting, "no hand-back: {:#?}", h.op.report.timeline);
+        // Nothing is decided, nothing else is sent, until the operator acts.
+        assert_eq!(h.op.report.outcome, None);
+        assert_eq!(h.op.report.uploads.len(), 1);
+        assert!(!h.op.twin().unwrap().learnt.is_empty());
+        let reason = h.op.awaiting_decision().unwrap().reason.clone();
+        assert_eq!(reason, "unexpected_bump");
+        assert!(h.op.last_handback().is_some_and(|w| !w.window.is_empty()));
+        let now = h.link.now_ns;
+        {
+            let (op, agent) = (&mut h.op, &mut h.agent);
+            h.link.run(op, agent, now + 5_000_000_000, |_, _| false);
+        }
+        assert_eq!(h.op.report.outcome, None, "still waiting");
+        let now = h.link.now_ns;
+        if continue_it {
+            h.op.replan(now).unwrap();
+            assert!(h.op.awaiting_decision().is_none());
+            assert!(h.op.replan(now).is_err(), "nothing waits any more");
+            // The continuation goes out; this test stops at the next
+            // hand-back or the end.
+            let (op, agent) = (&mut h.op, &mut h.agent);
+            let decided = h.link.run(op, agent, limit * 2, |op, _| {
+                op.awaiting_decision().is_some() || op.report.outcome.is_some()
+            });
+            assert!(decided);
+            assert!(
+                h.op.report.uploads.len() >= 2,
+                "{:#?}",
+                h.op.report.timeline
+            );
+        } else {
+            h.op.end_mission(now);
+            assert_eq!(h.op.report.outcome, Some(Outcome::HandedBack));
+            assert!(h.run_until(900.0), "the logs come back");
+            assert_eq!(h.op.report.uploads.len(), 1);
+        }
+    }
+}
+
+#[test]
 fn on_handback_stop_ends_the_mission_handed_back_with_the_twin_updated() {
     let dir = tempfile::tempdir().unwrap();
     let key = generate_key().unwrap();

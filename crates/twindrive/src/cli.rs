@@ -142,6 +142,20 @@ pub enum Command {
     /// when the robot rejected the plan, 1 when it failed (in a fleet, the
     /// worst robot's).
     Master(MasterArgs),
+    /// The operator's console: an interactive master with a web page.
+    ///
+    /// Serves one page (every asset embedded: it works offline) at --listen
+    /// and prints its address with an access token; every request needs the
+    /// token and WebSocket upgrades must come from the console's own origin.
+    /// On the page: drive the twin (arrows/WASD or the joystick, both
+    /// dead-man; or the wall follower), record a rehearsal, run the
+    /// pipeline on it and see each stage on the map, keep regions and
+    /// times, verify on the twin, sign and upload to a robot (--robot, over
+    /// zenoh, through --link's emulator), and supervise it: progress, link,
+    /// stream ages, reported against predicted pose, residuals, hand-back
+    /// banner, re-plan. Files go to --out (plans, rehearsals, robot logs,
+    /// reports, console.token). Runs until Ctrl-C.
+    Console(ConsoleArgs),
     /// Measure what decoupling buys: direct against decoupled operation
     /// over latency and loss, the upload against the link's ideal, and one
     /// master supervising a fleet through a zenoh router.
@@ -384,6 +398,69 @@ pub struct MasterArgs {
     /// Wait this long for the robot's logs once the mission is decided, seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 120.0)]
     pub log_wait: f64,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ConsoleArgs {
+    /// The twin's scenario (default: the built-in wall-following case study).
+    #[arg(long, value_name = "S.toml")]
+    pub scenario: Option<PathBuf>,
+    /// Address of the web page. The default is loopback only: the page can
+    /// sign and upload plans.
+    #[arg(long, value_name = "ADDR:PORT", default_value = "127.0.0.1:8080")]
+    pub listen: std::net::SocketAddr,
+    /// Another origin allowed to open the page's WebSocket
+    /// (`https://ops.example`, behind a reverse proxy); repeatable.
+    #[arg(long, value_name = "ORIGIN")]
+    pub allow_origin: Vec<String>,
+    /// The master's private key (from `twindrive keygen`); without it the
+    /// console plans but does not sign or upload.
+    #[arg(long, value_name = "master.key")]
+    pub key: Option<PathBuf>,
+    /// The robot's calibrated parameters (`twindrive calibrate`'s JSON),
+    /// which plans are made with (default: the twin's nominal ones).
+    #[arg(long, value_name = "calib.json")]
+    pub calibration: Option<PathBuf>,
+    /// A robot this console supervises; repeatable (a fleet).
+    #[arg(long, value_name = "ID")]
+    pub robot: Vec<String>,
+    /// Connect to this zenoh endpoint (a robot, or a router); repeatable.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// Listen on this zenoh endpoint (`tcp/0.0.0.0:7447`) for robots;
+    /// repeatable.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh_listen: Vec<String>,
+    /// A standard zenoh JSON5 configuration; --connect and --zenoh-listen
+    /// are added to it.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Emulate this link on all traffic with the robots, both ways (as
+    /// `twindrive master --link`).
+    #[arg(long, value_name = "PROFILE")]
+    pub link: Option<String>,
+    /// Seed of the link emulator.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Bytes per second each robot may send this console.
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0)]
+    pub telemetry_budget: f64,
+    /// Plans signed here stop the robot when it has heard nothing for this
+    /// long, seconds (default: unsupervised).
+    #[arg(long, value_name = "SECONDS")]
+    pub supervise: Option<f64>,
+    /// Plans signed here are valid for this long, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]
+    pub expires_in: u64,
+    /// A rehearsal to start with: a mission log made in this twin (a
+    /// simulate output directory or its log.mcap).
+    #[arg(long, value_name = "LOG")]
+    pub rehearsal: Option<PathBuf>,
+    /// Output directory: plans, rehearsals, robot logs, reports and the
+    /// access token (console.token, kept so a restarted console accepts the
+    /// open pages).
+    #[arg(long, default_value = "twindrive-console")]
+    pub out: PathBuf,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -8,26 +8,16 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use common::{repo, text, twindrive};
+use common::{Proc, port, repo, text, twindrive};
 
 const BOX: &str = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// A child process killed (by pid) when dropped.
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 /// A case-study plan (a 30 s mission) and a key pair, made once.
@@ -81,15 +71,6 @@ impl Fixture {
     fn path(&self, p: &str) -> PathBuf {
         self.dir.path().join(p)
     }
-}
-
-/// A free loopback port.
-fn port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 struct Mission {

@@ -1,6 +1,7 @@
 //! One file per subcommand.
 
 mod calibrate;
+mod console;
 mod demo;
 mod demo_decoupled;
 mod draw_map;
@@ -36,6 +37,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Sign(a) => keys::sign(&a),
         Command::Robot(a) => ops::robot(&a),
         Command::Master(a) => ops::master(&a),
+        Command::Console(a) => console::run(&a),
         Command::Experiment { command } => experiment::run(&command),
         Command::Router {
             listen,

@@ -47,7 +47,7 @@ fn unix_now_s() -> anyhow::Result<f64> {
     Ok(super::keys::since_epoch()?.as_secs_f64())
 }
 
-fn check_robot_id(id: &str, flag: &str) -> anyhow::Result<()> {
+pub(super) fn check_robot_id(id: &str, flag: &str) -> anyhow::Result<()> {
     if id.is_empty()
         || id.len() > twindrive_link::wire::MAX_ROBOT_ID_BYTES
         || !id
@@ -237,6 +237,26 @@ fn first_plan(
     })
 }
 
+/// `--link PROFILE`, parsed.
+pub(super) fn link_profile(arg: Option<&str>) -> anyhow::Result<Option<LinkProfile>> {
+    arg.map(|p| p.parse().map_err(|e| anyhow::anyhow!("--link {p}: {e}")))
+        .transpose()
+}
+
+/// `--key master.key`, read.
+pub(super) fn signing_key(
+    path: Option<&Path>,
+) -> anyhow::Result<Option<twindrive_link::envelope::SigningKey>> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("--key: reading {}", path.display()))?;
+    read_private_key_pem(&text)
+        .map(Some)
+        .map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))
+}
+
 /// One robot the master supervises.
 struct Supervised {
     robot: String,
@@ -274,22 +294,8 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     {
         bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
     }
-    let profile: Option<LinkProfile> = args
-        .link
-        .as_deref()
-        .map(|p| p.parse().map_err(|e| anyhow::anyhow!("--link {p}: {e}")))
-        .transpose()?;
-    let key = match &args.key {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("--key: reading {}", path.display()))?;
-            Some(
-                read_private_key_pem(&text)
-                    .map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))?,
-            )
-        }
-        None => None,
-    };
+    let profile = link_profile(args.link.as_deref())?;
+    let key = signing_key(args.key.as_deref())?;
     if args.on_handback == OnHandbackArg::Replan && key.is_none() {
         bail!("--on-handback replan signs continuations: it needs --key");
     }

@@ -1,0 +1,600 @@
+//! The console's state behind the web server: the twin workspace, the plan
+//! and its verification, the robots; commands in, frames out. No I/O but
+//! the files a plan leaves behind (rehearsals), and time as an argument.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use serde_json::{Value, json};
+use twindrive_kinematics::{DiffDriveParams, Pose};
+use twindrive_link::envelope::{SigningKey, Supervision};
+use twindrive_log::MissionLog;
+use twindrive_mission::plan::MissionPlan;
+use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_sim::Scenario;
+
+use crate::fleet::{SharedSlot, Signing};
+use crate::planning::{self, PlanResult, Verification};
+use crate::protocol::Command;
+use crate::workspace::Workspace;
+
+/// Work too slow for the console's tick, run on a blocking thread.
+pub enum Job {
+    Plan {
+        log: Box<MissionLog>,
+        scenario: Box<Scenario>,
+        params: DiffDriveParams,
+        redundancy: RedundancyConfig,
+    },
+    Verify {
+        plan: Arc<MissionPlan>,
+        scenario: Box<Scenario>,
+    },
+}
+
+pub enum JobResult {
+    Plan(Result<PlanResult, String>),
+    Verify(Result<(Verification, Value), String>),
+}
+
+impl Job {
+    pub fn run(self) -> JobResult {
+        match self {
+            Job::Plan {
+                log,
+                scenario,
+                params,
+                redundancy,
+            } => JobResult::Plan(planning::make_plan(&log, &scenario, &params, redundancy)),
+            Job::Verify { plan, scenario } => JobResult::Verify(planning::verify(&plan, &scenario)),
+        }
+    }
+}
+
+/// What a command did.
+pub enum Applied {
+    /// Done; a line for the operator, if worth one.
+    Done(Option<String>),
+    /// Run this job, then hand its result to [`Core::finish`].
+    Job(Job),
+}
+
+/// One published picture: the state (small, every frame) and the heavy
+/// parts with the revision they belong to (sent when a page lacks them).
+pub struct Frame {
+    pub state: Arc<str>,
+    pub world: Arc<str>,
+    pub plan: Option<(u64, Arc<str>)>,
+    pub verify: Option<(u64, Arc<str>)>,
+    pub rehearsal: Option<(u64, Arc<str>)>,
+}
+
+/// What the console was started with.
+pub struct Settings {
+    pub key: Option<SigningKey>,
+    /// The robot's calibrated parameters, which plans are made with.
+    pub params: DiffDriveParams,
+    /// SHA-256 of the twin's scenario file: plans are signed for it.
+    pub world_sha256: String,
+    pub unix_at_zero_s: f64,
+    pub supervision: Supervision,
+    pub expires_in_s: u64,
+    /// Where rehearsals and plans are kept.
+    pub out: PathBuf,
+    /// Tells a page that the console behind it restarted.
+    pub instance: String,
+}
+
+pub struct Core {
+    pub ws: Workspace,
+    pub robots: Vec<SharedSlot>,
+    settings: Settings,
+    redundancy: RedundancyConfig,
+    plan: Option<PlanResult>,
+    plan_rev: u64,
+    verification: Option<(Verification, Value)>,
+    verify_rev: u64,
+    job: Option<&'static str>,
+    events: VecDeque<Value>,
+    event_seq: u64,
+    world: Arc<str>,
+    plan_cache: Option<(u64, Arc<str>)>,
+    verify_cache: Option<(u64, Arc<str>)>,
+    rehearsal_cache: Option<(u64, Arc<str>)>,
+}
+
+/// The map as the page draws it: walls, solids, the occupancy grid (row 0
+/// at the bottom), the robot's footprint and sensors.
+pub fn world_json(scenario: &Scenario) -> Value {
+    let w = &scenario.world;
+    let segments: Vec<[f64; 4]> = w
+        .segments()
+        .iter()
+        .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
+        .collect();
+    let solids: Vec<[f64; 4]> = w
+        .solids()
+        .iter()
+        .map(|a| [a.mins.x, a.mins.y, a.maxs.x, a.maxs.y])
+        .collect();
+    let grid = w.grid().map(|g| {
+        let cells: String = g
+            .cells
+            .iter()
+            .map(|c| match c {
+                twindrive_sim::map::Cell::Free => '0',
+                twindrive_sim::map::Cell::Occupied => '1',
+                twindrive_sim::map::Cell::Unknown => '2',
+            })
+            .collect();
+        json!({
+            "width": g.width, "height": g.height, "resolution_m": g.resolution_m,
+            "origin": [g.origin_x_m, g.origin_y_m, g.origin_yaw_rad], "cells": cells,
+        })
+    });
+    let bounds = w.bounds().map(|b| [b.mins.x, b.mins.y, b.maxs.x, b.maxs.y]);
+    json!({
+        "type": "world",
+        "scenario": scenario.name,
+        "segments": segments,
+        "solids": solids,
+        "grid": grid,
+        "bounds": bounds,
+        "start": [scenario.robot.start.x_m, scenario.robot.start.y_m, scenario.robot.start.heading_rad],
+        "footprint_radius_m": scenario.robot.footprint_radius_m,
+        "dt_s": scenario.dt_ns as f64 * 1e-9,
+    })
+}
+
+impl Core {
+    pub fn new(ws: Workspace, robots: Vec<SharedSlot>, settings: Settings) -> Self {
+        let world = world_json(ws.scenario()).to_string().into();
+        let redundancy = planning::default_redundancy(ws.scenario());
+        Self {
+            ws,
+            robots,
+            settings,
+            redundancy,
+            plan: None,
+            plan_rev: 0,
+            verification: None,
+            verify_rev: 0,
+            job: None,
+            events: VecDeque::new(),
+            event_seq: 0,
+            world,
+            plan_cache: None,
+            verify_cache: None,
+            rehearsal_cache: None,
+        }
+    }
+
+    /// A line in the page's event list.
+    pub fn event(&mut self, level: &str, text: String) {
+        match level {
+            "error" => tracing::warn!("{text}"),
+            _ => tracing::info!("{text}"),
+        }
+        self.event_seq += 1;
+        self.events
+            .push_back(json!({ "seq": self.event_seq, "level": level, "text": text }));
+        if self.events.len() > 30 {
+            self.events.pop_front();
+        }
+    }
+
+    fn robot(&self, id: &str) -> Result<&SharedSlot, String> {
+        self.robots
+            .iter()
+            .find(|r| r.lock().id == id)
+            .ok_or_else(|| {
+                let ids: Vec<String> = self.robots.iter().map(|r| r.lock().id.clone()).collect();
+                format!("no robot `{id}`; this console has {ids:?}")
+            })
+    }
+
+    /// Carries out a command from a page at console time `now_ns`.
+    pub fn apply(&mut self, cmd: Command, now_ns: u64) -> Result<Applied, String> {
+        let done = |s: &str| Ok(Applied::Done(Some(s.to_owned())));
+        match cmd {
+            Command::Drive { forward, turn } => {
+                self.ws.drive(forward, turn, now_ns)?;
+                Ok(Applied::Done(None))
+            }
+            Command::Stop => {
+                self.ws.stop(now_ns);
+                Ok(Applied::Done(None))
+            }
+            Command::WallFollow => {
+                self.ws.wall_follow(now_ns);
+                done("twin: wall follower on")
+            }
+            Command::Speed { factor } => {
+                self.ws.set_speed(factor, now_ns)?;
+                Ok(Applied::Done(Some(format!("twin: {factor}x real time"))))
+            }
+            Command::Reset => {
+                self.ws.reset(now_ns);
+                done("twin: reset to the start pose")
+            }
+            Command::Place {
+                x_m,
+                y_m,
+                heading_rad,
+            } => {
+                self.ws.place(Pose::new(x_m, y_m, heading_rad), now_ns)?;
+                Ok(Applied::Done(Some(format!(
+                    "twin: robot placed at ({x_m:.2}, {y_m:.2})"
+                ))))
+            }
+            Command::RecordStart => {
+                self.ws.record_start(now_ns);
+                done("twin: recording a rehearsal")
+            }
+            Command::RecordStop => {
+                let log = self.ws.record_stop(now_ns)?;
+                let secs = log.steps.len() as f64 * log.header.dt_s;
+                Ok(Applied::Done(Some(format!(
+                    "twin: rehearsal of {secs:.1} s recorded"
+                ))))
+            }
+            Command::Plan { redundancy } => {
+                if let Some(job) = self.job {
+                    return Err(format!("busy {job}; wait for it"));
+                }
+                let log = self
+                    .ws
+                    .rehearsal()
+                    .ok_or("plan: record a rehearsal first")?
+                    .clone();
+                if let Some(r) = redundancy {
+                    self.redundancy = r;
+                }
+                self.job = Some("planning");
+                Ok(Applied::Job(Job::Plan {
+                    log: Box::new(log),
+                    scenario: Box::new(self.ws.scenario().clone()),
+                    params: self.settings.params,
+                    redundancy: self.redundancy.clone(),
+                }))
+            }
+            Command::Verify => {
+                if let Some(job) = self.job {
+                    return Err(format!("busy {job}; wait for it"));
+                }
+                let plan = self
+                    .plan
+                    .as_ref()
+                    .ok_or("verify: make a plan first")?
+                    .plan
+                    .clone();
+                self.job = Some("verifying");
+                Ok(Applied::Job(Job::Verify {
+                    plan,
+                    scenario: Box::new(self.ws.scenario().clone()),
+                }))
+            }
+            Command::Upload { robot } => {
+                let key = self
+                    .settings
+                    .key
+                    .as_ref()
+                    .ok_or("upload: this console has no signing key (start it with --key)")?;
+                let p = self.plan.as_ref().ok_or("upload: make a plan first")?;
+                let unix_now_s = self.settings.unix_at_zero_s + now_ns as f64 * 1e-9;
+                let signing = Signing {
+                    key,
+                    world_sha256: &self.settings.world_sha256,
+                    unix_now_s,
+                    unix_at_zero_s: self.settings.unix_at_zero_s,
+                    expires_in_s: self.settings.expires_in_s,
+                    supervision: self.settings.supervision,
+                };
+                let slot = self.robot(&robot)?;
+                let line = slot.lock().upload(
+                    p.plan.clone(),
+                    &p.plan_json,
+                    self.ws.scenario(),
+                    &signing,
+                    now_ns,
+                )?;
+                Ok(Applied::Done(Some(line)))
+            }
+            Command::Replan { robot } => {
+                let line = self.robot(&robot)?.lock().replan(now_ns)?;
+                Ok(Applied::Done(Some(line)))
+            }
+            Command::EndMission { robot } => {
+                let line = self.robot(&robot)?.lock().end_mission(now_ns)?;
+                Ok(Applied::Done(Some(line)))
+            }
+            Command::Focus { robot } => {
+                if let Some(id) = robot {
+                    self.robot(&id)?;
+                }
+                Ok(Applied::Done(None))
+            }
+        }
+    }
+
+    /// Takes a job's result in.
+    pub fn finish(&mut self, result: JobResult) -> Result<String, String> {
+        self.job = None;
+        match result {
+            JobResult::Plan(Ok(p)) => {
+                let dir = self.settings.out.join("plans");
+                let stem = p.plan.sha256[..12].to_owned();
+                let files = [
+                    (format!("{stem}.rehearsal.mcap"), &p.rehearsal_mcap),
+                    (format!("{stem}.json"), &p.plan_json),
+                ];
+                for (name, bytes) in files {
+                    std::fs::create_dir_all(&dir)
+                        .and_then(|()| {
+                            twindrive_link::upload::write_durably(&dir.join(&name), bytes)
+                        })
+                        .map_err(|e| format!("writing {}: {e}", dir.join(&name).display()))?;
+                }
+                let s = &p.view["summary"];
+                let line = format!(
+                    "plan {stem}: {:.2} m in {:.1} s from {:.2} m rehearsed, {:.2} % covered; {}",
+                    s["plan_length_m"].as_f64().unwrap_or(0.0),
+                    s["plan_duration_s"].as_f64().unwrap_or(0.0),
+                    s["executed_length_m"].as_f64().unwrap_or(0.0),
+                    s["coverage_percent"].as_f64().unwrap_or(0.0),
+                    dir.join(format!("{stem}.json")).display(),
+                );
+                self.plan = Some(p);
+                self.plan_rev += 1;
+                self.verification = None;
+                self.verify_rev += 1;
+                Ok(line)
+            }
+            JobResult::Plan(Err(e)) => Err(e),
+            JobResult::Verify(Ok(v)) => {
+                let line = format!(
+                    "verification of {}: {} (open loop {} collisions, {} bumps, {:.3} m max deviation; closed loop {} collisions, {} bumps)",
+                    &v.0.plan_sha256[..12],
+                    if v.0.passed { "passed" } else { "FAILED" },
+                    v.0.open_loop.collisions,
+                    v.0.open_loop.bumps,
+                    v.0.open_loop.max_deviation_m,
+                    v.0.closed_loop.collisions,
+                    v.0.closed_loop.bumps,
+                );
+                self.verification = Some(v);
+                self.verify_rev += 1;
+                Ok(line)
+            }
+            JobResult::Verify(Err(e)) => Err(e),
+        }
+    }
+
+    /// Time passes: the twin moves, the operators react.
+    pub fn tick(&mut self, now_ns: u64) {
+        self.ws.advance(now_ns);
+        for r in &self.robots {
+            r.lock().tick(now_ns);
+        }
+    }
+
+    /// The heavy detail of robot `id` (for a page that focuses it).
+    pub fn robot_detail(&self, id: &str) -> Option<Arc<str>> {
+        let slot = self.robot(id).ok()?;
+        Some(slot.lock().detail().to_string().into())
+    }
+
+    /// The revisions of robot `id`'s detail.
+    pub fn robot_revs(&self, id: &str) -> Option<(u64, u64)> {
+        let slot = self.robot(id).ok()?;
+        let s = slot.lock();
+        Some((s.mission_rev(), s.series_rev()))
+    }
+
+    /// Writes every robot's report (the console is closing).
+    pub fn finish_all(&mut self) {
+        for r in &self.robots {
+            r.lock().finish();
+        }
+    }
+
+    /// The picture now.
+    pub fn frame(&mut self, now_ns: u64) -> Frame {
+        let ws = &self.ws;
+        let pose = ws.pose();
+        let bumps: Vec<[f64; 2]> = ws.bumps().rev().take(20).map(|b| [b.x_m, b.y_m]).collect();
+        let verdict = self.verification.as_ref().map(|(v, _)| {
+            json!({
+                "passed": v.passed,
+                "open_loop": { "collisions": v.open_loop.collisions, "bumps": v.open_loop.bumps, "max_deviation_m": v.open_loop.max_deviation_m },
+                "closed_loop": { "collisions": v.closed_loop.collisions, "bumps": v.closed_loop.bumps, "max_deviation_m": v.closed_loop.max_deviation_m },
+            })
+        });
+        let robots: Vec<Value> = self.robots.iter().map(|r| r.lock().view(now_ns)).collect();
+        let state = json!({
+            "type": "state",
+            "instance": self.settings.instance,
+            "t_s": now_ns as f64 * 1e-9,
+            "twin": {
+                "t_s": ws.t_s(),
+                "pose": [pose.x_m, pose.y_m, pose.heading_rad],
+                "beams": ws.beams(),
+                "bump": ws.bumped(),
+                "bumps": bumps,
+                "drive": ws.drive_name(),
+                "speed": ws.speed(),
+                "recording_s": ws.recording_s(),
+                "rehearsal_rev": ws.rehearsal_rev(),
+                "has_rehearsal": ws.rehearsal().is_some(),
+            },
+            "job": self.job,
+            "plan_rev": self.plan_rev,
+            "plan": self.plan.as_ref().map(|p| json!({
+                "sha256": p.plan.sha256,
+                "summary": p.view["summary"],
+                "duration_s": p.plan.duration_s(),
+            })),
+            "verify_rev": self.verify_rev,
+            "verdict": verdict,
+            "redundancy": self.redundancy,
+            "can_sign": self.settings.key.is_some(),
+            "robots": robots,
+            "events": self.events,
+        });
+        if let Some(p) = &self.plan
+            && self
+                .plan_cache
+                .as_ref()
+                .is_none_or(|c| c.0 != self.plan_rev)
+        {
+            let mut v = p.view.clone();
+            v["type"] = json!("plan");
+            v["rev"] = json!(self.plan_rev);
+            self.plan_cache = Some((self.plan_rev, v.to_string().into()));
+        }
+        if self.plan.is_none() {
+            self.plan_cache = None;
+        }
+        match &self.verification {
+            Some((_, view))
+                if self
+                    .verify_cache
+                    .as_ref()
+                    .is_none_or(|c| c.0 != self.verify_rev) =>
+            {
+                let mut v = view.clone();
+                v["type"] = json!("verify");
+                v["rev"] = json!(self.verify_rev);
+                self.verify_cache = Some((self.verify_rev, v.to_string().into()));
+            }
+            None => self.verify_cache = None,
+            _ => {}
+        }
+        let rev = self.ws.rehearsal_rev();
+        if let Some(log) = self.ws.rehearsal()
+            && self.rehearsal_cache.as_ref().is_none_or(|c| c.0 != rev)
+        {
+            let every = (log.steps.len() / 50_000).max(1);
+            let track = planning::columns(
+                log.steps
+                    .iter()
+                    .step_by(every)
+                    .map(|s| (s.t_ns as f64 * 1e-9, s.ground_truth.x_m, s.ground_truth.y_m)),
+            );
+            let v = json!({ "type": "rehearsal", "rev": rev, "track": track });
+            self.rehearsal_cache = Some((rev, v.to_string().into()));
+        }
+        Frame {
+            state: state.to_string().into(),
+            world: self.world.clone(),
+            plan: self.plan_cache.clone(),
+            verify: self.verify_cache.clone(),
+            rehearsal: self.rehearsal_cache.clone(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::parse;
+
+    fn core(key: bool) -> Core {
+        let scenario = twindrive_sim::builtin::load("wall_following")
+            .unwrap()
+            .unwrap();
+        let out =
+            std::env::temp_dir().join(format!("twindrive-console-core-{}", std::process::id()));
+        let params = scenario.robot.nominal_params;
+        Core::new(
+            Workspace::new(scenario),
+            Vec::new(),
+            Settings {
+                key: key.then(|| twindrive_link::envelope::generate_key().unwrap()),
+                params,
+                world_sha256: "00".repeat(32),
+                unix_at_zero_s: 1.8e9,
+                supervision: Supervision {
+                    dead_man_timeout_s: None,
+                },
+                expires_in_s: 60,
+                out,
+                instance: "test".into(),
+            },
+        )
+    }
+
+    fn apply(c: &mut Core, text: &str, now_ns: u64) -> Result<Applied, String> {
+        c.apply(parse(text)?, now_ns)
+    }
+
+    fn state(c: &mut Core, now_ns: u64) -> Value {
+        serde_json::from_str(&c.frame(now_ns).state).unwrap()
+    }
+
+    #[test]
+    fn commands_out_of_order_are_refused_with_a_reason() {
+        let mut c = core(false);
+        let e = |r: Result<Applied, String>| r.err().expect("refused");
+        assert!(e(apply(&mut c, r#"{"cmd":"plan"}"#, 0)).contains("record a rehearsal first"));
+        assert!(e(apply(&mut c, r#"{"cmd":"verify"}"#, 0)).contains("make a plan first"));
+        assert!(e(apply(&mut c, r#"{"cmd":"record_stop"}"#, 0)).contains("not recording"));
+        assert!(e(apply(&mut c, r#"{"cmd":"upload","robot":"r1"}"#, 0)).contains("no signing key"));
+        assert!(e(apply(&mut c, r#"{"cmd":"replan","robot":"r1"}"#, 0)).contains("no robot `r1`"));
+        assert!(e(apply(&mut c, r#"{"cmd":"focus","robot":"r9"}"#, 0)).contains("no robot"));
+        assert!(e(apply(&mut c, r#"{"cmd":"speed","factor":-1}"#, 0)).contains("speed: a factor"));
+        let mut k = core(true);
+        assert!(e(apply(&mut k, r#"{"cmd":"upload","robot":"r1"}"#, 0)).contains("make a plan"));
+        // Refusals change nothing.
+        let s = state(&mut c, 0);
+        assert_eq!(s["twin"]["drive"], "idle");
+        assert_eq!(s["plan"], Value::Null);
+    }
+
+    #[test]
+    fn a_recorded_drive_is_planned_verified_and_published() {
+        let mut c = core(true);
+        let s = 1_000_000_000u64;
+        for cmd in [
+            r#"{"cmd":"wall_follow"}"#,
+            r#"{"cmd":"speed","factor":32}"#,
+            r#"{"cmd":"record_start"}"#,
+        ] {
+            assert!(apply(&mut c, cmd, 0).is_ok());
+        }
+        c.tick(s);
+        let st = state(&mut c, s);
+        assert!(st["twin"]["recording_s"].as_f64().unwrap() > 30.0, "{st}");
+        assert!(apply(&mut c, r#"{"cmd":"record_stop"}"#, s).is_ok());
+        let Ok(Applied::Job(job)) = apply(
+            &mut c,
+            r#"{"cmd":"plan","redundancy":{"pinch_distance_m":0.15,"keep_end":true}}"#,
+            s,
+        ) else {
+            panic!("a planning job")
+        };
+        // One job at a time.
+        assert!(apply(&mut c, r#"{"cmd":"verify"}"#, s).is_err());
+        assert_eq!(state(&mut c, s)["job"], "planning");
+        let line = c.finish(job.run()).unwrap();
+        assert!(line.contains("covered"), "{line}");
+        let frame = c.frame(s);
+        let plan: Value = serde_json::from_str(&frame.plan.unwrap().1).unwrap();
+        assert_eq!(plan["type"], "plan");
+        assert_eq!(plan["settings"]["keep_end"], true);
+        let Ok(Applied::Job(job)) = apply(&mut c, r#"{"cmd":"verify"}"#, s) else {
+            panic!("a verification job")
+        };
+        let line = c.finish(job.run()).unwrap();
+        assert!(line.contains("passed"), "{line}");
+        let st = state(&mut c, s);
+        assert_eq!(st["verdict"]["passed"], true);
+        assert!(
+            st["events"].as_array().unwrap().is_empty(),
+            "events are the server's to add"
+        );
+        assert!(c.frame(s).verify.is_some());
+        assert!(c.frame(s).rehearsal.is_some());
+    }
+}

@@ -1,0 +1,634 @@
+//! The robots the console supervises: one master end per robot (its own
+//! upload, heartbeats, pings and log assembly), an operator per mission
+//! that waits for the person at the page on a hand-back, and what the page
+//! shows of each: upload progress, link state, the age of every stream,
+//! reported against predicted pose, residuals, the twin's updates.
+//!
+//! A [`RobotSlot`] is shared between its zenoh driver task (through
+//! [`SharedSlot`], a `twindrive_link::vtime::Endpoint`) and the console;
+//! nothing in it does network I/O, and time comes in as nanoseconds of the
+//! console's clock.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use serde_json::{Value, json};
+use twindrive_agent::master::{Master, MasterConfig, MasterEvent};
+use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
+use twindrive_agent::twin::Twin;
+use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, sign_plan};
+use twindrive_link::upload::{DirStore, write_durably};
+use twindrive_link::vtime::Endpoint;
+use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Status};
+use twindrive_mission::plan::MissionPlan;
+use twindrive_sim::Scenario;
+
+use crate::planning::columns;
+
+/// Statuses kept for the page's time series (an hour at one a second).
+const SERIES_LEN: usize = 3600;
+
+/// A stream is stale when nothing came for this long and this many of its
+/// expected periods.
+const STALE_S: f64 = 3.0;
+
+/// Everything the page needs to sign a plan for a robot.
+pub struct Signing<'a> {
+    pub key: &'a SigningKey,
+    pub world_sha256: &'a str,
+    pub unix_now_s: f64,
+    /// Unix time at the console clock's zero.
+    pub unix_at_zero_s: f64,
+    pub expires_in_s: u64,
+    pub supervision: Supervision,
+}
+
+enum Link {
+    Idle(Box<Master<DirStore>>),
+    Operating(Box<Operator<DirStore>>),
+}
+
+/// One robot.
+pub struct RobotSlot {
+    pub id: String,
+    out: PathBuf,
+    link: Option<Link>,
+    /// Console time of the last message from the robot.
+    last_rx_ns: Option<u64>,
+    last_status_ns: Option<u64>,
+    /// Arrival times of recent messages (for a rate).
+    rx_times: VecDeque<u64>,
+    pub messages_received: u64,
+    /// (console s, plan s, deviation m, range residual m).
+    series: VecDeque<[f64; 4]>,
+    series_rev: u64,
+    /// Changes when the mission's picture changes (plans, hand-backs, twin
+    /// updates, logs).
+    mission_rev: u64,
+    /// Tracks of the robot's back-filled logs (columns t, x, y).
+    logs: Vec<Value>,
+    /// A hand-back that arrived while no mission of this console ran (the
+    /// robot ran a plan of an earlier master).
+    orphan_handback: Option<Handback>,
+    report_written: bool,
+    /// Problems worth telling the operator (writing files, say).
+    pub notices: VecDeque<String>,
+}
+
+/// A robot slot shared by its driver and the console.
+#[derive(Clone)]
+pub struct SharedSlot(pub Arc<Mutex<RobotSlot>>);
+
+impl SharedSlot {
+    pub fn lock(&self) -> MutexGuard<'_, RobotSlot> {
+        // A panic elsewhere must not take the console down with it.
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Endpoint for SharedSlot {
+    fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        self.lock().poll_transmit(now_ns)
+    }
+    fn handle(&mut self, message: &Message, now_ns: u64) {
+        self.lock().handle(message, now_ns)
+    }
+    fn poll_timeout(&self) -> Option<u64> {
+        self.lock().poll_timeout()
+    }
+}
+
+impl RobotSlot {
+    /// A robot `id` whose files go to `out` (`out/plans`, `out/robot_logs`,
+    /// `out/report.json`).
+    pub fn new(id: &str, out: &Path, config: MasterConfig) -> Self {
+        let master = Master::new(
+            id,
+            config,
+            DirStore::new(out.join("state").join("log_chunks")),
+        );
+        Self {
+            id: id.into(),
+            out: out.to_path_buf(),
+            link: Some(Link::Idle(Box::new(master))),
+            last_rx_ns: None,
+            last_status_ns: None,
+            rx_times: VecDeque::new(),
+            messages_received: 0,
+            series: VecDeque::new(),
+            series_rev: 0,
+            mission_rev: 0,
+            logs: Vec::new(),
+            orphan_handback: None,
+            report_written: false,
+            notices: VecDeque::new(),
+        }
+    }
+
+    fn link(&mut self) -> &mut Link {
+        self.link.as_mut().expect("a link, except inside upload")
+    }
+
+    fn master(&self) -> &Master<DirStore> {
+        match self.link.as_ref().expect("a link") {
+            Link::Idle(m) => m,
+            Link::Operating(op) => &op.master,
+        }
+    }
+
+    fn operator(&self) -> Option<&Operator<DirStore>> {
+        match self.link.as_ref().expect("a link") {
+            Link::Idle(_) => None,
+            Link::Operating(op) => Some(op),
+        }
+    }
+
+    pub fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
+        match self.link() {
+            Link::Idle(m) => m.poll_transmit(now_ns),
+            Link::Operating(op) => op.poll_transmit(now_ns),
+        }
+    }
+
+    pub fn poll_timeout(&self) -> Option<u64> {
+        match self.link.as_ref().expect("a link") {
+            Link::Idle(m) => m.poll_timeout(),
+            Link::Operating(op) => op.poll_timeout(),
+        }
+    }
+
+    pub fn handle(&mut self, message: &Message, now_ns: u64) {
+        self.messages_received += 1;
+        self.last_rx_ns = Some(now_ns);
+        self.rx_times.push_back(now_ns);
+        while self
+            .rx_times
+            .front()
+            .is_some_and(|&t| t + 10_000_000_000 < now_ns)
+        {
+            self.rx_times.pop_front();
+        }
+        if let Body::Status(s) = &message.body {
+            self.last_status_ns = Some(now_ns);
+            self.series.push_back([
+                now_ns as f64 * 1e-9,
+                s.plan_t_s,
+                s.deviation_m,
+                s.range_residual_m,
+            ]);
+            if self.series.len() > SERIES_LEN {
+                self.series.pop_front();
+            }
+            self.series_rev += 1;
+        }
+        match self.link() {
+            Link::Idle(m) => {
+                m.handle(message, now_ns);
+                let mut orphan = None;
+                while let Some(event) = m.poll_event() {
+                    if let MasterEvent::Handback(h) = event {
+                        orphan = Some(*h);
+                    }
+                }
+                if let Some(h) = orphan {
+                    self.orphan_handback = Some(h);
+                    self.mission_rev += 1;
+                }
+            }
+            Link::Operating(op) => {
+                let before = (op.report.handbacks.len(), op.report.twin_updates.len());
+                op.handle(message, now_ns);
+                let after = (op.report.handbacks.len(), op.report.twin_updates.len());
+                if before != after {
+                    self.mission_rev += 1;
+                }
+                self.collect(now_ns);
+            }
+        }
+    }
+
+    /// Writes what the operator produced (continuation plans, robot logs,
+    /// the report once the mission is done).
+    fn collect(&mut self, _now_ns: u64) {
+        let Some(Link::Operating(op)) = self.link.as_mut() else {
+            return;
+        };
+        let mut files: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+        let mut logs = Vec::new();
+        while let Some((plan, json, signed)) = op.new_plans.pop_front() {
+            let stem = &plan.sha256[..12];
+            files.push((self.out.join("plans").join(format!("{stem}.json")), json));
+            files.push((
+                self.out.join("plans").join(format!("{stem}.signed")),
+                signed,
+            ));
+        }
+        while let Some((plan, mcap)) = op.new_logs.pop_front() {
+            logs.push((plan, mcap));
+        }
+        let report = (op.is_done() && !self.report_written).then(|| {
+            op.finish_report();
+            serde_json::to_vec_pretty(&op.report).unwrap_or_default()
+        });
+        let changed = !files.is_empty() || !logs.is_empty() || report.is_some();
+        for (path, bytes) in files {
+            self.write(&path, &bytes);
+        }
+        for (plan, mcap) in logs {
+            let n = self.logs.len() + 1;
+            let name = match &plan {
+                Some(p) => format!("{n:02}_{}.mcap", &p.sha256[..12]),
+                None => format!("{n:02}.mcap"),
+            };
+            let path = self.out.join("robot_logs").join(name);
+            if self.write(&path, &mcap) {
+                match twindrive_log::read_mcap(&path) {
+                    Ok(log) => {
+                        let every = (log.steps.len() / 20_000).max(1);
+                        self.logs
+                            .push(columns(log.steps.iter().step_by(every).map(|s| {
+                                (s.t_ns as f64 * 1e-9, s.ground_truth.x_m, s.ground_truth.y_m)
+                            })));
+                    }
+                    Err(e) => self.notice(format!("the robot's log {}: {e}", path.display())),
+                }
+            }
+        }
+        if let Some(report) = report {
+            self.report_written = true;
+            let path = self.out.join("report.json");
+            self.write(&path, &report);
+        }
+        if changed {
+            self.mission_rev += 1;
+        }
+    }
+
+    fn write(&mut self, path: &Path, bytes: &[u8]) -> bool {
+        let result = path
+            .parent()
+            .map_or(Ok(()), std::fs::create_dir_all)
+            .and_then(|()| write_durably(path, bytes));
+        match result {
+            Ok(()) => true,
+            Err(e) => {
+                self.notice(format!("writing {}: {e}", path.display()));
+                false
+            }
+        }
+    }
+
+    fn notice(&mut self, text: String) {
+        tracing::warn!(robot = %self.id, "{text}");
+        self.notices.push_back(text);
+        if self.notices.len() > 20 {
+            self.notices.pop_front();
+        }
+        self.mission_rev += 1;
+    }
+
+    /// Whether a mission of this console is under way (not yet decided).
+    pub fn busy(&self) -> bool {
+        self.operator()
+            .is_some_and(|op| op.report.outcome.is_none())
+    }
+
+    /// Signs `plan` for this robot and starts uploading it; the operator
+    /// waits for the person on a hand-back.
+    pub fn upload(
+        &mut self,
+        plan: Arc<MissionPlan>,
+        plan_json: &[u8],
+        twin: &Scenario,
+        signing: &Signing,
+        now_ns: u64,
+    ) -> Result<String, String> {
+        if self.busy() {
+            return Err(format!(
+                "robot {}: a mission is under way; end it (or let it finish) first",
+                self.id
+            ));
+        }
+        // Counters only grow: milliseconds of Unix time.
+        let counter = (signing.unix_now_s * 1e3) as u64;
+        let envelope = Envelope::new(
+            &self.id,
+            counter,
+            signing.unix_now_s as u64,
+            signing.expires_in_s,
+            signing.world_sha256.to_owned(),
+            signing.supervision,
+            Tolerances::default(),
+        );
+        let signed = sign_plan(signing.key, plan_json, envelope)
+            .map_err(|e| format!("signing the plan: {e}"))?;
+        let master = match self.link.take().expect("a link") {
+            Link::Idle(m) => *m,
+            Link::Operating(op) => op.into_master(),
+        };
+        let mut op = Operator::new(
+            master,
+            Some(Twin::new(twin.clone(), plan.header.calibrated)),
+            Some(signing.key.clone()),
+            OperatorConfig {
+                on_handback: OnHandback::Ask,
+                expires_in_s: signing.expires_in_s,
+                supervision: signing.supervision,
+                ..OperatorConfig::replanning(
+                    &self.id,
+                    &plan,
+                    counter,
+                    signing.world_sha256.to_owned(),
+                    signing.unix_at_zero_s,
+                )
+            },
+        );
+        let stem = plan.sha256[..12].to_owned();
+        let plans = self.out.join("plans");
+        self.write(&plans.join(format!("{stem}.json")), plan_json);
+        self.write(&plans.join(format!("{stem}.signed")), &signed);
+        let bytes = signed.len();
+        op.start(plan, signed, counter, false, now_ns);
+        self.link = Some(Link::Operating(Box::new(op)));
+        self.orphan_handback = None;
+        self.logs.clear();
+        self.report_written = false;
+        self.mission_rev += 1;
+        Ok(format!(
+            "robot {}: uploading plan {stem} ({bytes} bytes signed)",
+            self.id
+        ))
+    }
+
+    /// Continues after a hand-back: a continuation rehearsed on the updated
+    /// twin from the hand-back pose, signed and uploaded.
+    pub fn replan(&mut self, now_ns: u64) -> Result<String, String> {
+        let Some(Link::Operating(op)) = self.link.as_mut() else {
+            return Err(format!("robot {}: no mission to continue", self.id));
+        };
+        op.replan(now_ns)
+            .map_err(|e| format!("robot {}: {e:#}", self.id))?;
+        self.collect(now_ns);
+        self.mission_rev += 1;
+        Ok(format!("robot {}: continuation uploading", self.id))
+    }
+
+    /// Ends the mission at a hand-back.
+    pub fn end_mission(&mut self, now_ns: u64) -> Result<String, String> {
+        let Some(Link::Operating(op)) = self.link.as_mut() else {
+            self.orphan_handback = None;
+            self.mission_rev += 1;
+            return Ok(format!("robot {}: nothing to end", self.id));
+        };
+        op.end_mission(now_ns);
+        self.mission_rev += 1;
+        Ok(format!("robot {}: mission ended", self.id))
+    }
+
+    /// Lets the operator act on what the master reported (called by the
+    /// console's tick: time passing decides things too).
+    pub fn tick(&mut self, now_ns: u64) {
+        if let Some(Link::Operating(op)) = self.link.as_mut() {
+            op.react(now_ns);
+            self.collect(now_ns);
+        }
+    }
+
+    /// Writes the report now (the console is closing).
+    pub fn finish(&mut self) {
+        if let Some(Link::Operating(op)) = self.link.as_mut() {
+            op.finish_report();
+            if let Ok(bytes) = serde_json::to_vec_pretty(&op.report) {
+                let path = self.out.join("report.json");
+                self.write(&path, &bytes);
+            }
+        }
+    }
+
+    pub fn mission_rev(&self) -> u64 {
+        self.mission_rev
+    }
+
+    pub fn series_rev(&self) -> u64 {
+        self.series_rev
+    }
+
+    /// The state in one word for the fleet list.
+    fn state_word(&self) -> &'static str {
+        let Some(op) = self.operator() else {
+            return if self.orphan_handback.is_some() {
+                "handed_back"
+            } else {
+                "idle"
+            };
+        };
+        if op.awaiting_decision().is_some() {
+            return "awaiting_decision";
+        }
+        if let Some(outcome) = op.report.outcome {
+            return match outcome {
+                Outcome::Completed => "completed",
+                Outcome::HandedBack => "handed_back",
+                Outcome::Rejected => "rejected",
+                Outcome::Failed => "failed",
+            };
+        }
+        let m = &op.master;
+        match m.uploading().and_then(|t| m.phase(&t)) {
+            Some(PlanPhase::Executing) => "executing",
+            Some(PlanPhase::Finished) => "completed",
+            Some(PlanPhase::Stopped { .. }) => "stopped",
+            Some(PlanPhase::Rejected { .. }) => "rejected",
+            _ if m.upload_finished() => "uploaded",
+            _ => "uploading",
+        }
+    }
+
+    /// What the page shows of this robot now (a few hundred bytes).
+    pub fn view(&self, now_ns: u64) -> Value {
+        let master = self.master();
+        let age = |t: Option<u64>| t.map(|t| now_ns.saturating_sub(t) as f64 * 1e-9);
+        let rtt = {
+            let r = &master.rtt_s;
+            let recent = &r[r.len().saturating_sub(5)..];
+            let mut v = recent.to_vec();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied()
+        };
+        let rx_age = age(self.last_rx_ns);
+        let rtt_allow = rtt.unwrap_or(0.0);
+        let outage = rx_age.is_none_or(|a| a > STALE_S + rtt_allow);
+        let rate = self.rx_times.len() as f64 / 10.0;
+        let upload = master.upload_stats().map(|(s, bytes, started)| {
+            json!({
+                "chunks": s.chunks,
+                "confirmed": s.chunks_confirmed,
+                "sent": s.chunks_sent,
+                "resent": s.chunks_resent,
+                "repairs": s.repairs_sent,
+                "bytes": bytes,
+                "elapsed_s": now_ns.saturating_sub(started) as f64 * 1e-9,
+                "done": master.upload_finished(),
+            })
+        });
+        let status_age = age(self.last_status_ns);
+        let status = master.latest_status().map(|s| status_view(s, status_age));
+        let op = self.operator();
+        let plan = op.and_then(|o| o.current_plan());
+        // The twin's prediction only means something while a plan runs.
+        let predicted = match (plan, master.latest_status()) {
+            (Some(p), Some(s)) if matches!(s.plan, Some((_, PlanPhase::Executing))) => {
+                Some(predicted_pose(p, s.plan_t_s))
+            }
+            _ => None,
+        };
+        let awaiting = op.and_then(|o| o.awaiting_decision()).map(|h| {
+            json!({ "reason": h.reason, "plan_t_s": h.plan_t_s, "pose": h.pose, "decision": true })
+        });
+        let awaiting = awaiting.or_else(|| {
+            self.orphan_handback.as_ref().map(|h| {
+                json!({ "reason": h.reason, "plan_t_s": h.plan_t_s, "pose": h.pose, "decision": false })
+            })
+        });
+        let tol = Tolerances::default();
+        json!({
+            "id": self.id,
+            "state": self.state_word(),
+            "upload": upload,
+            "link": {
+                "rtt_s": rtt,
+                "last_rx_age_s": rx_age,
+                "rx_msgs_s": rate,
+                "messages": self.messages_received,
+                "outage": outage,
+            },
+            "status": status,
+            "predicted": predicted,
+            "awaiting": awaiting,
+            "outcome": op.and_then(|o| o.report.outcome),
+            "failure": op.and_then(|o| o.report.failure.clone()),
+            "uploads": op.map_or(0, |o| o.report.uploads.len()),
+            "handbacks": op.map_or(0, |o| o.report.handbacks.len()),
+            "learnt": op.and_then(|o| o.twin()).map(|t| t.learnt.clone()).unwrap_or_default(),
+            "tolerances": { "deviation_m": tol.max_deviation_m, "range_residual_m": tol.max_range_residual_m },
+            "notices": self.notices,
+            "mission_rev": self.mission_rev,
+            "series_rev": self.series_rev,
+        })
+    }
+
+    /// The heavier picture, sent when it changes: time series, the plan,
+    /// the hand-back's readings against the prediction, the twin's updates,
+    /// the robot's logs, the timeline.
+    pub fn detail(&self) -> Value {
+        let op = self.operator();
+        let plan = op.and_then(|o| o.current_plan());
+        let series = {
+            let col = |k: usize| self.series.iter().map(|s| s[k]).collect::<Vec<_>>();
+            json!({ "t": col(0), "plan_t": col(1), "deviation": col(2), "residual": col(3) })
+        };
+        let window = op
+            .and_then(|o| o.report.handbacks.last().map(|h| (o, h)))
+            .and_then(|(o, _)| handback_window(o));
+        json!({
+            "type": "robot",
+            "id": self.id,
+            "series": series,
+            "plan": plan.map(|p| columns(p.samples.iter().map(|s| (s.t_s - p.samples[0].t_s, s.x_m, s.y_m)))),
+            "plan_sha256": plan.map(|p| p.sha256.clone()),
+            "window": window,
+            "twin_updates": op.map(|o| &o.report.twin_updates),
+            "handbacks": op.map(|o| &o.report.handbacks),
+            "logs": self.logs,
+            "timeline": op.map(|o| &o.report.timeline),
+            "mission_rev": self.mission_rev,
+            "series_rev": self.series_rev,
+        })
+    }
+}
+
+fn status_view(s: &Status, age_s: Option<f64>) -> Value {
+    json!({
+        "age_s": age_s,
+        "stale": age_s.is_none_or(|a| a > STALE_S),
+        "pose": s.pose,
+        "plan_t_s": s.plan_t_s,
+        "progress": [s.progress.0, s.progress.1],
+        "phase": s.plan.as_ref().map(|(_, p)| p),
+        "deviation_m": s.deviation_m,
+        "range_residual_m": s.range_residual_m,
+        "params": s.params,
+        "params_std": s.params_std,
+        "bumps": s.bumps,
+        "collisions": s.collisions,
+        "logs_pending": s.logs_pending,
+    })
+}
+
+/// The plan's pose `plan_t_s` into it (the twin's prediction for the time
+/// the robot reports), interpolated.
+pub fn predicted_pose(plan: &MissionPlan, plan_t_s: f64) -> [f64; 3] {
+    let s = &plan.samples;
+    let t = s[0].t_s + plan_t_s.max(0.0);
+    let k = s.partition_point(|p| p.t_s <= t);
+    if k == 0 {
+        return [s[0].x_m, s[0].y_m, s[0].heading_rad];
+    }
+    if k >= s.len() {
+        let l = &s[s.len() - 1];
+        return [l.x_m, l.y_m, l.heading_rad];
+    }
+    let (a, b) = (&s[k - 1], &s[k]);
+    let f = ((t - a.t_s) / (b.t_s - a.t_s)).clamp(0.0, 1.0);
+    let dh = (b.heading_rad - a.heading_rad + std::f64::consts::PI)
+        .rem_euclid(2.0 * std::f64::consts::PI)
+        - std::f64::consts::PI;
+    [
+        a.x_m + f * (b.x_m - a.x_m),
+        a.y_m + f * (b.y_m - a.y_m),
+        a.heading_rad + f * dh,
+    ]
+}
+
+/// The last hand-back's sensor window against the plan's predicted
+/// readings at the same plan times: per beam, measured and predicted.
+fn handback_window(op: &Operator<DirStore>) -> Option<Value> {
+    let h = op.last_handback()?;
+    let plan = op.plan_for(&h.plan)?;
+    let beams = h.window.first()?.ranges_m.len();
+    let t: Vec<f64> = h.window.iter().map(|w| w.plan_t_s).collect();
+    let measured: Vec<Vec<Option<f64>>> = (0..beams)
+        .map(|b| {
+            h.window
+                .iter()
+                .map(|w| {
+                    let r = w.ranges_m[b] as f64;
+                    r.is_finite().then_some(r)
+                })
+                .collect()
+        })
+        .collect();
+    let t0 = plan.samples[0].t_s;
+    let predicted: Vec<Vec<Option<f64>>> = (0..beams)
+        .map(|b| {
+            h.window
+                .iter()
+                .map(|w| {
+                    let k = plan
+                        .samples
+                        .partition_point(|p| p.t_s <= t0 + w.plan_t_s)
+                        .saturating_sub(1);
+                    plan.samples[k].expected_ranges_m.get(b).copied()
+                })
+                .collect()
+        })
+        .collect();
+    Some(json!({
+        "reason": h.reason,
+        "t": t,
+        "measured": measured,
+        "predicted": predicted,
+        "tolerance_m": Tolerances::default().max_range_residual_m,
+    }))
+}

@@ -1,0 +1,265 @@
+//! The operator's console: an interactive master with a web page.
+//!
+//! The operator drives the twin (keys, an on-screen joystick that stops the
+//! robot when released, or the wall follower), records a rehearsal, runs
+//! the mission pipeline on it and sees every stage on the map, verifies the
+//! plan on the twin, signs and uploads it to a robot agent over zenoh, and
+//! supervises it: the robot's reported pose against the twin's prediction,
+//! residuals against the hand-back tolerances, the link and the age of
+//! every stream, the hand-back banner and the decision after it (a
+//! continuation rehearsed on the updated twin, or the end of the mission).
+//!
+//! Modules: [`workspace`] (the twin, no I/O), [`planning`] (pipeline and
+//! verification), [`fleet`] (one master end and operator per robot),
+//! [`core`] (commands in, frames out), [`protocol`] (the page's commands),
+//! [`auth`] (token and origin), [`server`] (axum, WebSockets, zenoh
+//! drivers). The page itself is `web/` (plain modules, uPlot), embedded in
+//! the binary.
+
+pub mod auth;
+pub mod core;
+pub mod fleet;
+pub mod planning;
+pub mod protocol;
+pub mod server;
+pub mod workspace;
+
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use twindrive_agent::master::MasterConfig;
+use twindrive_link::LinkEmulator;
+use twindrive_link::emulator::LinkProfile;
+use twindrive_link::envelope::{SigningKey, Supervision};
+use twindrive_log::MissionLog;
+use twindrive_net::{Emulation, SessionOptions};
+use twindrive_sim::Scenario;
+
+use crate::fleet::{RobotSlot, SharedSlot};
+
+/// Everything `twindrive console` is started with.
+pub struct ConsoleConfig {
+    /// The twin.
+    pub scenario: Scenario,
+    /// The scenario file's bytes: plans are signed for their SHA-256.
+    pub scenario_bytes: Vec<u8>,
+    pub listen: SocketAddr,
+    /// Further origins allowed to open the WebSocket.
+    pub allow_origins: Vec<String>,
+    pub key: Option<SigningKey>,
+    /// The robot's calibrated parameters (default: the twin's nominal ones).
+    pub params: Option<twindrive_kinematics::DiffDriveParams>,
+    pub robots: Vec<String>,
+    pub session: SessionOptions,
+    /// The emulated link on every robot's traffic, at this end.
+    pub link: Option<LinkProfile>,
+    pub seed: u64,
+    pub telemetry_budget_bytes_s: f64,
+    pub supervision: Supervision,
+    pub expires_in_s: u64,
+    /// Plans, rehearsals, robot logs, reports, the access token.
+    pub out: PathBuf,
+    /// A rehearsal to start with (a mission log made in this twin).
+    pub rehearsal: Option<MissionLog>,
+}
+
+/// Runs the console until interrupted (Ctrl-C or SIGTERM).
+pub fn run(config: ConsoleConfig) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&config.out)
+        .with_context(|| format!("creating {}", config.out.display()))?;
+    let token = auth::token_in(&config.out.join("console.token"))?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(serve(config, token))
+}
+
+fn unix_now_s() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
+    let listener = tokio::net::TcpListener::bind(config.listen)
+        .await
+        .with_context(|| format!("--listen {}: binding", config.listen))?;
+    let bound = listener.local_addr()?;
+    let access = Arc::new(auth::Access::new(token, bound, &config.allow_origins));
+    let zero = Instant::now();
+    let unix_at_zero_s = unix_now_s();
+    let master_config =
+        MasterConfig::for_link(config.link.as_ref(), config.telemetry_budget_bytes_s);
+    let robots: Vec<SharedSlot> = config
+        .robots
+        .iter()
+        .map(|id| {
+            SharedSlot(Arc::new(Mutex::new(RobotSlot::new(
+                id,
+                &config.out.join(id),
+                master_config,
+            ))))
+        })
+        .collect();
+    let mut ws = workspace::Workspace::new(config.scenario.clone());
+    if let Some(log) = config.rehearsal {
+        ws.set_rehearsal(log);
+    }
+    let instance = auth::new_token()?[..12].to_owned();
+    let mut core = core::Core::new(
+        ws,
+        robots.clone(),
+        core::Settings {
+            key: config.key,
+            params: config
+                .params
+                .unwrap_or(config.scenario.robot.nominal_params),
+            world_sha256: twindrive_mission::plan::sha256_hex(&config.scenario_bytes),
+            unix_at_zero_s,
+            supervision: config.supervision,
+            expires_in_s: config.expires_in_s,
+            out: config.out.clone(),
+            instance,
+        },
+    );
+    let (frames_tx, frames_rx) = watch::channel(Arc::new(core.frame(0)));
+    let core = Arc::new(Mutex::new(core));
+    let stop = Arc::new(AtomicBool::new(false));
+
+    // The robots' links, on one zenoh session.
+    let session = if robots.is_empty() {
+        None
+    } else {
+        Some(twindrive_net::open_session(&config.session).await?)
+    };
+    let mut drivers = Vec::new();
+    if let Some(session) = &session {
+        for (k, slot) in robots.iter().enumerate() {
+            let id = slot.lock().id.clone();
+            let session = session.clone();
+            let mut endpoint = slot.clone();
+            let stop = stop.clone();
+            let emulation = config.link.clone().map(|p| Emulation {
+                outgoing: LinkEmulator::new(p.clone(), config.seed, 2 * k as u64),
+                incoming: LinkEmulator::new(p, config.seed, 2 * k as u64 + 1),
+            });
+            drivers.push(tokio::spawn(async move {
+                let mut stats = twindrive_net::DriveStats::default();
+                let result = twindrive_net::drive_counting(
+                    &mut endpoint,
+                    &session,
+                    &id,
+                    &twindrive_net::up_key(&id),
+                    &twindrive_net::down_key(&id),
+                    emulation,
+                    Duration::from_secs(100 * 365 * 86_400),
+                    zero,
+                    &mut stats,
+                    |_| stop.load(Ordering::Relaxed),
+                )
+                .await;
+                if let Err(e) = result {
+                    tracing::error!(robot = %id, "the link driver stopped: {e:#}");
+                }
+            }));
+        }
+    }
+
+    // The tick: the twin at 50 Hz, frames at 25 Hz.
+    let ticker = {
+        let core = core.clone();
+        let stop = stop.clone();
+        tokio::spawn(async move {
+            let mut interval = tokio::time::interval(Duration::from_millis(20));
+            interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+            let mut n = 0u64;
+            while !stop.load(Ordering::Relaxed) {
+                interval.tick().await;
+                n += 1;
+                let now = zero.elapsed().as_nanos() as u64;
+                let frame = {
+                    let mut c = core.lock().unwrap_or_else(|e| e.into_inner());
+                    c.tick(now);
+                    (n % 2 == 0).then(|| c.frame(now))
+                };
+                if let Some(f) = frame {
+                    frames_tx.send_replace(Arc::new(f));
+                }
+            }
+        })
+    };
+
+    let app = server::App {
+        core: core.clone(),
+        frames: frames_rx,
+        access: access.clone(),
+        zero,
+    };
+    let url = format!("http://{bound}/?token={}", access.token());
+    {
+        // A closed stdout (a launcher that read the address and left) must
+        // not stop the console.
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "console: open {url}");
+        let _ = writeln!(
+            out,
+            "console: twin `{}`, robots {:?}, files in {}",
+            config.scenario.name,
+            config.robots,
+            config.out.display()
+        );
+        let _ = out.flush();
+    }
+    let shutdown = {
+        let stop = stop.clone();
+        async move {
+            wait_for_signal().await;
+            stop.store(true, Ordering::Relaxed);
+        }
+    };
+    axum::serve(listener, server::router(app))
+        .with_graceful_shutdown(shutdown)
+        .await
+        .context("serving the console")?;
+    stop.store(true, Ordering::Relaxed);
+    let _ = ticker.await;
+    for d in drivers {
+        let _ = tokio::time::timeout(Duration::from_secs(2), d).await;
+    }
+    core.lock().unwrap_or_else(|e| e.into_inner()).finish_all();
+    if let Some(s) = session {
+        let _ = s.close().await;
+    }
+    eprintln!("console: stopped; reports in {}", config.out.display());
+    Ok(())
+}
+
+use tokio::sync::watch;
+
+async fn wait_for_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}

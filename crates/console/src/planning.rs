@@ -1,0 +1,247 @@
+//! The pipeline on a rehearsal, and verification on the twin, with what
+//! the page draws of each stage. No I/O.
+
+use std::sync::Arc;
+
+use serde::Serialize;
+use serde_json::{Value, json};
+use twindrive_log::MissionLog;
+use twindrive_mission::path::PathSample;
+use twindrive_mission::pipeline::{PipelineSettings, plan_from_log};
+use twindrive_mission::plan::{MissionPlan, sha256_hex};
+use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_mission::verify::{Replay, TrackerSettings, closed_loop, open_loop};
+use twindrive_sim::Scenario;
+
+/// A plan made on the console.
+pub struct PlanResult {
+    pub plan: Arc<MissionPlan>,
+    /// The plan document as uploaded (its bytes are what gets signed).
+    pub plan_json: Vec<u8>,
+    /// The rehearsal as MCAP (the plan names its SHA-256).
+    pub rehearsal_mcap: Vec<u8>,
+    /// What the page draws: every stage (JSON).
+    pub view: Value,
+}
+
+/// Rounds to 0.1 mm (or 0.1 ms): the page draws, it does not compute.
+fn r4(v: f64) -> f64 {
+    (v * 1e4).round() * 1e-4
+}
+
+/// A path as three columns (`t`, `x`, `y`), compact in JSON.
+pub fn columns(points: impl Iterator<Item = (f64, f64, f64)>) -> Value {
+    let (mut t, mut x, mut y) = (Vec::new(), Vec::new(), Vec::new());
+    for (a, b, c) in points {
+        t.push(r4(a));
+        x.push(r4(b));
+        y.push(r4(c));
+    }
+    json!({ "t": t, "x": x, "y": y })
+}
+
+fn path_columns(path: &[PathSample]) -> Value {
+    columns(path.iter().map(|p| (p.t_s, p.pose.x_m, p.pose.y_m)))
+}
+
+/// The rehearsal as MCAP bytes (the same log gives the same bytes).
+pub fn mcap_bytes(log: &MissionLog) -> Result<Vec<u8>, String> {
+    let mut cursor = std::io::Cursor::new(Vec::new());
+    twindrive_log::write_mcap(log, &mut cursor).map_err(|e| format!("writing the MCAP: {e}"))?;
+    Ok(cursor.into_inner())
+}
+
+/// The redundancy settings the console starts with: pinch at the robot's
+/// footprint, as `twindrive plan` does.
+pub fn default_redundancy(scenario: &Scenario) -> RedundancyConfig {
+    RedundancyConfig::with_pinch_distance(scenario.robot.footprint_radius_m)
+}
+
+/// Runs the pipeline on the rehearsal `log` made in `scenario`, with the
+/// robot's calibrated `params` (the operator's knowledge of the real robot;
+/// `twindrive calibrate` gives them).
+pub fn make_plan(
+    log: &MissionLog,
+    scenario: &Scenario,
+    params: &twindrive_kinematics::DiffDriveParams,
+    redundancy: RedundancyConfig,
+) -> Result<PlanResult, String> {
+    let rehearsal_mcap = mcap_bytes(log)?;
+    let settings = PipelineSettings {
+        planner: Default::default(),
+        redundancy,
+        filter: Default::default(),
+    };
+    let (plan, stages) = plan_from_log(
+        log,
+        &sha256_hex(&rehearsal_mcap),
+        params,
+        scenario,
+        &settings,
+        false,
+    )
+    .map_err(|e| format!("the pipeline: {e}"))?;
+    let plan_json =
+        serde_json::to_vec_pretty(&plan).map_err(|e| format!("the plan document: {e}"))?;
+    let summary = stages.summary();
+    let pinches: Vec<[f64; 4]> = stages
+        .pruned
+        .deletions
+        .iter()
+        .filter_map(|d| {
+            let a = stages.executed.get(d.first_removed.checked_sub(1)?)?;
+            let b = stages.executed.get(d.last_removed + 1)?;
+            Some([
+                r4(a.pose.x_m),
+                r4(a.pose.y_m),
+                r4(b.pose.x_m),
+                r4(b.pose.y_m),
+            ])
+        })
+        .collect();
+    let spikes: Vec<[f64; 3]> = stages
+        .filtered
+        .spikes
+        .iter()
+        .filter_map(|s| {
+            let p = stages.cleaned.get(s.segment)?;
+            Some([r4(p.pose.x_m), r4(p.pose.y_m), r4(s.t_s)])
+        })
+        .collect();
+    let view = json!({
+        "executed": path_columns(&stages.executed),
+        "deletions": stages.pruned.deletions.iter().map(|d| json!({
+            "first": d.first_removed, "last": d.last_removed,
+            "reason": d.reason, "length_m": r4(d.length_m),
+        })).collect::<Vec<_>>(),
+        "refused": stages.pruned.refused.iter().map(|c| json!({
+            "first": c.i, "last": c.j, "would_drop_m": r4(c.would_drop_m),
+        })).collect::<Vec<_>>(),
+        "uncovered": summary.coverage.uncovered_stretches.iter().map(|u| json!({
+            "first": u.first, "last": u.last, "length_m": r4(u.length_m),
+        })).collect::<Vec<_>>(),
+        "pinches": pinches,
+        "spikes": spikes,
+        "plan": columns(plan.samples.iter().map(|s| (s.t_s, s.x_m, s.y_m))),
+        "summary": {
+            "executed_length_m": r4(summary.executed_length_m),
+            "executed_duration_s": r4(summary.executed_duration_s),
+            "plan_length_m": r4(summary.filtered_length_m),
+            "plan_duration_s": r4(summary.filtered_duration_s),
+            "deletions": summary.deletions,
+            "loops_removed": summary.loops_removed,
+            "kinks_removed": summary.kinks_removed,
+            "trailing_retrace_m": r4(summary.trailing_retrace_m),
+            "spikes_found": summary.spikes_found,
+            "filter_windows": summary.filter_windows,
+            "coverage_percent": r4(summary.coverage.covered_percent),
+            "coverage_radius_m": r4(summary.coverage.radius_m),
+            "uncovered_m": r4(summary.coverage.uncovered_m),
+            "refused_cuts": summary.refused_cuts.len(),
+            "reversing_m": r4(summary.reversing_m),
+        },
+        "settings": settings.redundancy,
+        "sha256": plan.sha256,
+        "samples": plan.samples.len(),
+    });
+    Ok(PlanResult {
+        plan: Arc::new(plan),
+        plan_json,
+        rehearsal_mcap,
+        view,
+    })
+}
+
+/// Both replays of a plan on the twin.
+#[derive(Debug, Clone, Serialize)]
+pub struct Verification {
+    pub plan_sha256: String,
+    pub open_loop: twindrive_mission::verify::ReplayReport,
+    pub closed_loop: twindrive_mission::verify::ReplayReport,
+    /// Passed: no collision and no bump in either replay.
+    pub passed: bool,
+}
+
+fn track(replay: &Replay) -> Value {
+    // A point every 0.1 s at most is plenty to draw.
+    let every = (replay.track.len() / 20_000).max(1);
+    columns(
+        replay
+            .track
+            .iter()
+            .step_by(every)
+            .map(|(t, p)| (*t, p.x_m, p.y_m)),
+    )
+}
+
+/// Replays `plan` open and closed loop on the twin's true robot from the
+/// plan's start; returns the verdict and what the page draws.
+pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> Result<(Verification, Value), String> {
+    let mut twin = scenario.clone();
+    twin.robot.start = plan.header.start;
+    let open = open_loop(&plan.samples, twin.clone(), None)
+        .map_err(|e| format!("the open-loop replay: {e}"))?;
+    let closed = closed_loop(
+        &plan.samples,
+        twin,
+        &plan.header.calibrated,
+        &TrackerSettings::default(),
+    )
+    .map_err(|e| format!("the closed-loop replay: {e}"))?;
+    let passed = [&open.report, &closed.report]
+        .iter()
+        .all(|r| r.collisions == 0 && r.bumps == 0);
+    let verdict = Verification {
+        plan_sha256: plan.sha256.clone(),
+        open_loop: open.report.clone(),
+        closed_loop: closed.report.clone(),
+        passed,
+    };
+    let view = json!({
+        "verdict": verdict,
+        "open_loop": track(&open),
+        "closed_loop": track(&closed),
+    });
+    Ok((verdict, view))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::workspace::Workspace;
+
+    #[test]
+    fn a_wall_following_rehearsal_becomes_a_verified_plan() {
+        let scenario = twindrive_sim::builtin::load("wall_following")
+            .unwrap()
+            .unwrap();
+        let mut w = Workspace::new(scenario.clone());
+        w.wall_follow(0);
+        w.set_speed(32.0, 0).unwrap();
+        w.record_start(0);
+        w.advance(1_000_000_000);
+        let log = w.record_stop(1_000_000_000).unwrap().clone();
+        let result = make_plan(
+            &log,
+            w.scenario(),
+            &scenario.robot.nominal_params,
+            default_redundancy(&scenario),
+        )
+        .unwrap();
+        let plan = &result.plan;
+        assert!(plan.samples.len() > 100);
+        assert_eq!(plan.header.start, log.header.start);
+        let s = &result.view["summary"];
+        assert!(s["coverage_percent"].as_f64().unwrap() > 99.0, "{s}");
+        assert_eq!(
+            result.view["plan"]["x"].as_array().unwrap().len(),
+            plan.samples.len()
+        );
+        // The document hashes to the plan's hash.
+        let back: MissionPlan = serde_json::from_slice(&result.plan_json).unwrap();
+        assert_eq!(back.sha256, plan.sha256);
+        let (verdict, view) = verify(plan, w.scenario()).unwrap();
+        assert!(verdict.passed, "{verdict:?}");
+        assert!(view["closed_loop"]["x"].as_array().unwrap().len() > 10);
+    }
+}

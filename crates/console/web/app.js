@@ -1,0 +1,516 @@
+// The twindrive console page: one WebSocket to the master, reconnecting by
+// itself; the map; the twin's controls; the plan's stages; the robots.
+import { MapView, LodPath, at } from './map.js';
+
+const $ = (id) => document.getElementById(id);
+const map = new MapView($('map'));
+
+// Everything the page knows (tests read it through window.twindrive).
+const S = {
+  ws: null, connected: false, everConnected: false, instance: null, reconnects: 0,
+  world: null, state: null, plan: null, verify: null, rehearsal: null,
+  focus: null, detail: null, regions: [], acked: new Set(), errors: [],
+  // Bytes and milliseconds (parse and build) of the heavy messages.
+  timings: {},
+};
+window.twindrive = { S, map };
+
+// ---------------------------------------------------------------- link
+let backoffMs = 250;
+function connect() {
+  const proto = location.protocol === 'https:' ? 'wss:' : 'ws:';
+  const ws = new WebSocket(`${proto}//${location.host}/ws`);
+  S.ws = ws;
+  ws.onopen = () => {
+    S.connected = true;
+    backoffMs = 250;
+    setConn(S.everConnected ? 'reconnected' : 'connected', 'ok');
+    S.everConnected = true;
+    if (S.focus) send({ cmd: 'focus', robot: S.focus });
+  };
+  ws.onmessage = (e) => {
+    const t0 = performance.now();
+    let m;
+    try { m = JSON.parse(e.data); } catch { return; }
+    receive(m);
+    if (m.type !== 'state') {
+      S.timings[m.type] = { bytes: e.data.length, ms: Math.round(performance.now() - t0) };
+    }
+  };
+  ws.onclose = () => {
+    const was = S.connected;
+    S.connected = false;
+    S.ws = null;
+    if (was) S.reconnects++;
+    setConn(`console unreachable: reconnecting in ${(backoffMs / 1000).toFixed(1)} s…`, 'bad');
+    setTimeout(connect, backoffMs);
+    backoffMs = Math.min(backoffMs * 2, 4000);
+  };
+}
+
+function setConn(text, kind) {
+  const c = $('conn');
+  c.textContent = text;
+  c.className = `pill ${kind}`;
+}
+
+function send(obj) {
+  if (S.ws && S.ws.readyState === WebSocket.OPEN) {
+    S.ws.send(JSON.stringify(obj));
+    return true;
+  }
+  return false;
+}
+
+function receive(m) {
+  switch (m.type) {
+    case 'world':
+      S.world = m;
+      $('scenario').textContent = `twin: ${m.scenario}`;
+      map.setWorld(m);
+      break;
+    case 'state': onState(m); break;
+    case 'plan': onPlan(m); break;
+    case 'verify': onVerify(m); break;
+    case 'rehearsal': onRehearsal(m); break;
+    case 'robot': onDetail(m); break;
+    case 'error':
+      S.errors.push(m.message);
+      addEvent({ seq: `local${S.errors.length}`, level: 'error', text: m.message });
+      break;
+  }
+}
+
+// ---------------------------------------------------------------- state
+function fmt(v, d = 2) { return v === null || v === undefined ? '–' : Number(v).toFixed(d); }
+function age(a) { return a === null || a === undefined ? 'never' : `${fmt(a, 1)} s ago`; }
+
+function onState(m) {
+  if (S.instance && m.instance !== S.instance) {
+    // The console restarted: what it had is gone; it sends its world again.
+    S.plan = S.verify = S.rehearsal = S.detail = null;
+    for (const n of [...map.layers.keys()]) map.setLayer(n, null);
+    addEvent({ seq: `restart${m.instance}`, level: 'info', text: 'the console restarted; reconnected to the new one' });
+  }
+  S.instance = m.instance;
+  S.state = m;
+  const t = m.twin;
+  $('twin-readout').textContent =
+    `twin t=${fmt(t.t_s, 1)} s · (${fmt(t.pose[0])}, ${fmt(t.pose[1])}) m, ${fmt(t.pose[2] * 180 / Math.PI, 0)}° · ${t.drive} · ${t.speed}×` +
+    (t.recording_s !== null ? ` · ● REC ${fmt(t.recording_s, 1)} s` : '');
+  $('twin-status').textContent = m.job ? `busy: ${m.job}…` : (t.has_rehearsal ? 'rehearsal ready' : 'no rehearsal yet');
+  $('btn-record').textContent = t.recording_s !== null ? '■ Stop recording' : '● Record rehearsal';
+  $('btn-record').classList.toggle('on', t.recording_s !== null);
+  $('btn-wall').classList.toggle('on', t.drive === 'wall_follower');
+  if (document.activeElement !== $('speed')) $('speed').value = String(t.speed);
+  $('btn-upload').disabled = !(m.can_sign && m.plan && S.focus);
+  $('btn-upload').title = m.can_sign ? '' : 'start the console with --key to sign plans';
+  renderFleet(m.robots);
+  renderRobot(m.robots.find((r) => r.id === S.focus));
+  renderBanner(m.robots);
+  renderEvents(m.events);
+  if (m.verdict) renderVerdict(m.verdict);
+  updateCursorRange();
+  map.dirty = true;
+}
+
+function renderEvents(events) {
+  for (const e of events) addEvent(e);
+}
+
+function addEvent(e) {
+  const list = $('events');
+  if (list.querySelector(`[data-seq="${e.seq}"]`)) return;
+  const li = document.createElement('li');
+  li.dataset.seq = e.seq;
+  li.className = e.level;
+  li.textContent = e.text;
+  list.prepend(li);
+  while (list.children.length > 60) list.lastChild.remove();
+}
+
+// ---------------------------------------------------------------- fleet
+function renderFleet(robots) {
+  const body = $('fleet').querySelector('tbody');
+  if (!S.focus && robots.length) focus(robots[0].id);
+  const rows = robots.map((r) => {
+    const link = r.link.outage ? '<span class="stale">outage</span>'
+      : `rtt ${r.link.rtt_s === null ? '–' : fmt(r.link.rtt_s, 2) + ' s'}`;
+    const st = r.status;
+    const prog = st && st.progress[1] ? `${st.progress[0]}/${st.progress[1]}` : (r.upload && !r.upload.done ? `upload ${pct(r.upload)} %` : '–');
+    return `<tr data-id="${esc(r.id)}" class="${r.id === S.focus ? 'focus' : ''}"><td>${esc(r.id)}</td><td>${esc(r.state)}</td><td>${link}</td><td>${prog}</td></tr>`;
+  }).join('');
+  if (body.dataset.html !== rows) { body.innerHTML = rows; body.dataset.html = rows; }
+}
+$('fleet').addEventListener('click', (e) => {
+  const tr = e.target.closest('tr[data-id]');
+  if (tr) focus(tr.dataset.id);
+});
+
+function focus(id) {
+  S.focus = id;
+  S.detail = null;
+  $('focus-name').textContent = id;
+  send({ cmd: 'focus', robot: id });
+}
+
+function pct(u) { return u.chunks ? Math.floor(100 * u.confirmed / u.chunks) : 0; }
+function esc(s) { return String(s).replace(/[&<>"]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;' })[c]); }
+
+function renderRobot(r) {
+  if (!r) return;
+  const up = r.upload;
+  $('upload-box').hidden = !up;
+  if (up) {
+    $('upload-progress').value = up.chunks ? up.confirmed / up.chunks : 0;
+    $('upload-text').textContent =
+      `${pct(up)} % · ${up.confirmed}/${up.chunks} chunks acknowledged · ${up.sent} sent, ${up.resent} resent, ${up.repairs} repair · ` +
+      `${(up.bytes / 1000).toFixed(1)} kB in ${fmt(up.elapsed_s, 1)} s${up.done ? ' · on the robot' : ''}`;
+  }
+  const l = r.link;
+  $('link-state').innerHTML =
+    `link: ${l.outage ? '<span class="stale">OUTAGE</span> · ' : ''}round trip ${l.rtt_s === null ? '–' : fmt(l.rtt_s, 2) + ' s'} · ` +
+    `last message ${age(l.last_rx_age_s)} · ${fmt(l.rx_msgs_s, 1)} msg/s · ${l.messages} messages`;
+  const s = r.status;
+  if (s) {
+    const stale = s.stale ? ' <span class="stale">STALE</span>' : '';
+    const pred = r.predicted ? ` · twin predicts (${fmt(r.predicted[0])}, ${fmt(r.predicted[1])})` : '';
+    $('robot-status').innerHTML =
+      `state <b>${esc(r.state)}</b> · status ${age(s.age_s)}${stale}<br>` +
+      `pose (${fmt(s.pose[0])}, ${fmt(s.pose[1])}) m, ${fmt(s.pose[2] * 180 / Math.PI, 0)}° at ${fmt(s.plan_t_s, 1)} s into the plan${pred}<br>` +
+      `deviation ${fmt(s.deviation_m, 3)} m (tolerance ${r.tolerances.deviation_m}) · range residual ${fmt(s.range_residual_m, 3)} m (tolerance ${r.tolerances.range_residual_m})<br>` +
+      `wheels ${fmt(s.params[0], 4)}/${fmt(s.params[1], 4)} m, wheelbase ${fmt(s.params[2], 4)} m · bumps ${s.bumps} · logs pending ${s.logs_pending}`;
+  } else {
+    $('robot-status').innerHTML = `state <b>${esc(r.state)}</b> · no status from the robot yet`;
+  }
+  const notes = [];
+  if (r.learnt.length) notes.push(`the twin learnt ${r.learnt.length} block(s) from the robot`);
+  if (r.failure) notes.push(`failure: ${esc(r.failure)}`);
+  for (const n of r.notices) notes.push(esc(n));
+  $('twin-updates').innerHTML = notes.join('<br>');
+}
+
+function renderBanner(robots) {
+  const r = robots.find((x) => x.awaiting && !S.acked.has(bannerKey(x)));
+  const b = $('banner');
+  b.hidden = !r;
+  if (!r) return;
+  b.dataset.robot = r.id;
+  b.dataset.key = bannerKey(r);
+  const a = r.awaiting;
+  $('banner-text').textContent =
+    `Robot ${r.id} handed control back: ${a.reason.replace(/_/g, ' ')} at ${fmt(a.plan_t_s, 1)} s into the plan, at (${fmt(a.pose[0])}, ${fmt(a.pose[1])}).`;
+  $('banner-replan').hidden = !a.decision;
+  $('banner-end').hidden = false;
+}
+function bannerKey(r) { return `${r.id}:${r.handbacks}:${r.awaiting.plan_t_s}`; }
+$('banner-ack').onclick = () => { S.acked.add($('banner').dataset.key); $('banner').hidden = true; };
+$('banner-replan').onclick = () => { send({ cmd: 'replan', robot: $('banner').dataset.robot }); S.acked.add($('banner').dataset.key); };
+$('banner-end').onclick = () => { send({ cmd: 'end_mission', robot: $('banner').dataset.robot }); S.acked.add($('banner').dataset.key); };
+
+// ---------------------------------------------------------------- charts
+let seriesChart = null, windowChart = null;
+function onDetail(d) {
+  if (d.id !== S.focus) return;
+  S.detail = d;
+  const w = Math.max(300, $('robot-panel').clientWidth - 10);
+  const sr = d.series;
+  const tol = S.state?.robots.find((r) => r.id === d.id)?.tolerances || { deviation_m: 0.15, range_residual_m: 0.1 };
+  const data = [sr.t, sr.deviation, sr.residual, sr.t.map(() => tol.deviation_m), sr.t.map(() => tol.range_residual_m)];
+  if (!seriesChart) {
+    seriesChart = new uPlot({
+      title: 'robot vs twin (statuses)', width: w, height: 170,
+      scales: { x: { time: false } },
+      axes: [{ label: 'console time (s)' }, { label: 'm' }],
+      series: [{}, { label: 'deviation', stroke: '#2b6cb0' }, { label: 'range residual', stroke: '#dd6b20' },
+        { label: 'deviation tol.', stroke: '#2b6cb0', dash: [4, 4] }, { label: 'residual tol.', stroke: '#dd6b20', dash: [4, 4] }],
+    }, data, $('chart-series'));
+  } else seriesChart.setData(data);
+  if (windowChart) { windowChart.destroy(); windowChart = null; }
+  if (d.window && d.window.t.length) {
+    const series = [{}];
+    const cols = [d.window.t];
+    const colors = ['#2b6cb0', '#38a169', '#805ad5', '#d53f8c'];
+    d.window.measured.slice(0, 4).forEach((m, b) => {
+      cols.push(m); series.push({ label: `measured ${b}`, stroke: colors[b], width: 2 });
+      cols.push(d.window.predicted[b]); series.push({ label: `predicted ${b}`, stroke: colors[b], dash: [5, 3] });
+    });
+    const p0 = d.window.predicted[0] || [];
+    cols.push(p0.map((v) => (v === null ? null : v - d.window.tolerance_m)));
+    series.push({ label: 'predicted 0 − tolerance', stroke: '#c53030', dash: [2, 3] });
+    windowChart = new uPlot({
+      title: `hand-back (${d.window.reason}): ranges measured vs predicted`, width: w, height: 170,
+      scales: { x: { time: false } }, axes: [{ label: 'plan time (s)' }, { label: 'm' }], series,
+    }, cols, $('chart-window'));
+  }
+  // The robot's plan and its back-filled logs on the map.
+  map.setLayer('robot:plan', d.plan ? new LodPath(d.plan) : null, { color: '#3182ce', width: 1, dash: [6, 4], alpha: 0.8 });
+  for (const n of [...map.layers.keys()]) if (n.startsWith('robot:log')) map.setLayer(n, null);
+  d.logs.forEach((l, i) => map.setLayer(`robot:log${i}`, new LodPath(l), { color: '#dd6b20', width: 2 }));
+  updateCursorRange();
+}
+
+// ---------------------------------------------------------------- plan
+function onPlan(p) {
+  S.plan = p;
+  const ex = p.executed;
+  const deleted = p.deletions.map((d) => [Math.max(0, d.first - 1), d.last + 1]);
+  const uncovered = p.uncovered.map((u) => [u.first, u.last]);
+  map.setLayer('executed', new LodPath(ex), { color: '#a0aec0', width: 1.5 });
+  map.setLayer('deleted', deleted.length ? new LodPath(ex, deleted) : null, { color: '#e53e3e', width: 2.5, alpha: 0.8 });
+  map.setLayer('uncovered', uncovered.length ? new LodPath(ex, uncovered) : null, { color: '#dd6b20', width: 4 });
+  map.setLayer('plan', new LodPath(p.plan), { color: '#2b6cb0', width: 2 });
+  for (const g of ['executed', 'deleted', 'uncovered', 'plan']) map.setVisible(g, map.isVisible(g));
+  const s = p.summary;
+  $('plan-summary').innerHTML =
+    `plan <code>${p.sha256.slice(0, 12)}</code>: <b>${fmt(s.plan_length_m)} m in ${fmt(s.plan_duration_s, 1)} s</b> ` +
+    `from ${fmt(s.executed_length_m)} m in ${fmt(s.executed_duration_s, 1)} s rehearsed · ` +
+    `<b>${fmt(s.coverage_percent, 2)} %</b> of the route within ${fmt(s.coverage_radius_m)} m (${fmt(s.uncovered_m, 3)} m uncovered) · ` +
+    `${s.loops_removed} loop(s), ${s.kinks_removed} kink(s), ${fmt(s.trailing_retrace_m)} m trailing retrace cut · ` +
+    `${s.refused_cuts} cut(s) refused (they would drop ground) · ${s.spikes_found} spike(s) filtered in ${s.filter_windows} window(s) · ${p.samples} samples`;
+  $('verdict').textContent = '';
+  map.setLayer('replays:open', null);
+  map.setLayer('replays:closed', null);
+  updateCursorRange();
+}
+
+function onVerify(v) {
+  S.verify = v;
+  map.setLayer('replays:open', new LodPath(v.open_loop), { color: '#38a169', width: 1.5, dash: [6, 3] });
+  map.setLayer('replays:closed', new LodPath(v.closed_loop), { color: '#319795', width: 1.5 });
+  map.setVisible('replays', map.isVisible('replays'));
+  renderVerdict(v.verdict);
+}
+
+function renderVerdict(v) {
+  $('verdict').innerHTML = `verification: <span class="pill ${v.passed ? 'ok' : 'bad'}">${v.passed ? 'passed' : 'FAILED'}</span> ` +
+    `open loop ${v.open_loop.collisions} collisions, ${v.open_loop.bumps} bumps, ${fmt(v.open_loop.max_deviation_m, 3)} m max deviation; ` +
+    `closed loop ${v.closed_loop.collisions} collisions, ${v.closed_loop.bumps} bumps`;
+}
+
+function onRehearsal(r) {
+  S.rehearsal = r;
+  map.setLayer('rehearsal', new LodPath(r.track), { color: '#718096', width: 1, alpha: 0.5 });
+  map.setVisible('rehearsal', map.isVisible('rehearsal'));
+  updateCursorRange();
+}
+
+for (const box of document.querySelectorAll('input[data-layer]')) {
+  box.addEventListener('change', () => {
+    map.setVisible(box.dataset.layer, box.checked);
+  });
+}
+
+function redundancySettings() {
+  const pinch = parseFloat($('pinch').value);
+  const cov = $('coverage').value.trim();
+  const windows = $('keep-windows').value.split(',').map((w) => w.trim()).filter(Boolean).map((w) => {
+    const [a, b] = w.split('-').map(Number);
+    return { start_s: a, end_s: b };
+  });
+  const r = {
+    pinch_distance_m: pinch,
+    reversing_is_redundant: $('cut-reversing').checked,
+    keep_end: $('keep-end').checked,
+    keep_regions: S.regions,
+    keep_windows: windows,
+  };
+  if (cov !== '') r.coverage_radius_m = parseFloat(cov);
+  return r;
+}
+
+function renderRegions() {
+  $('regions').innerHTML = S.regions.map((r, i) =>
+    `<li>circle (${fmt(r.x_m)}, ${fmt(r.y_m)}) r ${fmt(r.radius_m)} m <button data-i="${i}">remove</button></li>`).join('');
+  map.dirty = true;
+}
+$('regions').addEventListener('click', (e) => {
+  const i = e.target.dataset.i;
+  if (i !== undefined) { S.regions.splice(Number(i), 1); renderRegions(); }
+});
+
+// ---------------------------------------------------------------- controls
+$('btn-wall').onclick = () => send({ cmd: 'wall_follow' });
+$('btn-stop').onclick = () => send({ cmd: 'stop' });
+$('btn-reset').onclick = () => send({ cmd: 'reset' });
+$('speed').onchange = () => send({ cmd: 'speed', factor: parseFloat($('speed').value) });
+$('btn-record').onclick = () => send({ cmd: S.state?.twin.recording_s !== null && S.state ? 'record_stop' : 'record_start' });
+$('btn-plan').onclick = () => send({ cmd: 'plan', redundancy: redundancySettings() });
+$('btn-verify').onclick = () => send({ cmd: 'verify' });
+$('btn-upload').onclick = () => { if (S.focus) send({ cmd: 'upload', robot: S.focus }); };
+function setMode(mode) {
+  map.mode = map.mode === mode ? null : mode;
+  $('btn-place').classList.toggle('on', map.mode === 'place');
+  $('btn-region').classList.toggle('on', map.mode === 'region');
+  $('map').className = map.mode || '';
+}
+$('btn-place').onclick = () => setMode('place');
+$('btn-region').onclick = () => setMode('region');
+map.onPick = (mode, a, b) => {
+  if (mode === 'place') {
+    const heading = Math.hypot(b[0] - a[0], b[1] - a[1]) > 0.05 ? Math.atan2(b[1] - a[1], b[0] - a[0]) : 0;
+    send({ cmd: 'place', x_m: a[0], y_m: a[1], heading_rad: heading });
+  } else if (mode === 'region') {
+    const r = Math.hypot(b[0] - a[0], b[1] - a[1]);
+    if (r > 0.02) S.regions.push({ kind: 'circle', x_m: a[0], y_m: a[1], radius_m: r });
+    renderRegions();
+  }
+  setMode(null);
+};
+
+// Keys: arrows or WASD, renewed every 100 ms while held (the console's
+// dead-man lapses 0.4 s after the last); a stop on release.
+const held = new Set();
+const KEYS = { ArrowUp: 'f', KeyW: 'f', ArrowDown: 'b', KeyS: 'b', ArrowLeft: 'l', KeyA: 'l', ArrowRight: 'r', KeyD: 'r' };
+function typing(e) { return ['INPUT', 'SELECT', 'TEXTAREA'].includes(e.target.tagName); }
+window.addEventListener('keydown', (e) => {
+  const k = KEYS[e.code];
+  if (!k || typing(e)) return;
+  e.preventDefault();
+  if (!held.has(k)) { held.add(k); sendKeys(); }
+});
+window.addEventListener('keyup', (e) => {
+  const k = KEYS[e.code];
+  if (!k) return;
+  held.delete(k);
+  if (held.size === 0) send({ cmd: 'stop' }); else sendKeys();
+});
+window.addEventListener('blur', () => { if (held.size) { held.clear(); send({ cmd: 'stop' }); } });
+function sendKeys() {
+  const forward = (held.has('f') ? 1 : 0) - (held.has('b') ? 1 : 0);
+  const turn = (held.has('l') ? 1 : 0) - (held.has('r') ? 1 : 0);
+  send({ cmd: 'drive', forward, turn });
+}
+setInterval(() => { if (held.size) sendKeys(); }, 100);
+
+// The joystick: drive while held, stop when released (a dead-man).
+const pad = $('joystick'), stick = $('stick');
+let joy = null;
+pad.addEventListener('pointerdown', (e) => { pad.setPointerCapture(e.pointerId); joy = [0, 0]; moveJoy(e); });
+pad.addEventListener('pointermove', (e) => { if (joy) moveJoy(e); });
+const release = () => { if (!joy) return; joy = null; stick.style.left = stick.style.top = '40px'; send({ cmd: 'stop' }); };
+pad.addEventListener('pointerup', release);
+pad.addEventListener('pointercancel', release);
+function moveJoy(e) {
+  const r = pad.getBoundingClientRect();
+  let dx = (e.clientX - r.left - r.width / 2) / (r.width / 2);
+  let dy = (e.clientY - r.top - r.height / 2) / (r.height / 2);
+  const n = Math.hypot(dx, dy);
+  if (n > 1) { dx /= n; dy /= n; }
+  joy = [-dy, -dx];
+  stick.style.left = `${40 + dx * 40}px`;
+  stick.style.top = `${40 + dy * 40}px`;
+  send({ cmd: 'drive', forward: round(joy[0]), turn: round(joy[1]) });
+}
+function round(v) { return Math.round(v * 100) / 100; }
+setInterval(() => { if (joy) send({ cmd: 'drive', forward: round(joy[0]), turn: round(joy[1]) }); }, 100);
+
+// ---------------------------------------------------------------- look back
+function updateCursorRange() {
+  let max = 0;
+  const end = (c) => (c && c.t.length ? c.t[c.t.length - 1] : 0);
+  max = Math.max(max, end(S.rehearsal?.track), end(S.plan?.plan ? rel(S.plan.plan) : null));
+  for (const l of S.detail?.logs || []) max = Math.max(max, end(l));
+  $('cursor').max = String(Math.ceil(max));
+}
+function rel(c) { return { t: c.t.map((t) => t - c.t[0]), x: c.x, y: c.y }; }
+$('cursor').oninput = () => { $('cursor-on').checked = true; map.dirty = true; };
+$('cursor-on').onchange = () => { map.dirty = true; };
+
+// ---------------------------------------------------------------- overlay
+map.overlay = (ctx, px) => {
+  const st = S.state;
+  // Keep regions.
+  ctx.fillStyle = 'rgba(128, 90, 213, 0.15)';
+  ctx.strokeStyle = '#805ad5';
+  ctx.lineWidth = 1.5 * px;
+  for (const r of S.regions) { ctx.beginPath(); ctx.arc(r.x_m, r.y_m, r.radius_m, 0, 2 * Math.PI); ctx.fill(); ctx.stroke(); }
+  if (S.plan && map.isVisible('pinches')) {
+    ctx.strokeStyle = '#e53e3e';
+    ctx.lineWidth = 1.5 * px;
+    for (const [x0, y0, x1, y1] of S.plan.pinches) {
+      ctx.beginPath(); ctx.arc(x0, y0, 5 * px, 0, 2 * Math.PI); ctx.stroke();
+      ctx.beginPath(); ctx.arc(x1, y1, 5 * px, 0, 2 * Math.PI); ctx.stroke();
+      ctx.setLineDash([3 * px, 3 * px]); ctx.beginPath(); ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); ctx.stroke(); ctx.setLineDash([]);
+    }
+  }
+  if (S.plan && map.isVisible('spikes')) {
+    ctx.strokeStyle = '#d69e2e';
+    ctx.lineWidth = 2 * px;
+    for (const [x, y] of S.plan.spikes) {
+      const d = 4 * px;
+      ctx.beginPath(); ctx.moveTo(x - d, y - d); ctx.lineTo(x + d, y + d); ctx.moveTo(x - d, y + d); ctx.lineTo(x + d, y - d); ctx.stroke();
+    }
+  }
+  if (!st) return;
+  // Learnt blocks of the focused robot's twin.
+  const focused = st.robots.find((r) => r.id === S.focus);
+  if (focused) {
+    ctx.fillStyle = 'rgba(197, 48, 48, 0.55)';
+    for (const [a, b] of focused.learnt) ctx.fillRect(a[0], a[1], b[0] - a[0], b[1] - a[1]);
+  }
+  const fr = S.world ? S.world.footprint_radius_m : 0.15;
+  // The twin's robot: beams, footprint, heading, bumps.
+  const t = st.twin;
+  ctx.lineWidth = 1 * px;
+  ctx.strokeStyle = 'rgba(214, 158, 46, 0.8)';
+  ctx.beginPath();
+  for (const [x0, y0, x1, y1] of t.beams) { ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); }
+  ctx.stroke();
+  robotGlyph(ctx, px, t.pose, fr, t.bump ? '#e53e3e' : '#2b6cb0', 1);
+  ctx.fillStyle = '#e53e3e';
+  for (const [x, y] of t.bumps) { ctx.beginPath(); ctx.arc(x, y, 3 * px, 0, 2 * Math.PI); ctx.fill(); }
+  // Every robot: the reported pose (faded when stale) and the twin's
+  // prediction for the same plan time.
+  for (const r of st.robots) {
+    if (r.predicted) robotGlyph(ctx, px, r.predicted, fr, '#90cdf4', 0.7, true);
+    if (r.status) {
+      robotGlyph(ctx, px, r.status.pose, fr, '#dd6b20', r.status.stale ? 0.35 : 1);
+      label(ctx, px, r.status.pose, `${r.id} · ${fmt(r.status.age_s, 1)} s${r.status.stale ? ' STALE' : ''}`);
+    }
+  }
+  // The time cursor: the rehearsal, the plan and the robot's log at t.
+  if ($('cursor-on').checked) {
+    const tc = parseFloat($('cursor').value);
+    $('cursor-label').textContent = `t = ${tc.toFixed(1)} s`;
+    const marks = [];
+    if (S.rehearsal) marks.push([at(S.rehearsal.track, tc), '#718096']);
+    if (S.plan) marks.push([at(rel(S.plan.plan), tc), '#2b6cb0']);
+    for (const l of S.detail?.logs || []) marks.push([at(l, tc), '#dd6b20']);
+    for (const [p, color] of marks) {
+      if (!p) continue;
+      ctx.strokeStyle = color; ctx.lineWidth = 2.5 * px;
+      ctx.beginPath(); ctx.arc(p[0], p[1], 7 * px, 0, 2 * Math.PI); ctx.stroke();
+    }
+  }
+};
+
+function robotGlyph(ctx, px, pose, radius, color, alpha, dashed) {
+  const [x, y, h] = pose;
+  ctx.globalAlpha = alpha;
+  ctx.strokeStyle = color;
+  ctx.lineWidth = 2 * px;
+  ctx.setLineDash(dashed ? [4 * px, 3 * px] : []);
+  ctx.beginPath(); ctx.arc(x, y, radius, 0, 2 * Math.PI); ctx.stroke();
+  ctx.beginPath(); ctx.moveTo(x, y); ctx.lineTo(x + radius * Math.cos(h), y + radius * Math.sin(h)); ctx.stroke();
+  ctx.setLineDash([]);
+  ctx.globalAlpha = 1;
+}
+
+function label(ctx, px, pose, text) {
+  ctx.save();
+  ctx.translate(pose[0], pose[1]);
+  ctx.scale(px, -px);
+  ctx.fillStyle = '#1d1d1f';
+  ctx.font = '11px system-ui, sans-serif';
+  ctx.fillText(text, 12, -12);
+  ctx.restore();
+}
+
+$('legend').innerHTML = [['#a0aec0', 'executed'], ['#e53e3e', 'deleted'], ['#dd6b20', 'uncovered / robot'],
+  ['#2b6cb0', 'plan / twin'], ['#319795', 'closed-loop replay'], ['#90cdf4', 'prediction']]
+  .map(([c, n]) => `<i style="background:${c}"></i>${n}`).join('');
+
+// The token came in the address; the cookie carries it from here on.
+if (location.search.includes('token=')) history.replaceState(null, '', location.pathname);
+connect();

@@ -1,0 +1,210 @@
+//! Frame time of the console's map while panning, measured in the browser,
+//! with a long rehearsal (a one-hour mission: 360,000 samples) and its plan
+//! drawn. Run by `bench/console_frame_time.sh`, which builds the release
+//! binary and the mission first:
+//!
+//! ```sh
+//! console_frame_time --twindrive target/release/twindrive --rehearsal DIR [--frames 300]
+//! ```
+//!
+//! Starts `twindrive console` on a free loopback port, chromedriver and a
+//! headless Debian chromium, loads the page, makes the plan on it (the
+//! pipeline on the whole mission), then pans the map one step per animation
+//! frame and reads the map's own draw times (`performance.now()` around
+//! each draw) and the intervals between animation frames.
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use fantoccini::{Client, ClientBuilder};
+use serde_json::{Value, json};
+
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("a loopback port")
+        .local_addr()
+        .expect("its address")
+        .port()
+}
+
+fn arg(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+async fn wait_js(c: &Client, script: &str, limit: Duration, what: &str) -> anyhow::Result<()> {
+    let started = Instant::now();
+    while c.execute(script, vec![]).await? != Value::Bool(true) {
+        if started.elapsed() > limit {
+            anyhow::bail!("waited {limit:?} for {what}");
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    Ok(())
+}
+
+fn stats(label: &str, v: &[f64]) -> String {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let q = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
+    format!(
+        "{label}: median {:.2} ms, p95 {:.2} ms, max {:.2} ms over {} frames",
+        q(0.5),
+        q(0.95),
+        s[s.len() - 1],
+        s.len()
+    )
+}
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+async fn main() -> anyhow::Result<()> {
+    let _ = rustls::crypto::ring::default_provider().install_default();
+    let twindrive = PathBuf::from(arg("--twindrive").unwrap_or("target/release/twindrive".into()));
+    let rehearsal = arg("--rehearsal").ok_or_else(|| anyhow::anyhow!("--rehearsal DIR"))?;
+    let frames: usize = arg("--frames").map_or(Ok(300), |f| f.parse())?;
+    let out = tempfile::tempdir()?;
+    let http = free_port();
+    let mut console = Command::new(&twindrive)
+        .args(["console", "--listen", &format!("127.0.0.1:{http}")])
+        .args(["--rehearsal", &rehearsal, "--out"])
+        .arg(out.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()?;
+    let stdout = console.stdout.take().expect("piped");
+    let _console = Proc(console);
+    let mut lines = BufReader::new(stdout).lines();
+    let url = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|l| l.strip_prefix("console: open ").map(str::to_owned))
+        .ok_or_else(|| anyhow::anyhow!("the console printed no address"))?;
+    // Keep reading what the console prints.
+    std::thread::spawn(move || lines.for_each(drop));
+    let driver_port = free_port();
+    let _driver = Proc(
+        Command::new("/usr/bin/chromedriver")
+            .arg(format!("--port={driver_port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()?,
+    );
+    let started = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", driver_port)).is_err() {
+        anyhow::ensure!(started.elapsed() < Duration::from_secs(30), "chromedriver");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let profile = tempfile::tempdir()?;
+    let mut caps = serde_json::Map::new();
+    caps.insert(
+        "goog:chromeOptions".into(),
+        json!({
+            "binary": "/usr/bin/chromium",
+            "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                     "--no-first-run", "--disable-background-networking",
+                     "--disable-component-update", "--disable-sync", "--window-size=1400,900",
+                     format!("--user-data-dir={}", profile.path().display())],
+        }),
+    );
+    let c = ClientBuilder::rustls()?
+        .capabilities(caps)
+        .connect(&format!("http://127.0.0.1:{driver_port}"))
+        .await?;
+    let result = measure(&c, &url, frames).await;
+    c.close().await?;
+    result
+}
+
+async fn measure(c: &Client, url: &str, frames: usize) -> anyhow::Result<()> {
+    c.goto(url).await?;
+    wait_js(
+        c,
+        "return !!(window.twindrive && window.twindrive.S.rehearsal)",
+        Duration::from_secs(120),
+        "the rehearsal on the page",
+    )
+    .await?;
+    let samples = c
+        .execute("return window.twindrive.S.rehearsal.track.t.length", vec![])
+        .await?;
+    let asked = Instant::now();
+    c.execute(
+        "window.twindrive.S.ws.send(JSON.stringify({cmd: 'plan'})); return true",
+        vec![],
+    )
+    .await?;
+    wait_js(
+        c,
+        "return !!window.twindrive.S.plan",
+        Duration::from_secs(600),
+        "the plan",
+    )
+    .await?;
+    let plan_s = asked.elapsed().as_secs_f64();
+    let info = c
+        .execute(
+            "const S = window.twindrive.S; return [S.plan.executed.t.length, S.plan.plan.t.length, S.timings]",
+            vec![],
+        )
+        .await?;
+    // Zoom to the whole room, then pan around a circle, one step a frame.
+    let r = c
+        .execute_async(
+            &format!(
+                r#"const done = arguments[arguments.length - 1];
+                const map = window.twindrive.map;
+                if (window.twindrive.S.world.bounds) map.fit(window.twindrive.S.world.bounds);
+                map.syncMeasure = true;
+                map.frameTimes.length = 0;
+                const gaps = []; let last = null; let k = 0;
+                function step(t) {{
+                  if (last !== null) gaps.push(t - last);
+                  last = t;
+                  const a = 2 * Math.PI * k / 120;
+                  map.pan(6 * Math.cos(a), 6 * Math.sin(a));
+                  if (++k <= {frames}) requestAnimationFrame(step);
+                  else done([map.frameTimes.slice(), gaps]);
+                }}
+                requestAnimationFrame(step);"#
+            ),
+            vec![],
+        )
+        .await?;
+    let draws: Vec<f64> = serde_json::from_value(r[0].clone())?;
+    let gaps: Vec<f64> = serde_json::from_value(r[1].clone())?;
+    anyhow::ensure!(!draws.is_empty(), "no frame was drawn");
+    println!(
+        "console map, one-hour mission: {} rehearsal samples on the page; the plan: executed path {} samples, plan {} samples (made in {plan_s:.1} s, page timings {})",
+        samples, info[0], info[1], info[2]
+    );
+    println!(
+        "{}",
+        stats("draw time while panning (raster included)", &draws)
+    );
+    println!("{}", stats("interval between animation frames", &gaps));
+    let mut sorted = draws.clone();
+    sorted.sort_by(f64::total_cmp);
+    let p95 = sorted[((sorted.len() - 1) as f64 * 0.95).round() as usize];
+    println!(
+        "target: draw time under 16 ms: {}",
+        if p95 < 16.0 {
+            "met (p95)"
+        } else {
+            "NOT met (p95)"
+        }
+    );
+    Ok(())
+}

@@ -1,0 +1,105 @@
+//! `twindrive console`: checks the command line, loads the twin, the key
+//! and a rehearsal, and hands over to `twindrive-console`.
+
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use twindrive_console::ConsoleConfig;
+use twindrive_link::envelope::Supervision;
+use twindrive_net::SessionOptions;
+use twindrive_sim::Scenario;
+
+use crate::cli::ConsoleArgs;
+
+/// A mission log: a directory `simulate` wrote, or an MCAP file.
+fn read_log(path: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
+    if path.is_dir() {
+        twindrive_log::read_log_dir(path).with_context(|| format!("--rehearsal {}", path.display()))
+    } else {
+        twindrive_log::read_mcap(path).with_context(|| format!("--rehearsal {}", path.display()))
+    }
+}
+
+pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    for id in &args.robot {
+        super::ops::check_robot_id(id, "--robot")?;
+        if !seen.insert(id) {
+            bail!("--robot {id} is given twice");
+        }
+    }
+    if !(args.telemetry_budget.is_finite() && args.telemetry_budget >= 100.0) {
+        bail!(
+            "--telemetry-budget: at least 100 bytes per second, got {}",
+            args.telemetry_budget
+        );
+    }
+    if let Some(s) = args.supervise
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
+    }
+    for o in &args.allow_origin {
+        if !(o.starts_with("http://") || o.starts_with("https://")) {
+            bail!(
+                "--allow-origin {o}: an origin is scheme://host[:port], e.g. https://ops.example"
+            );
+        }
+    }
+    let (scenario, scenario_bytes) = match &args.scenario {
+        Some(p) => {
+            let bytes =
+                std::fs::read(p).with_context(|| format!("--scenario: reading {}", p.display()))?;
+            let s = Scenario::load(p).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?;
+            (s, bytes)
+        }
+        None => {
+            let s = twindrive_sim::builtin::load("wall_following")
+                .expect("built in")
+                .map_err(|e| anyhow::anyhow!("the built-in scenario: {e}"))?;
+            (
+                s,
+                twindrive_sim::builtin::WALL_FOLLOWING.as_bytes().to_vec(),
+            )
+        }
+    };
+    let link = super::ops::link_profile(args.link.as_deref())?;
+    let key = super::ops::signing_key(args.key.as_deref())?;
+    let rehearsal = args.rehearsal.as_deref().map(read_log).transpose()?;
+    if let Some(log) = &rehearsal
+        && log.steps.len() < 20
+    {
+        bail!(
+            "--rehearsal: {} steps; a rehearsal needs at least 20",
+            log.steps.len()
+        );
+    }
+    twindrive_console::run(ConsoleConfig {
+        scenario,
+        scenario_bytes,
+        listen: args.listen,
+        allow_origins: args.allow_origin.clone(),
+        key,
+        params: args
+            .calibration
+            .as_deref()
+            .map(super::plan::read_calibration)
+            .transpose()?,
+        robots: args.robot.clone(),
+        session: SessionOptions {
+            listen: args.zenoh_listen.clone(),
+            connect: args.connect.clone(),
+            config_file: args.zenoh_config.clone(),
+            mode: None,
+        },
+        link,
+        seed: args.seed,
+        telemetry_budget_bytes_s: args.telemetry_budget,
+        supervision: Supervision {
+            dead_man_timeout_s: args.supervise,
+        },
+        expires_in_s: args.expires_in,
+        out: args.out.clone(),
+        rehearsal,
+    })
+}

@@ -1,0 +1,686 @@
+//! The operator's console in a real browser: Debian's chromium, headless,
+//! driven over WebDriver (chromedriver) by fantoccini, against `twindrive
+//! console` (and `twindrive robot` where a robot is needed) on loopback.
+//! `scripts/browser-deps.sh` installs chromium and chromium-driver (the
+//! test script runs it). Every test saves screenshots under
+//! `target/console-screenshots/`; every wait is bounded and every child is
+//! killed by its process id.
+
+mod common;
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::OnceLock;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use common::{Proc, port, repo, text, twindrive};
+use fantoccini::actions::{InputSource, KeyAction, KeyActions, MouseActions, PointerAction};
+use fantoccini::{Client, ClientBuilder, Locator};
+use serde_json::{Value, json};
+
+const BOX: &str = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
+const ARROW_UP: char = '\u{e013}';
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A 30 s wall-following run (the rehearsal), its calibration, keys and a
+/// site with a box the twin lacks: made once.
+struct Fixture {
+    dir: tempfile::TempDir,
+}
+
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let out = twindrive(&[
+            "simulate",
+            "scenarios/wall_following.toml",
+            "--duration-s",
+            "30",
+            "--out",
+            s(&d.join("wf")),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        std::fs::write(
+            d.join("calib.json"),
+            r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678}"#,
+        )
+        .unwrap();
+        let out = twindrive(&["keygen", "--out", s(&d.join("keys"))]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
+        std::fs::write(
+            d.join("site_box.toml"),
+            site.replace("[world]\n", &format!("[world]\n{BOX}\n")),
+        )
+        .unwrap();
+        Fixture { dir }
+    })
+}
+
+impl Fixture {
+    fn path(&self, p: &str) -> PathBuf {
+        self.dir.path().join(p)
+    }
+}
+
+fn screenshots() -> PathBuf {
+    let dir = repo().join("target/console-screenshots");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `twindrive console` with `args`, once it has printed its address.
+struct Console {
+    _proc: Proc,
+    url: String,
+}
+
+fn console(http_port: u16, out: &Path, args: &[&str]) -> Console {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_twindrive"))
+        .args([
+            "console",
+            "--listen",
+            &format!("127.0.0.1:{http_port}"),
+            "--out",
+            s(out),
+        ])
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let proc = Proc(child);
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Some(url) = line.strip_prefix("console: open ") {
+                let _ = tx.send(url.to_owned());
+            }
+        }
+    });
+    let url = rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("the console prints its address within 60 s");
+    assert!(url.starts_with(&format!("http://127.0.0.1:{http_port}/?token=")));
+    Console { _proc: proc, url }
+}
+
+fn robot(site: &Path, zenoh_port: u16, state: &Path) -> Proc {
+    let child = Command::new(env!("CARGO_BIN_EXE_twindrive"))
+        .args([
+            "robot",
+            "--id",
+            "rover",
+            "--site",
+            s(site),
+            "--trust",
+            s(&fixture().path("keys/master.pub")),
+            "--state-dir",
+            s(state),
+            "--listen",
+            &format!("tcp/127.0.0.1:{zenoh_port}"),
+            "--time-scale",
+            "5",
+            "--run-for",
+            "300",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    Proc(child)
+}
+
+/// chromedriver on a free port, and a headless chromium session through it.
+struct Browser {
+    client: Client,
+    _driver: Proc,
+    _profile: tempfile::TempDir,
+}
+
+async fn browser() -> Browser {
+    // Two TLS providers are linked (zenoh's and fantoccini's): choose one.
+    let _ = rustls::crypto::ring::default_provider().install_default();
+    for exe in ["/usr/bin/chromium", "/usr/bin/chromedriver"] {
+        assert!(
+            Path::new(exe).exists(),
+            "{exe} is missing: run scripts/browser-deps.sh (scripts/test.sh does)"
+        );
+    }
+    let port = port();
+    let driver = Proc(
+        Command::new("/usr/bin/chromedriver")
+            .args([format!("--port={port}"), "--allowed-ips=127.0.0.1".into()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let started = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "chromedriver did not listen within 30 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let profile = tempfile::tempdir().unwrap();
+    let mut caps = serde_json::Map::new();
+    caps.insert(
+        "goog:chromeOptions".into(),
+        json!({
+            "binary": "/usr/bin/chromium",
+            "args": [
+                "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                "--no-first-run", "--disable-background-networking",
+                "--disable-component-update", "--disable-sync",
+                "--disable-dev-shm-usage", "--window-size=1400,900",
+                format!("--user-data-dir={}", profile.path().display()),
+            ],
+        }),
+    );
+    let client = tokio::time::timeout(Duration::from_secs(60), async {
+        ClientBuilder::rustls()
+            .unwrap()
+            .capabilities(caps)
+            .connect(&format!("http://127.0.0.1:{port}"))
+            .await
+    })
+    .await
+    .expect("chromium starts within 60 s")
+    .expect("a WebDriver session");
+    Browser {
+        client,
+        _driver: driver,
+        _profile: profile,
+    }
+}
+
+async fn js(c: &Client, script: &str) -> Value {
+    c.execute(script, vec![]).await.unwrap()
+}
+
+/// Waits (at most `limit_s`) until `script` returns true.
+async fn wait_js(c: &Client, script: &str, limit_s: f64, what: &str) {
+    let started = Instant::now();
+    loop {
+        if js(c, script).await == Value::Bool(true) {
+            return;
+        }
+        if started.elapsed().as_secs_f64() > limit_s {
+            let state = js(c, "return JSON.stringify(window.twindrive && window.twindrive.S.state && window.twindrive.S.state.robots)").await;
+            let events = js(c, "return document.getElementById('events').innerText").await;
+            panic!("waited {limit_s} s for {what}; robots: {state}; events: {events}");
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+async fn shot(c: &Client, name: &str) {
+    let png = c.screenshot().await.unwrap();
+    std::fs::write(screenshots().join(format!("{name}.png")), png).unwrap();
+}
+
+async fn click(c: &Client, id: &str) {
+    c.find(Locator::Id(id))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+}
+
+async fn pose(c: &Client) -> [f64; 3] {
+    serde_json::from_value(js(c, "return window.twindrive.S.state.twin.pose").await).unwrap()
+}
+
+async fn loaded(c: &Client, url: &str) {
+    c.goto(url).await.unwrap();
+    wait_js(
+        c,
+        "return !!(window.twindrive && window.twindrive.S.connected && window.twindrive.S.state && window.twindrive.S.world)",
+        30.0,
+        "the page to connect",
+    )
+    .await;
+}
+
+/// A raw HTTP/1.1 request to the console; the status code.
+fn http_status(port: u16, request: &str) -> u16 {
+    let mut stream = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    stream.write_all(request.as_bytes()).unwrap();
+    let mut head = [0u8; 12];
+    stream.read_exact(&mut head).unwrap();
+    std::str::from_utf8(&head[9..12]).unwrap().parse().unwrap()
+}
+
+fn token_of(url: &str) -> &str {
+    url.split("token=").nth(1).unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_needs_its_token_and_its_own_origin() {
+    let tmp = tempfile::tempdir().unwrap();
+    let http = port();
+    let con = console(http, tmp.path(), &[]);
+    let token = token_of(&con.url);
+    let get = |path: &str, extra: &str| {
+        http_status(
+            http,
+            &format!(
+                "GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{http}\r\n{extra}Connection: close\r\n\r\n"
+            ),
+        )
+    };
+    assert_eq!(get("/", ""), 401);
+    assert_eq!(get("/?token=wrong", ""), 401);
+    assert_eq!(get("/assets/app.js", ""), 401);
+    assert_eq!(get("/api/state", ""), 401);
+    assert_eq!(get(&format!("/?token={token}"), ""), 200);
+    assert_eq!(
+        get("/", &format!("Cookie: twindrive_token={token}\r\n")),
+        200
+    );
+    let upgrade = |origin: &str| {
+        get(
+            &format!("/ws?token={token}"),
+            &format!(
+                "Origin: {origin}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+                 Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+            ),
+        )
+    };
+    assert_eq!(upgrade("http://evil.example"), 403);
+    assert_eq!(upgrade(&format!("http://127.0.0.1:{http}")), 101);
+
+    let b = browser().await;
+    let c = &b.client;
+    c.goto(&format!("http://127.0.0.1:{http}/")).await.unwrap();
+    let body = c.source().await.unwrap();
+    assert!(body.contains("Access token needed"), "{body}");
+    shot(c, "01_refused_without_token").await;
+    loaded(c, &con.url).await;
+    // The token left the address bar; the cookie carries it.
+    let here = c.current_url().await.unwrap();
+    assert!(!here.as_str().contains("token"), "{here}");
+    let walls = js(c, "return window.twindrive.S.world.segments.length").await;
+    assert!(walls.as_u64().unwrap() >= 4, "{walls}");
+    shot(c, "02_loaded").await;
+    c.clone().close().await.unwrap();
+    drop(con);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn keys_and_the_joystick_drive_the_twin_and_it_stops_on_release() {
+    let tmp = tempfile::tempdir().unwrap();
+    let con = console(port(), tmp.path(), &[]);
+    let b = browser().await;
+    let c = &b.client;
+    loaded(c, &con.url).await;
+    c.find(Locator::Id("map"))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+    let start = pose(c).await;
+    let keys = |a: KeyAction| KeyActions::new("keyboard".into()).then(a);
+    c.perform_actions(keys(KeyAction::Down { value: ARROW_UP }))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let moving = pose(c).await;
+    shot(c, "03_driving_with_keys").await;
+    c.perform_actions(keys(KeyAction::Up { value: ARROW_UP }))
+        .await
+        .unwrap();
+    let dist = |a: [f64; 3], b: [f64; 3]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    assert!(dist(start, moving) > 0.1, "{start:?} -> {moving:?}");
+    // Released: it stops (the stop, or at worst the dead-man, 0.4 s).
+    tokio::time::sleep(Duration::from_millis(700)).await;
+    let stopped = pose(c).await;
+    tokio::time::sleep(Duration::from_millis(1000)).await;
+    let later = pose(c).await;
+    assert!(dist(stopped, later) < 1e-6, "{stopped:?} -> {later:?}");
+    assert_eq!(
+        js(c, "return window.twindrive.S.state.twin.drive").await,
+        "idle"
+    );
+
+    // The joystick: pushed up, the robot drives; released, it stops.
+    let stick = c.find(Locator::Id("joystick")).await.unwrap();
+    let mouse = MouseActions::new("mouse".into())
+        .then(PointerAction::MoveToElement {
+            element: stick.clone(),
+            duration: None,
+            x: 0.0,
+            y: 0.0,
+        })
+        .then(PointerAction::Down { button: 0 })
+        .then(PointerAction::MoveToElement {
+            element: stick,
+            duration: Some(Duration::from_millis(100)),
+            x: 0.0,
+            y: -50.0,
+        });
+    c.perform_actions(mouse).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(1200)).await;
+    let pushed = pose(c).await;
+    assert!(dist(later, pushed) > 0.1, "{later:?} -> {pushed:?}");
+    c.perform_actions(MouseActions::new("mouse".into()).then(PointerAction::Up { button: 0 }))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(700)).await;
+    let released = pose(c).await;
+    tokio::time::sleep(Duration::from_millis(1000)).await;
+    assert!(dist(released, pose(c).await) < 1e-6);
+    shot(c, "04_stopped_after_release").await;
+    c.clone().close().await.unwrap();
+}
+
+/// Records a wall-following rehearsal on the page, makes a plan, verifies it.
+async fn rehearse_and_plan(c: &Client) {
+    click(c, "btn-wall").await;
+    c.find(Locator::Css("#speed option[value='32']"))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+    wait_js(
+        c,
+        "return window.twindrive.S.state.twin.speed === 32",
+        10.0,
+        "32x",
+    )
+    .await;
+    click(c, "btn-record").await;
+    wait_js(
+        c,
+        "return window.twindrive.S.state.twin.recording_s > 45",
+        30.0,
+        "45 s recorded",
+    )
+    .await;
+    click(c, "btn-record").await;
+    wait_js(
+        c,
+        "return window.twindrive.S.state.twin.has_rehearsal",
+        10.0,
+        "the rehearsal",
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rehearsal_becomes_a_plan_with_its_stages_drawn_and_verified() {
+    let tmp = tempfile::tempdir().unwrap();
+    let con = console(port(), tmp.path(), &[]);
+    let b = browser().await;
+    let c = &b.client;
+    loaded(c, &con.url).await;
+    rehearse_and_plan(c).await;
+    click(c, "btn-stop").await;
+    click(c, "btn-plan").await;
+    wait_js(c, "return !!window.twindrive.S.plan", 60.0, "the plan").await;
+    let layers = js(c, "return [...window.twindrive.map.layers.keys()]").await;
+    for l in ["executed", "plan", "rehearsal"] {
+        assert!(
+            layers.as_array().unwrap().iter().any(|v| v == l),
+            "{l} in {layers}"
+        );
+    }
+    let summary = c
+        .find(Locator::Id("plan-summary"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        summary.contains("100.00 %") || summary.contains("99."),
+        "{summary}"
+    );
+    let covered = js(c, "return window.twindrive.S.plan.summary.coverage_percent").await;
+    assert!(covered.as_f64().unwrap() >= 99.0, "{covered}");
+    // The plan document is on disk under its hash.
+    let sha = js(c, "return window.twindrive.S.plan.sha256").await;
+    let sha = sha.as_str().unwrap();
+    let doc = tmp.path().join(format!("plans/{}.json", &sha[..12]));
+    let plan: Value = serde_json::from_slice(&std::fs::read(&doc).unwrap()).unwrap();
+    assert_eq!(plan["sha256"], sha);
+    shot(c, "05_plan_stages").await;
+    click(c, "btn-verify").await;
+    wait_js(
+        c,
+        "return !!window.twindrive.S.verify",
+        120.0,
+        "the replays",
+    )
+    .await;
+    assert_eq!(
+        js(c, "return window.twindrive.S.verify.verdict.passed").await,
+        true
+    );
+    // The time cursor scrubs the rehearsal and the plan together.
+    let cursor = c.find(Locator::Id("cursor")).await.unwrap();
+    let max = cursor.attr("max").await.unwrap().unwrap();
+    assert!(max.parse::<f64>().unwrap() > 40.0, "{max}");
+    js(
+        c,
+        "const c = document.getElementById('cursor'); c.value = 20; c.dispatchEvent(new Event('input')); return true",
+    )
+    .await;
+    shot(c, "06_verified_with_time_cursor").await;
+    c.clone().close().await.unwrap();
+}
+
+/// A console with a robot over an emulated link; the rehearsal is the
+/// fixture's 30 s run.
+struct WithRobot {
+    _tmp: tempfile::TempDir,
+    out: PathBuf,
+    robot_state: PathBuf,
+    console: Console,
+    _robot: Proc,
+}
+
+fn with_robot(site: &Path, link: &str) -> WithRobot {
+    let f = fixture();
+    let tmp = tempfile::tempdir().unwrap();
+    let zenoh = port();
+    let robot_state = tmp.path().join("robot");
+    let robot = robot(site, zenoh, &robot_state);
+    let out = tmp.path().join("console");
+    let console = console(
+        port(),
+        &out,
+        &[
+            "--key",
+            s(&f.path("keys/master.key")),
+            "--calibration",
+            s(&f.path("calib.json")),
+            "--robot",
+            "rover",
+            "--connect",
+            &format!("tcp/127.0.0.1:{zenoh}"),
+            "--link",
+            link,
+            "--rehearsal",
+            s(&f.path("wf")),
+        ],
+    );
+    WithRobot {
+        _tmp: tmp,
+        out,
+        robot_state,
+        console,
+        _robot: robot,
+    }
+}
+
+async fn plan_and_upload(c: &Client) {
+    wait_js(
+        c,
+        "return window.twindrive.S.state.twin.has_rehearsal",
+        10.0,
+        "the rehearsal",
+    )
+    .await;
+    click(c, "btn-plan").await;
+    wait_js(c, "return !!window.twindrive.S.plan", 60.0, "the plan").await;
+    wait_js(
+        c,
+        "return !document.getElementById('btn-upload').disabled",
+        10.0,
+        "the upload button",
+    )
+    .await;
+    click(c, "btn-upload").await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_plan_uploaded_over_a_lossy_link_reaches_100_percent_and_runs() {
+    let m = with_robot(
+        &repo().join("scenarios/wall_following.toml"),
+        "wifi,loss=0.2",
+    );
+    let b = browser().await;
+    let c = &b.client;
+    loaded(c, &m.console.url).await;
+    plan_and_upload(c).await;
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.robots[0]; return !!r.upload && r.upload.confirmed > 0 && r.upload.confirmed < r.upload.chunks",
+        60.0,
+        "the upload under way",
+    )
+    .await;
+    shot(c, "07_upload_in_progress").await;
+    wait_js(
+        c,
+        "return document.getElementById('upload-text').textContent.startsWith('100 %')",
+        120.0,
+        "100 % acknowledged",
+    )
+    .await;
+    let up = js(c, "return window.twindrive.S.state.robots[0].upload").await;
+    assert_eq!(up["confirmed"], up["chunks"], "{up}");
+    assert!(
+        up["resent"].as_u64().unwrap() + up["repairs"].as_u64().unwrap() > 0,
+        "a lossy link: {up}"
+    );
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.robots[0]; return r.state === 'completed'",
+        120.0,
+        "the mission to complete",
+    )
+    .await;
+    shot(c, "08_completed").await;
+    // The robot holds the plan byte for byte.
+    let sha = js(c, "return window.twindrive.S.plan.sha256").await;
+    let sha = sha.as_str().unwrap();
+    let ours = std::fs::read(m.out.join(format!("rover/plans/{}.json", &sha[..12]))).unwrap();
+    let theirs = std::fs::read(m.robot_state.join(format!("plans/{sha}.json"))).unwrap();
+    assert!(ours == theirs, "the robot's copy differs");
+    c.clone().close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_obstacle_the_twin_lacks_raises_the_hand_back_banner() {
+    let m = with_robot(&fixture().path("site_box.toml"), "lan");
+    let b = browser().await;
+    let c = &b.client;
+    loaded(c, &m.console.url).await;
+    plan_and_upload(c).await;
+    wait_js(
+        c,
+        "return !document.getElementById('banner').hidden",
+        120.0,
+        "the hand-back banner",
+    )
+    .await;
+    let banner = c
+        .find(Locator::Id("banner-text"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(banner.contains("handed control back"), "{banner}");
+    let r = js(c, "return window.twindrive.S.state.robots[0]").await;
+    assert_eq!(r["state"], "awaiting_decision", "{r}");
+    assert!(
+        !r["learnt"].as_array().unwrap().is_empty(),
+        "the twin learnt the box: {r}"
+    );
+    wait_js(
+        c,
+        "return !!(window.twindrive.S.detail && window.twindrive.S.detail.window)",
+        30.0,
+        "the hand-back's readings",
+    )
+    .await;
+    shot(c, "09_handback_banner").await;
+    // Continue: a continuation is rehearsed on the updated twin and sent.
+    click(c, "banner-replan").await;
+    wait_js(
+        c,
+        "return window.twindrive.S.state.robots[0].uploads >= 2",
+        60.0,
+        "the continuation's upload",
+    )
+    .await;
+    shot(c, "10_continuation").await;
+    c.clone().close().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_recovers_after_the_console_restarts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let http = port();
+    let first = console(http, tmp.path(), &[]);
+    let b = browser().await;
+    let c = &b.client;
+    loaded(c, &first.url).await;
+    let instance = js(c, "return window.twindrive.S.instance").await;
+    drop(first);
+    wait_js(
+        c,
+        "return document.getElementById('conn').textContent.includes('reconnecting')",
+        20.0,
+        "the page to say it lost the console",
+    )
+    .await;
+    shot(c, "11_console_gone").await;
+    let second = console(http, tmp.path(), &[]);
+    wait_js(
+        c,
+        "return window.twindrive.S.connected && document.getElementById('conn').textContent === 'reconnected'",
+        30.0,
+        "the page to reconnect",
+    )
+    .await;
+    wait_js(
+        c,
+        &format!("return window.twindrive.S.instance !== {instance}"),
+        10.0,
+        "the new console's state",
+    )
+    .await;
+    shot(c, "12_reconnected").await;
+    c.clone().close().await.unwrap();
+    drop(second);
+}
