@@ -42,6 +42,10 @@ pub trait RobotBackend {
     fn wheel_travel_rad(&self) -> f64;
     /// What the robot's logs say of it (sensors, limits, where it is now).
     fn log_header(&self) -> LogHeader;
+    /// The world the robot knows, for its logs' `/map` (none by default).
+    fn map(&self) -> Option<twindrive_log::WorldMap> {
+        None
+    }
 }
 
 /// The site as a simulator: the robot's true kinematics, noise, slip and
@@ -118,5 +122,10 @@ impl RobotBackend for SimBackend {
         let mut header = self.sim.scenario().log_header();
         header.start = self.sim.pose();
         header
+    }
+
+    /// The site's world: a simulated site knows it.
+    fn map(&self) -> Option<twindrive_log::WorldMap> {
+        Some(self.sim.scenario().world.log_map())
     }
 }

@@ -811,7 +811,8 @@ impl<B: RobotBackend> RobotAgent<B> {
         let result = (|| -> anyhow::Result<()> {
             std::fs::create_dir_all(&dir)?;
             let mut mcap = std::io::Cursor::new(Vec::new());
-            twindrive_log::write_mcap(log, &mut mcap)?;
+            let map = self.backend.map();
+            twindrive_log::write_mcap_with_map(log, map.as_ref(), &mut mcap)?;
             let mut csv = Vec::new();
             twindrive_log::write_csv(log, &mut csv)?;
             let meta = serde_json::to_vec_pretty(&log.header)?;

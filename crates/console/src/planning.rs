@@ -44,10 +44,13 @@ fn path_columns(path: &[PathSample]) -> Value {
     columns(path.iter().map(|p| (p.t_s, p.pose.x_m, p.pose.y_m)))
 }
 
-/// The rehearsal as MCAP bytes (the same log gives the same bytes).
-pub fn mcap_bytes(log: &MissionLog) -> Result<Vec<u8>, String> {
+/// The rehearsal as MCAP bytes with the twin's world on `/map` (the same
+/// log gives the same bytes).
+pub fn mcap_bytes(log: &MissionLog, scenario: &Scenario) -> Result<Vec<u8>, String> {
     let mut cursor = std::io::Cursor::new(Vec::new());
-    twindrive_log::write_mcap(log, &mut cursor).map_err(|e| format!("writing the MCAP: {e}"))?;
+    let map = scenario.world.log_map();
+    twindrive_log::write_mcap_with_map(log, Some(&map), &mut cursor)
+        .map_err(|e| format!("writing the MCAP: {e}"))?;
     Ok(cursor.into_inner())
 }
 
@@ -66,7 +69,7 @@ pub fn make_plan(
     params: &twindrive_kinematics::DiffDriveParams,
     redundancy: RedundancyConfig,
 ) -> Result<PlanResult, String> {
-    let rehearsal_mcap = mcap_bytes(log)?;
+    let rehearsal_mcap = mcap_bytes(log, scenario)?;
     let settings = PipelineSettings {
         planner: Default::default(),
         redundancy,

@@ -8,13 +8,15 @@
 pub mod calib_csv;
 mod csv_io;
 mod error;
+pub mod map_topic;
 mod mcap_io;
 mod time;
 mod tum;
 
 pub use csv_io::{read_csv, read_csv_from, write_csv};
 pub use error::LogError;
-pub use mcap_io::{Track, read_mcap, write_mcap, write_tracks_mcap};
+pub use map_topic::{MapGrid, WorldMap};
+pub use mcap_io::{Track, read_mcap, write_mcap, write_mcap_with_map, write_tracks_mcap};
 pub use time::{format_seconds, ns_from_seconds, push_seconds, seconds_from_ns};
 pub use tum::{read_tum, write_tum};
 

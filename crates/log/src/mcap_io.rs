@@ -3,8 +3,9 @@
 //! Topics: `/ground_truth` and `/tracker` (`foxglove.PoseInFrame`, plus an
 //! exact `heading_rad`), `/tf` (`foxglove.FrameTransform`, world -> base_link),
 //! `/range/<name>` (`foxglove.LaserScan` in frame `base_link`), `/wheels`,
-//! `/encoders` and `/bump` (twindrive schemas). The log header is the
-//! metadata record `twindrive.log_header`.
+//! `/encoders` and `/bump` (twindrive schemas), and with a map the world's
+//! walls on `/map` ([`crate::map_topic`]). The log header is the metadata
+//! record `twindrive.log_header`.
 
 use std::collections::{BTreeMap, HashMap};
 use std::io::{Seek, Write};
@@ -295,9 +296,22 @@ fn add_channels<W: Write + Seek>(
 /// Writes the log as MCAP (zstd-compressed chunks). No wall-clock time is
 /// recorded, so the same log gives the same bytes.
 pub fn write_mcap<W: Write + Seek>(log: &MissionLog, out: W) -> Result<(), mcap::McapError> {
+    write_mcap_with_map(log, None, out)
+}
+
+/// [`write_mcap`] with the world the log was made in on `/map` (see
+/// [`crate::map_topic`]), so the log opens in Foxglove with its walls.
+pub fn write_mcap_with_map<W: Write + Seek>(
+    log: &MissionLog,
+    map: Option<&crate::WorldMap>,
+    out: W,
+) -> Result<(), mcap::McapError> {
     let mut w = writer(out)?;
     let header_json = serde_json::to_string(&log.header).expect("header serialises");
     write_json_metadata(&mut w, HEADER_METADATA, header_json)?;
+    if let Some(map) = map {
+        crate::map_topic::write_map(&mut w, map)?;
+    }
     let ch = add_channels(&mut w, &log.header)?;
     let per_step = log.beams_per_step();
     let offsets = log.beam_offsets();
@@ -424,11 +438,15 @@ pub struct Track<'a> {
 pub fn write_tracks_mcap<W: Write + Seek>(
     tracks: &[Track],
     metadata: &[(&str, String)],
+    map: Option<&crate::WorldMap>,
     out: W,
 ) -> Result<(), mcap::McapError> {
     let mut w = writer(out)?;
     for (name, json) in metadata {
         write_json_metadata(&mut w, name, json.clone())?;
+    }
+    if let Some(map) = map {
+        crate::map_topic::write_map(&mut w, map)?;
     }
     let none = BTreeMap::new();
     let pose_in_frame = add_pose_in_frame_schema(&mut w)?;
@@ -545,7 +563,8 @@ pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
             log.ranges.resize(log.ranges.len() + per_step, f64::NAN);
             continue;
         }
-        if topic == "/tf" {
+        // The transform repeats the ground truth; the map is the world's.
+        if matches!(topic, "/tf" | "/map" | "/map/grid") {
             continue;
         }
         let &k = step_of_time

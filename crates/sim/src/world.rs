@@ -87,6 +87,37 @@ impl World {
         World::new(segments, solids, self.grid.clone())
     }
 
+    /// The world as a log's `/map` topic draws it.
+    pub fn log_map(&self) -> twindrive_log::WorldMap {
+        twindrive_log::WorldMap {
+            segments: self
+                .segments()
+                .iter()
+                .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
+                .collect(),
+            boxes: self
+                .solids()
+                .iter()
+                .map(|a| [a.mins.x, a.mins.y, a.maxs.x, a.maxs.y])
+                .collect(),
+            grid: self.grid().map(|g| twindrive_log::MapGrid {
+                width: g.width as u32,
+                height: g.height as u32,
+                resolution_m: g.resolution_m,
+                origin: [g.origin_x_m, g.origin_y_m, g.origin_yaw_rad],
+                cells: g
+                    .cells
+                    .iter()
+                    .map(|c| match c {
+                        crate::map::Cell::Free => 0,
+                        crate::map::Cell::Occupied => 100,
+                        crate::map::Cell::Unknown => 255,
+                    })
+                    .collect(),
+            }),
+        }
+    }
+
     pub fn grid(&self) -> Option<&OccupancyGrid> {
         self.grid.as_ref()
     }

@@ -218,6 +218,7 @@ pub fn write_outputs(
                 "twindrive.plan_header",
                 serde_json::to_string(&plan.header)?,
             )],
+            Some(&scenario.world.log_map()),
             w,
         )
         .map_err(Into::into)

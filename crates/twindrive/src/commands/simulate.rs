@@ -62,7 +62,7 @@ pub fn simulate_into(
         serde_json::to_writer_pretty(w, &log.header).map_err(Into::into)
     })?;
     staging.write_with("log.mcap", |w| {
-        twindrive_log::write_mcap(&log, w).map_err(Into::into)
+        twindrive_log::write_mcap_with_map(&log, Some(&world.log_map()), w).map_err(Into::into)
     })?;
     staging.write_with("ground_truth.tum", |w| {
         twindrive_log::write_tum(log.steps.iter().map(|s| (s.t_ns, s.ground_truth)), w)
