@@ -414,6 +414,34 @@ impl RobotSlot {
         self.series_rev
     }
 
+    /// The robot's reported pose, the twin's prediction for the same plan
+    /// time (while a plan runs), and the blocks the twin learnt from it.
+    #[allow(clippy::type_complexity)]
+    pub fn poses(
+        &self,
+    ) -> (
+        Option<[f64; 3]>,
+        Option<[f64; 3]>,
+        Vec<([f64; 2], [f64; 2])>,
+    ) {
+        let master = self.master();
+        let status = master.latest_status();
+        let op = self.operator();
+        let predicted = match (op.and_then(|o| o.current_plan()), status) {
+            (Some(p), Some(s)) if matches!(s.plan, Some((_, PlanPhase::Executing))) => {
+                Some(predicted_pose(p, s.plan_t_s))
+            }
+            _ => None,
+        };
+        (
+            status.map(|s| s.pose),
+            predicted,
+            op.and_then(|o| o.twin())
+                .map(|t| t.learnt.clone())
+                .unwrap_or_default(),
+        )
+    }
+
     /// The state in one word for the fleet list.
     fn state_word(&self) -> &'static str {
         let Some(op) = self.operator() else {
@@ -475,14 +503,8 @@ impl RobotSlot {
         let status_age = age(self.last_status_ns);
         let status = master.latest_status().map(|s| status_view(s, status_age));
         let op = self.operator();
-        let plan = op.and_then(|o| o.current_plan());
         // The twin's prediction only means something while a plan runs.
-        let predicted = match (plan, master.latest_status()) {
-            (Some(p), Some(s)) if matches!(s.plan, Some((_, PlanPhase::Executing))) => {
-                Some(predicted_pose(p, s.plan_t_s))
-            }
-            _ => None,
-        };
+        let (_, predicted, learnt) = self.poses();
         let awaiting = op.and_then(|o| o.awaiting_decision()).map(|h| {
             json!({ "reason": h.reason, "plan_t_s": h.plan_t_s, "pose": h.pose, "decision": true })
         });
@@ -510,7 +532,7 @@ impl RobotSlot {
             "failure": op.and_then(|o| o.report.failure.clone()),
             "uploads": op.map_or(0, |o| o.report.uploads.len()),
             "handbacks": op.map_or(0, |o| o.report.handbacks.len()),
-            "learnt": op.and_then(|o| o.twin()).map(|t| t.learnt.clone()).unwrap_or_default(),
+            "learnt": learnt,
             "tolerances": { "deviation_m": tol.max_deviation_m, "range_residual_m": tol.max_range_residual_m },
             "notices": self.notices,
             "mission_rev": self.mission_rev,

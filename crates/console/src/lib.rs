@@ -19,6 +19,7 @@
 pub mod auth;
 pub mod core;
 pub mod fleet;
+pub mod foxglove_bridge;
 pub mod planning;
 pub mod protocol;
 pub mod server;
@@ -66,6 +67,8 @@ pub struct ConsoleConfig {
     pub out: PathBuf,
     /// A rehearsal to start with (a mission log made in this twin).
     pub rehearsal: Option<MissionLog>,
+    /// Also serve the live streams to Foxglove / Lichtblick here.
+    pub foxglove: Option<SocketAddr>,
 }
 
 /// Runs the console until interrupted (Ctrl-C or SIGTERM).
@@ -128,6 +131,12 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
             instance,
         },
     );
+    let mut bridge = match config.foxglove {
+        Some(addr) => {
+            Some(foxglove_bridge::Bridge::start(addr, &config.scenario, &config.robots).await?)
+        }
+        None => None,
+    };
     let (frames_tx, frames_rx) = watch::channel(Arc::new(core.frame(0)));
     let core = Arc::new(Mutex::new(core));
     let stop = Arc::new(AtomicBool::new(false));
@@ -172,6 +181,7 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
     }
 
     // The tick: the twin at 50 Hz, frames at 25 Hz.
+    let foxglove_port = bridge.as_ref().map(foxglove_bridge::Bridge::port);
     let ticker = {
         let core = core.clone();
         let stop = stop.clone();
@@ -186,6 +196,12 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
                 let frame = {
                     let mut c = core.lock().unwrap_or_else(|e| e.into_inner());
                     c.tick(now);
+                    if n % 2 == 0
+                        && let Some(b) = &mut bridge
+                    {
+                        let unix_ns = ((unix_at_zero_s + now as f64 * 1e-9) * 1e9) as u64;
+                        b.publish(&c, unix_ns);
+                    }
                     (n % 2 == 0).then(|| c.frame(now))
                 };
                 if let Some(f) = frame {
@@ -207,6 +223,13 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
         // not stop the console.
         let mut out = std::io::stdout().lock();
         let _ = writeln!(out, "console: open {url}");
+        if let (Some(addr), Some(port)) = (config.foxglove, foxglove_port) {
+            let _ = writeln!(
+                out,
+                "console: Foxglove WebSocket at ws://{}:{port}",
+                addr.ip()
+            );
+        }
         let _ = writeln!(
             out,
             "console: twin `{}`, robots {:?}, files in {}",

@@ -57,6 +57,8 @@ pub struct Workspace {
     start: Pose,
     sim: Simulator,
     out: StepOutput,
+    /// The latest reading of every beam (NaN: none yet).
+    latest_ranges: Vec<f64>,
     drive: Drive,
     speed: f64,
     /// Console time up to which the twin has been simulated.
@@ -102,6 +104,7 @@ impl Workspace {
         Self {
             base,
             start,
+            latest_ranges: vec![f64::NAN; out.ranges.len()],
             out,
             sim,
             drive: Drive::Idle,
@@ -145,7 +148,7 @@ impl Workspace {
 
     /// The latest range reading of every beam (NaN: not sampled yet).
     pub fn ranges(&self) -> &[f64] {
-        &self.out.ranges
+        &self.latest_ranges
     }
 
     pub fn bumped(&self) -> bool {
@@ -272,6 +275,7 @@ impl Workspace {
         scenario.robot.start = pose;
         self.sim = Simulator::new(scenario);
         self.out = StepOutput::new(self.sim.beams());
+        self.latest_ranges = vec![f64::NAN; self.out.ranges.len()];
         self.simulated_to_ns = now_ns;
         self.owed_ns = 0.0;
         self.t_ns = 0;
@@ -367,6 +371,11 @@ impl Workspace {
             return;
         }
         self.t_ns = self.out.record.t_ns + self.base.dt_ns;
+        for (latest, &now) in self.latest_ranges.iter_mut().zip(&self.out.ranges) {
+            if now.is_finite() {
+                *latest = now;
+            }
+        }
         let bump = self.out.record.bump;
         if bump && !self.was_bumped {
             let p = self.out.record.ground_truth;
@@ -403,7 +412,7 @@ impl Workspace {
             let ox = pose.x_m + cos * info.mount.x_m - sin * info.mount.y_m;
             let oy = pose.y_m + sin * info.mount.x_m + cos * info.mount.y_m;
             for b in 0..info.beams {
-                let range = self.out.ranges.get(k).copied().unwrap_or(f64::NAN);
+                let range = self.latest_ranges.get(k).copied().unwrap_or(f64::NAN);
                 k += 1;
                 let a = pose.heading_rad + info.mount.heading_rad + info.beam_angle_rad(b);
                 let r = if range.is_finite() {

@@ -456,6 +456,11 @@ pub struct ConsoleArgs {
     /// simulate output directory or its log.mcap).
     #[arg(long, value_name = "LOG")]
     pub rehearsal: Option<PathBuf>,
+    /// Also serve the live streams (map, twin pose and scans, each robot's
+    /// reported and predicted pose) to Foxglove or Lichtblick: a Foxglove
+    /// WebSocket server at this address (`127.0.0.1:8765`).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub foxglove: Option<std::net::SocketAddr>,
     /// Output directory: plans, rehearsals, robot logs, reports and the
     /// access token (console.token, kept so a restarted console accepts the
     /// open pages).

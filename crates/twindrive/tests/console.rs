@@ -684,3 +684,101 @@ async fn the_page_recovers_after_the_console_restarts() {
     c.clone().close().await.unwrap();
     drop(second);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn foxglove_clients_get_the_map_the_twin_and_the_robots() {
+    use futures::{SinkExt, StreamExt};
+    use tokio_tungstenite::tungstenite::Message;
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+    let tmp = tempfile::tempdir().unwrap();
+    let fox = port();
+    let _con = console(
+        port(),
+        tmp.path(),
+        &[
+            "--foxglove",
+            &format!("127.0.0.1:{fox}"),
+            "--robot",
+            "rover",
+        ],
+    );
+    let mut request = format!("ws://127.0.0.1:{fox}/")
+        .into_client_request()
+        .unwrap();
+    request
+        .headers_mut()
+        .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
+    let (mut ws, _) = tokio::time::timeout(
+        Duration::from_secs(20),
+        tokio_tungstenite::connect_async(request),
+    )
+    .await
+    .expect("connects within 20 s")
+    .unwrap();
+    // serverInfo, then the channels advertised.
+    let mut channels: Vec<Value> = Vec::new();
+    let started = Instant::now();
+    // /map, /twin/pose, /twin/scan/side_ir, and the robot's two poses.
+    while channels.len() < 5 {
+        assert!(started.elapsed() < Duration::from_secs(20), "{channels:?}");
+        let m = tokio::time::timeout(Duration::from_secs(20), ws.next())
+            .await
+            .unwrap()
+            .unwrap()
+            .unwrap();
+        if let Message::Text(t) = m {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            if v["op"] == "advertise" {
+                channels.extend(v["channels"].as_array().unwrap().iter().cloned());
+            }
+        }
+    }
+    let find = |topic: &str| {
+        channels
+            .iter()
+            .find(|c| c["topic"] == topic)
+            .unwrap_or_else(|| panic!("no {topic} in {channels:?}"))
+            .clone()
+    };
+    assert_eq!(find("/map")["schemaName"], "foxglove.SceneUpdate");
+    assert_eq!(find("/twin/pose")["schemaName"], "foxglove.PoseInFrame");
+    assert_eq!(
+        find("/twin/scan/side_ir")["schemaName"],
+        "foxglove.LaserScan"
+    );
+    assert_eq!(
+        find("/robots/rover/pose")["schemaName"],
+        "foxglove.PoseInFrame"
+    );
+    assert_eq!(
+        find("/robots/rover/predicted")["schemaName"],
+        "foxglove.PoseInFrame"
+    );
+    // Subscribed, the twin's pose and the map arrive (binary message data:
+    // opcode 1, then the subscription id).
+    let subscribe = json!({"op": "subscribe", "subscriptions": [
+        {"id": 7, "channelId": find("/twin/pose")["id"]},
+        {"id": 8, "channelId": find("/map")["id"]},
+    ]});
+    ws.send(Message::Text(subscribe.to_string().into()))
+        .await
+        .unwrap();
+    let mut seen = std::collections::BTreeSet::new();
+    let started = Instant::now();
+    while seen.len() < 2 {
+        assert!(started.elapsed() < Duration::from_secs(20), "only {seen:?}");
+        let m = tokio::time::timeout(Duration::from_secs(20), ws.next())
+            .await
+            .unwrap()
+            .unwrap()
+            .unwrap();
+        if let Message::Binary(b) = m {
+            assert_eq!(b[0], 1, "message data");
+            let id = u32::from_le_bytes(b[1..5].try_into().unwrap());
+            assert!(b.len() > 13, "a payload after the header");
+            seen.insert(id);
+        }
+    }
+    assert_eq!(seen.into_iter().collect::<Vec<_>>(), [7, 8]);
+}

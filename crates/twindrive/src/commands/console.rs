@@ -101,5 +101,6 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
         expires_in_s: args.expires_in,
         out: args.out.clone(),
         rehearsal,
+        foxglove: args.foxglove,
     })
 }
