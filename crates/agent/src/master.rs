@@ -198,6 +198,18 @@ impl<S: ChunkStore> Master<S> {
             .map(|u| (u.sender.stats, u.bytes, u.started_ns))
     }
 
+    /// Pings answered, and pings unanswered for longer than `late_ns` (lost
+    /// one way or the other; an unanswered ping is forgotten after ten
+    /// minutes).
+    pub fn ping_counts(&self, now_ns: u64, late_ns: u64) -> (usize, usize) {
+        let lost = self
+            .pings
+            .values()
+            .filter(|&&sent| now_ns.saturating_sub(sent) > late_ns)
+            .count();
+        (self.rtt_s.len(), lost)
+    }
+
     /// Whether the current upload is on the robot whole.
     pub fn upload_finished(&self) -> bool {
         self.upload.as_ref().is_some_and(|u| u.done)

@@ -57,8 +57,8 @@ pub struct RobotSlot {
     /// Console time of the last message from the robot.
     last_rx_ns: Option<u64>,
     last_status_ns: Option<u64>,
-    /// Arrival times of recent messages (for a rate).
-    rx_times: VecDeque<u64>,
+    /// Arrival times and encoded sizes of recent messages (for rates).
+    rx_times: VecDeque<(u64, usize)>,
     pub messages_received: u64,
     /// (console s, plan s, deviation m, range residual m).
     series: VecDeque<[f64; 4]>,
@@ -161,11 +161,12 @@ impl RobotSlot {
     pub fn handle(&mut self, message: &Message, now_ns: u64) {
         self.messages_received += 1;
         self.last_rx_ns = Some(now_ns);
-        self.rx_times.push_back(now_ns);
+        self.rx_times
+            .push_back((now_ns, twindrive_link::wire::encode(message).len()));
         while self
             .rx_times
             .front()
-            .is_some_and(|&t| t + 10_000_000_000 < now_ns)
+            .is_some_and(|&(t, _)| t + 10_000_000_000 < now_ns)
         {
             self.rx_times.pop_front();
         }
@@ -485,9 +486,13 @@ impl RobotSlot {
             v.get(v.len() / 2).copied()
         };
         let rx_age = age(self.last_rx_ns);
+        // A ping is late past three round trips (at least 5 s).
+        let late_ns = (3.0 * rtt.unwrap_or(1.0) * 1e9).max(5e9) as u64;
+        let (answered, lost) = master.ping_counts(now_ns, late_ns);
         let rtt_allow = rtt.unwrap_or(0.0);
         let outage = rx_age.is_none_or(|a| a > STALE_S + rtt_allow);
         let rate = self.rx_times.len() as f64 / 10.0;
+        let bytes_rate = self.rx_times.iter().map(|&(_, n)| n).sum::<usize>() as f64 / 10.0;
         let upload = master.upload_stats().map(|(s, bytes, started)| {
             json!({
                 "chunks": s.chunks,
@@ -522,6 +527,9 @@ impl RobotSlot {
                 "rtt_s": rtt,
                 "last_rx_age_s": rx_age,
                 "rx_msgs_s": rate,
+                "rx_bytes_s": bytes_rate,
+                "pings_answered": answered,
+                "pings_lost": lost,
                 "messages": self.messages_received,
                 "outage": outage,
             },

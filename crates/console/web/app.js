@@ -83,6 +83,8 @@ function receive(m) {
 
 // ---------------------------------------------------------------- state
 function fmt(v, d = 2) { return v === null || v === undefined ? '–' : Number(v).toFixed(d); }
+// Degrees in (-180, 180].
+function deg(rad) { let d = (rad * 180 / Math.PI) % 360; if (d > 180) d -= 360; if (d <= -180) d += 360; return fmt(d, 0); }
 function age(a) { return a === null || a === undefined ? 'never' : `${fmt(a, 1)} s ago`; }
 
 function onState(m) {
@@ -96,7 +98,7 @@ function onState(m) {
   S.state = m;
   const t = m.twin;
   $('twin-readout').textContent =
-    `twin t=${fmt(t.t_s, 1)} s · (${fmt(t.pose[0])}, ${fmt(t.pose[1])}) m, ${fmt(t.pose[2] * 180 / Math.PI, 0)}° · ${t.drive} · ${t.speed}×` +
+    `twin t=${fmt(t.t_s, 1)} s · (${fmt(t.pose[0])}, ${fmt(t.pose[1])}) m, ${deg(t.pose[2])}° · ${t.drive} · ${t.speed}×` +
     (t.recording_s !== null ? ` · ● REC ${fmt(t.recording_s, 1)} s` : '');
   $('twin-status').textContent = m.job ? `busy: ${m.job}…` : (t.has_rehearsal ? 'rehearsal ready' : 'no rehearsal yet');
   $('btn-record').textContent = t.recording_s !== null ? '■ Stop recording' : '● Record rehearsal';
@@ -165,26 +167,41 @@ function renderRobot(r) {
     $('upload-progress').value = up.chunks ? up.confirmed / up.chunks : 0;
     $('upload-text').textContent =
       `${pct(up)} % · ${up.confirmed}/${up.chunks} chunks acknowledged · ${up.sent} sent, ${up.resent} resent, ${up.repairs} repair · ` +
-      `${(up.bytes / 1000).toFixed(1)} kB in ${fmt(up.elapsed_s, 1)} s${up.done ? ' · on the robot' : ''}`;
+      `${(up.bytes / 1000).toFixed(1)} kB in ${fmt(up.elapsed_s, 1)} s` +
+      (up.done ? ' · on the robot' : '');
   }
   const l = r.link;
   $('link-state').innerHTML =
     `link: ${l.outage ? '<span class="stale">OUTAGE</span> · ' : ''}round trip ${l.rtt_s === null ? '–' : fmt(l.rtt_s, 2) + ' s'} · ` +
-    `last message ${age(l.last_rx_age_s)} · ${fmt(l.rx_msgs_s, 1)} msg/s · ${l.messages} messages`;
+    `last message ${age(l.last_rx_age_s)} · ${fmt(l.rx_msgs_s, 1)} msg/s, ${fmt(l.rx_bytes_s / 1000, 2)} kB/s from the robot · ${l.messages} messages · ` +
+    (l.pings_answered + l.pings_lost ? `round-trip loss ${fmt(100 * l.pings_lost / (l.pings_answered + l.pings_lost), 0)} % (${l.pings_lost} of ${l.pings_answered + l.pings_lost} pings)` : 'no ping answered yet');
   const s = r.status;
   if (s) {
     const stale = s.stale ? ' <span class="stale">STALE</span>' : '';
     const pred = r.predicted ? ` · twin predicts (${fmt(r.predicted[0])}, ${fmt(r.predicted[1])})` : '';
     $('robot-status').innerHTML =
       `state <b>${esc(r.state)}</b> · status ${age(s.age_s)}${stale}<br>` +
-      `pose (${fmt(s.pose[0])}, ${fmt(s.pose[1])}) m, ${fmt(s.pose[2] * 180 / Math.PI, 0)}° at ${fmt(s.plan_t_s, 1)} s into the plan${pred}<br>` +
+      `pose (${fmt(s.pose[0])}, ${fmt(s.pose[1])}) m, ${deg(s.pose[2])}° at ${fmt(s.plan_t_s, 1)} s into the plan${pred}<br>` +
       `deviation ${fmt(s.deviation_m, 3)} m (tolerance ${r.tolerances.deviation_m}) · range residual ${fmt(s.range_residual_m, 3)} m (tolerance ${r.tolerances.range_residual_m})<br>` +
       `wheels ${fmt(s.params[0], 4)}/${fmt(s.params[1], 4)} m, wheelbase ${fmt(s.params[2], 4)} m · bumps ${s.bumps} · logs pending ${s.logs_pending}`;
   } else {
     $('robot-status').innerHTML = `state <b>${esc(r.state)}</b> · no status from the robot yet`;
   }
   const notes = [];
+  const d = S.detail && S.detail.id === r.id ? S.detail : null;
+  if (d && d.series.t.length) {
+    const stat = (v) => {
+      const ok = v.filter((x) => Number.isFinite(x));
+      return ok.length ? `mean ${fmt(ok.reduce((a, b) => a + b, 0) / ok.length, 3)}, max ${fmt(Math.max(...ok), 3)} m` : '–';
+    };
+    notes.push(`discrepancy over ${d.series.t.length} statuses: deviation ${stat(d.series.deviation)}; range residual ${stat(d.series.residual)}`);
+  }
   if (r.learnt.length) notes.push(`the twin learnt ${r.learnt.length} block(s) from the robot`);
+  for (const u of (d && d.twin_updates) || []) {
+    if (u.params) {
+      notes.push(`twin parameters updated: wheels ${fmt(u.params.left_diameter_m, 4)}/${fmt(u.params.right_diameter_m, 4)} m, wheelbase ${fmt(u.params.wheelbase_m, 4)} m`);
+    }
+  }
   if (r.failure) notes.push(`failure: ${esc(r.failure)}`);
   for (const n of r.notices) notes.push(esc(n));
   $('twin-updates').innerHTML = notes.join('<br>');
