@@ -141,44 +141,67 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
     let core = Arc::new(Mutex::new(core));
     let stop = Arc::new(AtomicBool::new(false));
 
-    // The robots' links, on one zenoh session.
-    let session = if robots.is_empty() {
+    // The robots' links, on one zenoh session, opened in the background:
+    // the page serves at once, and the robots show an outage until the
+    // session (a router not up yet, a network coming up) is there.
+    let (session_tx, session_rx) = tokio::sync::oneshot::channel::<twindrive_net::Session>();
+    let links = if robots.is_empty() {
         None
     } else {
-        Some(twindrive_net::open_session(&config.session).await?)
-    };
-    let mut drivers = Vec::new();
-    if let Some(session) = &session {
-        for (k, slot) in robots.iter().enumerate() {
-            let id = slot.lock().id.clone();
-            let session = session.clone();
-            let mut endpoint = slot.clone();
-            let stop = stop.clone();
-            let emulation = config.link.clone().map(|p| Emulation {
-                outgoing: LinkEmulator::new(p.clone(), config.seed, 2 * k as u64),
-                incoming: LinkEmulator::new(p, config.seed, 2 * k as u64 + 1),
-            });
-            drivers.push(tokio::spawn(async move {
-                let mut stats = twindrive_net::DriveStats::default();
-                let result = twindrive_net::drive_counting(
-                    &mut endpoint,
-                    &session,
-                    &id,
-                    &twindrive_net::up_key(&id),
-                    &twindrive_net::down_key(&id),
-                    emulation,
-                    Duration::from_secs(100 * 365 * 86_400),
-                    zero,
-                    &mut stats,
-                    |_| stop.load(Ordering::Relaxed),
-                )
-                .await;
-                if let Err(e) = result {
-                    tracing::error!(robot = %id, "the link driver stopped: {e:#}");
+        let robots = robots.clone();
+        let options = config.session.clone();
+        let link = config.link.clone();
+        let seed = config.seed;
+        let stop = stop.clone();
+        Some(tokio::spawn(async move {
+            let session = match twindrive_net::open_session_patiently(
+                &options,
+                Duration::from_secs(100 * 365 * 86_400),
+            )
+            .await
+            {
+                Ok(s) => s,
+                Err(e) => {
+                    tracing::error!("no zenoh session: {e:#}");
+                    return;
                 }
-            }));
-        }
-    }
+            };
+            let mut drivers = Vec::new();
+            for (k, slot) in robots.iter().enumerate() {
+                let id = slot.lock().id.clone();
+                let session = session.clone();
+                let mut endpoint = slot.clone();
+                let stop = stop.clone();
+                let emulation = link.clone().map(|p| Emulation {
+                    outgoing: LinkEmulator::new(p.clone(), seed, 2 * k as u64),
+                    incoming: LinkEmulator::new(p, seed, 2 * k as u64 + 1),
+                });
+                drivers.push(tokio::spawn(async move {
+                    let mut stats = twindrive_net::DriveStats::default();
+                    let result = twindrive_net::drive_counting(
+                        &mut endpoint,
+                        &session,
+                        &id,
+                        &twindrive_net::up_key(&id),
+                        &twindrive_net::down_key(&id),
+                        emulation,
+                        Duration::from_secs(100 * 365 * 86_400),
+                        zero,
+                        &mut stats,
+                        |_| stop.load(Ordering::Relaxed),
+                    )
+                    .await;
+                    if let Err(e) = result {
+                        tracing::error!(robot = %id, "the link driver stopped: {e:#}");
+                    }
+                }));
+            }
+            for d in drivers {
+                let _ = d.await;
+            }
+            let _ = session_tx.send(session);
+        }))
+    };
 
     // The tick: the twin at 50 Hz, frames at 25 Hz.
     let foxglove_port = bridge.as_ref().map(foxglove_bridge::Bridge::port);
@@ -252,13 +275,19 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
         .context("serving the console")?;
     stop.store(true, Ordering::Relaxed);
     let _ = ticker.await;
-    for d in drivers {
-        let _ = tokio::time::timeout(Duration::from_secs(2), d).await;
+    if let Some(links) = links {
+        // The drivers see `stop` within 50 ms; a session still being
+        // opened is given up.
+        match tokio::time::timeout(Duration::from_secs(2), links).await {
+            Ok(_) => {
+                if let Ok(s) = session_rx.await {
+                    let _ = s.close().await;
+                }
+            }
+            Err(_) => tracing::warn!("the robots' links did not stop within 2 s"),
+        }
     }
     core.lock().unwrap_or_else(|e| e.into_inner()).finish_all();
-    if let Some(s) = session {
-        let _ = s.close().await;
-    }
     eprintln!("console: stopped; reports in {}", config.out.display());
     Ok(())
 }

@@ -90,7 +90,7 @@ function age(a) { return a === null || a === undefined ? 'never' : `${fmt(a, 1)}
 function onState(m) {
   if (S.instance && m.instance !== S.instance) {
     // The console restarted: what it had is gone; it sends its world again.
-    S.plan = S.verify = S.rehearsal = S.detail = null;
+    S.plan = S.verify = S.rehearsal = S.detail = S.detailLayers = null;
     for (const n of [...map.layers.keys()]) map.setLayer(n, null);
     addEvent({ seq: `restart${m.instance}`, level: 'info', text: 'the console restarted; reconnected to the new one' });
   }
@@ -260,10 +260,15 @@ function onDetail(d) {
       scales: { x: { time: false } }, axes: [{ label: 'plan time (s)' }, { label: 'm' }], series,
     }, cols, $('chart-window'));
   }
-  // The robot's plan and its back-filled logs on the map.
-  map.setLayer('robot:plan', d.plan ? new LodPath(d.plan) : null, { color: '#3182ce', width: 1, dash: [6, 4], alpha: 0.8 });
-  for (const n of [...map.layers.keys()]) if (n.startsWith('robot:log')) map.setLayer(n, null);
-  d.logs.forEach((l, i) => map.setLayer(`robot:log${i}`, new LodPath(l), { color: '#dd6b20', width: 2 }));
+  // The robot's plan and its back-filled logs on the map (redrawn only
+  // when they change: the statuses come every second).
+  const key = `${d.id}:${d.plan_sha256}:${d.logs.length}`;
+  if (key !== S.detailLayers) {
+    S.detailLayers = key;
+    map.setLayer('robot:plan', d.plan ? new LodPath(d.plan) : null, { color: '#3182ce', width: 1, dash: [6, 4], alpha: 0.8 });
+    for (const n of [...map.layers.keys()]) if (n.startsWith('robot:log')) map.setLayer(n, null);
+    d.logs.forEach((l, i) => map.setLayer(`robot:log${i}`, new LodPath(l), { color: '#dd6b20', width: 2 }));
+  }
   updateCursorRange();
 }
 

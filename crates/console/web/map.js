@@ -1,7 +1,9 @@
 // The map: world frame (x right, y up, metres) on a canvas, with pan and
 // zoom by mouse and touch. Long paths are kept as Path2D objects in world
-// coordinates at several levels of detail, so a frame costs the same
-// whatever the zoom: a one-hour mission (360,000 samples) pans smoothly.
+// coordinates at several levels of detail, and the static picture (grid,
+// walls, paths) is drawn into an offscreen bitmap larger than the view:
+// a frame while panning copies that bitmap and draws the live parts (the
+// robots, beams, markers) on top, whatever the mission's length.
 
 const LOD_TOLERANCES_M = [0, 0.004, 0.016, 0.064, 0.256];
 
@@ -12,11 +14,11 @@ export class LodPath {
     this.levels = LOD_TOLERANCES_M.map((tol) => buildPath(cols.x, cols.y, ranges, tol));
     this.points = cols.x.length;
   }
-  // The coarsest level finer than half a pixel at `scale` px/m.
+  // The coarsest level finer than a pixel at `scale` px/m.
   pick(scale) {
     let best = this.levels[0];
     for (let i = 0; i < LOD_TOLERANCES_M.length; i++) {
-      if (LOD_TOLERANCES_M[i] * scale <= 0.5) best = this.levels[i];
+      if (LOD_TOLERANCES_M[i] * scale <= 1) best = this.levels[i];
     }
     return best;
   }
@@ -66,6 +68,9 @@ export class MapView {
     this.world = null;
     this.overlay = () => {}; // draws the live parts (robot, beams, markers)
     this.frameTimes = []; // ms per draw, the latest 600
+    this.staticTimes = []; // ms per redraw of the static picture
+    this.staticKey = 0; // changes with the world, the layers and their visibility
+    this.cache = null;
     this.pointers = new Map();
     this.mode = null; // null | 'place' | 'region'
     this.onPick = null; // (mode, startWorld, endWorld) => void
@@ -87,6 +92,7 @@ export class MapView {
     this.canvas.width = Math.max(1, Math.round(r.width * dpr));
     this.canvas.height = Math.max(1, Math.round(r.height * dpr));
     this.dpr = dpr;
+    this.cache = null;
     this.dirty = true;
   }
 
@@ -112,6 +118,7 @@ export class MapView {
       cx.putImageData(img, 0, 0);
       this.grid = c;
     }
+    this.staticKey++;
     if (!this.fitted && world.bounds) {
       this.fit(world.bounds);
       this.fitted = true;
@@ -129,6 +136,7 @@ export class MapView {
   setLayer(name, path, style) {
     if (path) this.layers.set(name, { path, style, visible: this.layers.get(name)?.visible ?? true });
     else this.layers.delete(name);
+    this.staticKey++;
     this.dirty = true;
   }
 
@@ -136,6 +144,7 @@ export class MapView {
     for (const [name, l] of this.layers) if (name === group || name.startsWith(group + ':')) l.visible = on;
     this.hidden = this.hidden || new Set();
     if (on) this.hidden.delete(group); else this.hidden.add(group);
+    this.staticKey++;
     this.dirty = true;
   }
 
@@ -156,15 +165,11 @@ export class MapView {
     ctx.setTransform(s, 0, 0, -s, (w / 2 - this.cx * this.scale) * this.dpr, (h / 2 + this.cy * this.scale) * this.dpr);
   }
 
-  draw() {
-    const t0 = performance.now();
-    this.dirty = false;
-    const ctx = this.ctx;
-    ctx.setTransform(1, 0, 0, 1, 0, 0);
-    ctx.fillStyle = '#fff';
-    ctx.fillRect(0, 0, this.canvas.width, this.canvas.height);
-    this.worldTransform(ctx);
-    const px = 1 / this.scale; // one CSS pixel in metres
+  // Draws the static picture (grid, walls, every path layer) into `target`
+  // with the world transform `t` = [scale (device px per m), ox, oy].
+  drawStatic(ctx, t, pxScale) {
+    ctx.setTransform(t[0], 0, 0, -t[0], t[1], t[2]);
+    const px = 1 / pxScale; // one CSS pixel in metres
     const w = this.world;
     if (w) {
       if (this.grid) {
@@ -191,10 +196,90 @@ export class MapView {
       ctx.lineWidth = (l.style.width || 1.5) * px;
       ctx.setLineDash(l.style.dash ? l.style.dash.map((d) => d * px) : []);
       ctx.globalAlpha = l.style.alpha ?? 1;
-      ctx.stroke(l.path.pick(this.scale));
+      ctx.stroke(l.path.pick(pxScale));
     }
     ctx.setLineDash([]);
     ctx.globalAlpha = 1;
+  }
+
+  // The static picture is drawn once into an offscreen canvas twice the
+  // view's size each way, centred on the view; panning within it only
+  // copies the bitmap. It is drawn again when the layers change, when the
+  // view leaves it, or after a zoom settles (meanwhile the old one is
+  // scaled: a long mission costs one redraw per zoom, not one per frame).
+  renderStatic() {
+    const t0 = performance.now();
+    const W = this.canvas.width, H = this.canvas.height;
+    const c = this.cacheCanvas || (this.cacheCanvas = document.createElement('canvas'));
+    c.width = 2 * W; c.height = 2 * H;
+    const ctx = c.getContext('2d');
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.clearRect(0, 0, c.width, c.height);
+    const s = this.scale * this.dpr;
+    // World point (cx, cy) at the cache's centre.
+    this.drawStatic(ctx, [s, W - this.cx * s, H + this.cy * s], this.scale);
+    this.cache = { key: this.staticKey, scale: this.scale, dpr: this.dpr, cx: this.cx, cy: this.cy, w: c.width, h: c.height };
+    if (this.syncMeasure) ctx.getImageData(0, 0, 1, 1);
+    const ms = performance.now() - t0;
+    this.staticTimes.push(ms);
+    if (this.staticTimes.length > 100) this.staticTimes.shift();
+    this.lastStaticMs = ms;
+  }
+
+  cacheState() {
+    const c = this.cache;
+    if (!c || c.key !== this.staticKey || c.dpr !== this.dpr) return 'stale';
+    // The view's half size in metres at the cache's scale, against the cache's.
+    const vx = this.canvas.width / 2 / (this.scale * this.dpr), vy = this.canvas.height / 2 / (this.scale * this.dpr);
+    const hx = c.w / 2 / (c.scale * c.dpr), hy = c.h / 2 / (c.scale * c.dpr);
+    const inside = Math.abs(this.cx - c.cx) + vx <= hx && Math.abs(this.cy - c.cy) + vy <= hy;
+    if (!inside) return 'outside';
+    return c.scale === this.scale ? 'ok' : 'scaled';
+  }
+
+  scheduleSettle() {
+    if (this.settle) return;
+    const wait = () => {
+      const still = performance.now() - (this.lastViewChange || 0);
+      if (still < 150) {
+        this.settle = setTimeout(wait, 150 - still);
+        return;
+      }
+      this.settle = null;
+      if (this.cacheState() !== 'ok') {
+        this.renderStatic();
+        this.dirty = true;
+      }
+    };
+    this.settle = setTimeout(wait, 150);
+  }
+
+  draw() {
+    const t0 = performance.now();
+    this.dirty = false;
+    const ctx = this.ctx;
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.fillStyle = '#fff';
+    ctx.fillRect(0, 0, this.canvas.width, this.canvas.height);
+    const state = this.cacheState();
+    if (state === 'stale' || (state === 'outside' && !(this.lastStaticMs > 16))) {
+      this.renderStatic();
+    } else if (state !== 'ok') {
+      // Expensive to redraw: show the old bitmap, redraw once the view has
+      // been still for 150 ms (live updates do not postpone it).
+      this.scheduleSettle();
+    }
+    const c = this.cache;
+    // Cache pixel (u, v) shows world (c.cx + (u - w/2)/(c.scale dpr), ...).
+    const k = this.scale / c.scale;
+    const s = this.scale * this.dpr;
+    const W = this.canvas.width, H = this.canvas.height;
+    // Where the cache's centre lands on screen.
+    const ux = W / 2 + (c.cx - this.cx) * s, uy = H / 2 - (c.cy - this.cy) * s;
+    ctx.imageSmoothingEnabled = k !== 1;
+    ctx.drawImage(this.cacheCanvas, ux - (c.w / 2) * k, uy - (c.h / 2) * k, c.w * k, c.h * k);
+    this.worldTransform(ctx);
+    const px = 1 / this.scale; // one CSS pixel in metres
     this.overlay(ctx, px);
 
     if (this.drag && this.drag.mode) {
@@ -268,12 +353,14 @@ export class MapView {
   }
 
   pan(dx, dy) {
+    this.lastViewChange = performance.now();
     this.cx -= dx / this.scale;
     this.cy += dy / this.scale;
     this.dirty = true;
   }
 
   zoomAt(px, py, factor) {
+    this.lastViewChange = performance.now();
     const before = this.toWorld(px, py);
     this.scale = Math.min(5000, Math.max(2, this.scale * factor));
     const after = this.toWorld(px, py);

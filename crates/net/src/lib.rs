@@ -80,6 +80,31 @@ pub async fn open_session(options: &SessionOptions) -> anyhow::Result<zenoh::Ses
         .map_err(|e| anyhow::anyhow!("opening the zenoh session: {e}"))
 }
 
+/// [`open_session`], tried again every second while it fails (a client
+/// whose router is not up yet, a network still coming up), for at most
+/// `patience`. A robot that boots before its link must not give up.
+pub async fn open_session_patiently(
+    options: &SessionOptions,
+    patience: Duration,
+) -> anyhow::Result<zenoh::Session> {
+    let started = Instant::now();
+    loop {
+        match open_session(options).await {
+            Ok(s) => return Ok(s),
+            Err(e) if started.elapsed() < patience => {
+                tracing::warn!("{e:#}; trying again in 1 s");
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+            Err(e) => {
+                return Err(e.context(format!(
+                    "gave up after {:.0} s",
+                    started.elapsed().as_secs_f64()
+                )));
+            }
+        }
+    }
+}
+
 fn load_config(path: &Path) -> anyhow::Result<zenoh::Config> {
     zenoh::Config::from_file(path)
         .map_err(|e| anyhow::anyhow!("{}: not a zenoh configuration: {e}", path.display()))

@@ -109,13 +109,30 @@ async fn main() -> anyhow::Result<()> {
             .success(),
         "keygen"
     );
+    // The site's robot as calibrated (near its true kinematics), so plans
+    // run without a hand-back.
+    let calib = d.join("calib.json");
+    std::fs::write(
+        &calib,
+        r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678}"#,
+    )?;
     let client = d.join("client.json5");
     std::fs::write(
         &client,
         "{ mode: \"client\", scouting: { multicast: { enabled: false } } }\n",
     )?;
-    let router = format!("tcp/127.0.0.1:{}", free_port());
+    let router_port = free_port();
+    let router = format!("tcp/127.0.0.1:{router_port}");
     let _router = spawn(&twindrive, &["router", "--listen", &router])?;
+    // A zenoh client that finds no router gives up: wait for it to listen.
+    let started = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", router_port)).is_err() {
+        anyhow::ensure!(
+            started.elapsed() < Duration::from_secs(30),
+            "the router did not listen within 30 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
     let site = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/wall_following.toml");
     let ids: Vec<String> = (1..=robots).map(|k| format!("r{k:03}")).collect();
     let mut procs = Vec::new();
@@ -145,6 +162,7 @@ async fn main() -> anyhow::Result<()> {
     let mut cmd = Command::new(&twindrive);
     cmd.args(["console", "--listen", &format!("127.0.0.1:{http}")])
         .args(["--key", &s(&keys.join("master.key"))])
+        .args(["--calibration", &s(&calib)])
         .args(["--rehearsal", &rehearsal, "--out", &s(&d.join("console"))])
         .args(["--connect", &router, "--zenoh-config", &s(&client)]);
     for id in &ids {
@@ -222,7 +240,30 @@ async fn main() -> anyhow::Result<()> {
             .await?;
     }
     let executing = wait("every robot executing", 120.0);
-    while !executing(robots_in(&|r| r["state"] == "executing") == robots)? {
+    loop {
+        let all = robots_in(&|r| r["state"] == "executing") == robots;
+        if let Err(e) = executing(all) {
+            let v = latest.lock().unwrap();
+            let states: Vec<String> = v["robots"]
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .map(|r| format!("{}: {}", r["id"], r["state"]))
+                        .collect()
+                })
+                .unwrap_or_default();
+            let stuck: Vec<String> = v["robots"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|r| r["state"] != "executing" && r["state"] != "completed")
+                .map(|r| r.to_string())
+                .collect();
+            anyhow::bail!("{e}; states: {}; {}", states.join(", "), stuck.join("\n"));
+        }
+        if all {
+            break;
+        }
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
     let upload_all_s = started.elapsed().as_secs_f64();
@@ -242,6 +283,16 @@ async fn main() -> anyhow::Result<()> {
     let window = t0.elapsed().as_secs_f64();
     let (cpu1, rss) = usage(pid)?;
     let still = robots_in(&|r| r["state"] == "executing");
+    let end_states = {
+        let v = latest.lock().unwrap();
+        let mut counts = std::collections::BTreeMap::new();
+        for r in v["robots"].as_array().into_iter().flatten() {
+            *counts
+                .entry(r["state"].as_str().unwrap_or("?").to_owned())
+                .or_insert(0) += 1;
+        }
+        counts
+    };
     let status_rate: f64 = {
         let v = latest.lock().unwrap();
         v["robots"].as_array().map_or(0.0, |a| {
@@ -254,7 +305,7 @@ async fn main() -> anyhow::Result<()> {
         "console serving {robots} robots to {pages} pages: plan uploaded to all and executing in {upload_all_s:.1} s"
     );
     println!(
-        "console CPU {:.1} % of one core over {window:.1} s ({:.3} s), RSS {:.0} MB; messages from the robots {status_rate:.1}/s; {still}/{robots} still executing at the end",
+        "console CPU {:.1} % of one core over {window:.1} s ({:.3} s), RSS {:.0} MB; messages from the robots {status_rate:.1}/s; {still}/{robots} still executing at the end ({end_states:?})",
         100.0 * (cpu1 - cpu0) / window,
         cpu1 - cpu0,
         rss as f64 / 1e6

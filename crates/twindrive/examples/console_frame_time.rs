@@ -4,7 +4,7 @@
 //! binary and the mission first:
 //!
 //! ```sh
-//! console_frame_time --twindrive target/release/twindrive --rehearsal DIR [--frames 300]
+//! console_frame_time --twindrive target/release/twindrive --rehearsal DIR [--frames 300] [--screenshot PNG]
 //! ```
 //!
 //! Starts `twindrive console` on a free loopback port, chromedriver and a
@@ -176,15 +176,31 @@ async fn measure(c: &Client, url: &str, frames: usize) -> anyhow::Result<()> {
                   const a = 2 * Math.PI * k / 120;
                   map.pan(6 * Math.cos(a), 6 * Math.sin(a));
                   if (++k <= {frames}) requestAnimationFrame(step);
-                  else done([map.frameTimes.slice(), gaps]);
+                  else done([map.frameTimes.slice(), gaps, map.staticTimes.slice()]);
                 }}
                 requestAnimationFrame(step);"#
             ),
             vec![],
         )
         .await?;
+    if let Some(path) = arg("--screenshot") {
+        std::fs::write(&path, c.screenshot().await?)?;
+    }
+    // A zoom step (the static picture is drawn anew once it settles).
+    let zoom = c
+        .execute_async(
+            r#"const done = arguments[arguments.length - 1];
+            const map = window.twindrive.map;
+            map.staticTimes.length = 0;
+            map.zoomAt(500, 400, 1.5);
+            setTimeout(() => done(map.staticTimes.slice()), 600);"#,
+            vec![],
+        )
+        .await?;
+    let zoom: Vec<f64> = serde_json::from_value(zoom)?;
     let draws: Vec<f64> = serde_json::from_value(r[0].clone())?;
     let gaps: Vec<f64> = serde_json::from_value(r[1].clone())?;
+    let statics: Vec<f64> = serde_json::from_value(r[2].clone())?;
     anyhow::ensure!(!draws.is_empty(), "no frame was drawn");
     println!(
         "console map, one-hour mission: {} rehearsal samples on the page; the plan: executed path {} samples, plan {} samples (made in {plan_s:.1} s, page timings {})",
@@ -195,6 +211,20 @@ async fn measure(c: &Client, url: &str, frames: usize) -> anyhow::Result<()> {
         stats("draw time while panning (raster included)", &draws)
     );
     println!("{}", stats("interval between animation frames", &gaps));
+    if let Some(ms) = zoom.first() {
+        println!(
+            "redraw of the static picture after a zoom step (raster included): {ms:.1} ms, once"
+        );
+    }
+    if !statics.is_empty() {
+        println!(
+            "{}",
+            stats(
+                "redraws of the static picture (layers changed, view left the bitmap, zoom settled)",
+                &statics
+            )
+        );
+    }
     let mut sorted = draws.clone();
     sorted.sort_by(f64::total_cmp);
     let p95 = sorted[((sorted.len() - 1) as f64 * 0.95).round() as usize];

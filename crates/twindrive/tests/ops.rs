@@ -561,17 +561,16 @@ fn robot_and_master_meet_through_a_zenoh_router() {
     let m = Mission::new("", "keys", 10.0);
     let router_port = port();
     let router = format!("tcp/127.0.0.1:{router_port}");
-    let _router = Proc(
-        Command::new(env!("CARGO_BIN_EXE_twindrive"))
-            .args(["router", "--listen", &router])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    std::thread::sleep(Duration::from_millis(500));
+    // The robot is a zenoh client and boots before its router: it keeps
+    // trying until the router is there.
+    let client = m.tmp.path().join("client.json5");
+    std::fs::write(
+        &client,
+        "{ mode: \"client\", scouting: { multicast: { enabled: false } } }\n",
+    )
+    .unwrap();
     let f = fixture();
-    let _robot = Proc(
+    let mut robot = Proc(
         Command::new(env!("CARGO_BIN_EXE_twindrive"))
             .args([
                 "robot",
@@ -585,6 +584,8 @@ fn robot_and_master_meet_through_a_zenoh_router() {
                 s(&m.robot_dir()),
                 "--connect",
                 &router,
+                "--zenoh-config",
+                s(&client),
                 "--time-scale",
                 "10",
                 "--run-for",
@@ -595,6 +596,20 @@ fn robot_and_master_meet_through_a_zenoh_router() {
             .spawn()
             .unwrap(),
     );
+    std::thread::sleep(Duration::from_millis(2500));
+    assert!(
+        robot.0.try_wait().unwrap().is_none(),
+        "the robot gave up before its router came"
+    );
+    let _router = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args(["router", "--listen", &router])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    std::thread::sleep(Duration::from_millis(500));
     let master = Proc(
         Command::new(env!("CARGO_BIN_EXE_twindrive"))
             .args([

@@ -99,7 +99,8 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
     let options = session_options(&args.zenoh, None);
     let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
     rt.block_on(async {
-        let session = open_session(&options).await?;
+        // A robot that boots before its router or its network keeps trying.
+        let session = twindrive_net::open_session_patiently(&options, deadline).await?;
         eprintln!(
             "robot {}: listening on {} for plans signed by {} trusted key(s)",
             args.id,
