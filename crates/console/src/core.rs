@@ -75,6 +75,8 @@ pub struct Settings {
     pub key: Option<SigningKey>,
     /// The robot's calibrated parameters, which plans are made with.
     pub params: DiffDriveParams,
+    /// Whether they came from a calibration (or are the twin's nominal ones).
+    pub calibrated: bool,
     /// SHA-256 of the twin's scenario file: plans are signed for it.
     pub world_sha256: String,
     pub unix_at_zero_s: f64,
@@ -439,6 +441,12 @@ impl Core {
             "verdict": verdict,
             "redundancy": self.redundancy,
             "can_sign": self.settings.key.is_some(),
+            "params": {
+                "left_diameter_m": self.settings.params.left_diameter_m,
+                "right_diameter_m": self.settings.params.right_diameter_m,
+                "wheelbase_m": self.settings.params.wheelbase_m,
+                "calibrated": self.settings.calibrated,
+            },
             "robots": robots,
             "events": self.events,
         });
@@ -513,6 +521,7 @@ mod tests {
             Settings {
                 key: key.then(|| twindrive_link::envelope::generate_key().unwrap()),
                 params,
+                calibrated: false,
                 world_sha256: "00".repeat(32),
                 unix_at_zero_s: 1.8e9,
                 supervision: Supervision {

@@ -123,6 +123,7 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
             params: config
                 .params
                 .unwrap_or(config.scenario.robot.nominal_params),
+            calibrated: config.params.is_some(),
             world_sha256: twindrive_mission::plan::sha256_hex(&config.scenario_bytes),
             unix_at_zero_s,
             supervision: config.supervision,

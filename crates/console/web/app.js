@@ -105,6 +105,10 @@ function onState(m) {
   $('btn-record').classList.toggle('on', t.recording_s !== null);
   $('btn-wall').classList.toggle('on', t.drive === 'wall_follower');
   if (document.activeElement !== $('speed')) $('speed').value = String(t.speed);
+  const p = m.params;
+  const params = `plans use wheels ${fmt(p.left_diameter_m, 4)}/${fmt(p.right_diameter_m, 4)} m, wheelbase ${fmt(p.wheelbase_m, 4)} m ` +
+    (p.calibrated ? '(calibration)' : '(the twin\'s nominal parameters: start the console with --calibration; the plan\'s path is dead reckoning with these)');
+  if ($('params').textContent !== params) $('params').textContent = params;
   $('btn-upload').disabled = !(m.can_sign && m.plan && S.focus);
   $('btn-upload').title = m.can_sign ? '' : 'start the console with --key to sign plans';
   renderFleet(m.robots);
