@@ -93,21 +93,31 @@ pub fn router(app: App) -> Router {
         .route("/assets/{name}", get(asset))
         .route("/ws", get(websocket))
         .route("/api/state", get(api_state))
+        .route_layer(axum::middleware::from_fn_with_state(
+            app.clone(),
+            require_token,
+        ))
         .with_state(app)
+}
+
+/// Every route needs the token (`?token=`, the cookie or a bearer header).
+async fn require_token(
+    State(app): State<App>,
+    Query(q): Query<TokenQuery>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    if !app.access.token_ok(request.headers(), q.token.as_deref()) {
+        return refused();
+    }
+    next.run(request).await
 }
 
 fn refused() -> Response {
     (StatusCode::UNAUTHORIZED, Html(REFUSED)).into_response()
 }
 
-async fn index(
-    State(app): State<App>,
-    Query(q): Query<TokenQuery>,
-    headers: HeaderMap,
-) -> Response {
-    if !app.access.token_ok(&headers, q.token.as_deref()) {
-        return refused();
-    }
+async fn index(State(app): State<App>) -> Response {
     (
         [
             (SET_COOKIE, app.access.cookie()),
@@ -119,15 +129,7 @@ async fn index(
         .into_response()
 }
 
-async fn asset(
-    State(app): State<App>,
-    Path(name): Path<String>,
-    Query(q): Query<TokenQuery>,
-    headers: HeaderMap,
-) -> Response {
-    if !app.access.token_ok(&headers, q.token.as_deref()) {
-        return refused();
-    }
+async fn asset(Path(name): Path<String>) -> Response {
     match ASSETS.iter().find(|(n, _, _)| *n == name) {
         Some((_, kind, bytes)) => {
             ([(CONTENT_TYPE, *kind), (CACHE_CONTROL, "no-cache")], *bytes).into_response()
@@ -136,27 +138,16 @@ async fn asset(
     }
 }
 
-async fn api_state(
-    State(app): State<App>,
-    Query(q): Query<TokenQuery>,
-    headers: HeaderMap,
-) -> Response {
-    if !app.access.token_ok(&headers, q.token.as_deref()) {
-        return refused();
-    }
+async fn api_state(State(app): State<App>) -> Response {
     let state = app.frames.borrow().state.clone();
     ([(CONTENT_TYPE, "application/json")], state.to_string()).into_response()
 }
 
 async fn websocket(
     State(app): State<App>,
-    Query(q): Query<TokenQuery>,
     headers: HeaderMap,
     upgrade: WebSocketUpgrade,
 ) -> Response {
-    if !app.access.token_ok(&headers, q.token.as_deref()) {
-        return refused();
-    }
     if !app.access.origin_ok(&headers) {
         tracing::warn!(
             origin = ?headers.get(axum::http::header::ORIGIN),

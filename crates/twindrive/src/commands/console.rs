@@ -21,24 +21,7 @@ fn read_log(path: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
 }
 
 pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
-    let mut seen = std::collections::HashSet::new();
-    for id in &args.robot {
-        super::ops::check_robot_id(id, "--robot")?;
-        if !seen.insert(id) {
-            bail!("--robot {id} is given twice");
-        }
-    }
-    if !(args.telemetry_budget.is_finite() && args.telemetry_budget >= 100.0) {
-        bail!(
-            "--telemetry-budget: at least 100 bytes per second, got {}",
-            args.telemetry_budget
-        );
-    }
-    if let Some(s) = args.supervise
-        && !(s.is_finite() && s > 0.0)
-    {
-        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
-    }
+    super::ops::check_supervisor_args(&args.robot, args.telemetry_budget, args.supervise)?;
     for o in &args.allow_origin {
         if !(o.starts_with("http://") || o.starts_with("https://")) {
             bail!(

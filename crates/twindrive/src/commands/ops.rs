@@ -47,7 +47,7 @@ fn unix_now_s() -> anyhow::Result<f64> {
     Ok(super::keys::since_epoch()?.as_secs_f64())
 }
 
-pub(super) fn check_robot_id(id: &str, flag: &str) -> anyhow::Result<()> {
+fn check_robot_id(id: &str, flag: &str) -> anyhow::Result<()> {
     if id.is_empty()
         || id.len() > twindrive_link::wire::MAX_ROBOT_ID_BYTES
         || !id
@@ -238,6 +238,31 @@ fn first_plan(
     })
 }
 
+/// The arguments a master and the console share: distinct valid robot ids,
+/// a telemetry budget of at least 100 B/s, a positive dead-man timeout.
+pub(super) fn check_supervisor_args(
+    robots: &[String],
+    telemetry_budget: f64,
+    supervise: Option<f64>,
+) -> anyhow::Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    for id in robots {
+        check_robot_id(id, "--robot")?;
+        if !seen.insert(id) {
+            bail!("--robot {id} is given twice");
+        }
+    }
+    if !(telemetry_budget.is_finite() && telemetry_budget >= 100.0) {
+        bail!("--telemetry-budget: at least 100 bytes per second, got {telemetry_budget}");
+    }
+    if let Some(s) = supervise
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
+    }
+    Ok(())
+}
+
 /// `--link PROFILE`, parsed.
 pub(super) fn link_profile(arg: Option<&str>) -> anyhow::Result<Option<LinkProfile>> {
     arg.map(|p| p.parse().map_err(|e| anyhow::anyhow!("--link {p}: {e}")))
@@ -271,29 +296,12 @@ struct Supervised {
 /// zenoh session, each robot with its own operator, twin and output
 /// directory.
 pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
-    let mut seen = std::collections::HashSet::new();
-    for id in &args.robot {
-        check_robot_id(id, "--robot")?;
-        if !seen.insert(id) {
-            bail!("--robot {id} is given twice");
-        }
-    }
+    check_supervisor_args(&args.robot, args.telemetry_budget, args.supervise)?;
     let fleet = args.robot.len() > 1;
     if fleet && args.signed.is_some() {
         bail!(
             "--signed holds a plan signed for one robot; a fleet needs --plan and --key (each robot gets its own signature)"
         );
-    }
-    if !(args.telemetry_budget.is_finite() && args.telemetry_budget >= 100.0) {
-        bail!(
-            "--telemetry-budget: at least 100 bytes per second, got {}",
-            args.telemetry_budget
-        );
-    }
-    if let Some(s) = args.supervise
-        && !(s.is_finite() && s > 0.0)
-    {
-        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
     }
     let profile = link_profile(args.link.as_deref())?;
     let key = signing_key(args.key.as_deref())?;
