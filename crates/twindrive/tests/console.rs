@@ -11,63 +11,18 @@ mod common;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::OnceLock;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use common::{Proc, port, repo, text, twindrive};
+use common::{Proc, fixture, port, repo};
 use fantoccini::actions::{InputSource, KeyAction, KeyActions, MouseActions, PointerAction};
 use fantoccini::{Client, ClientBuilder, Locator};
 use serde_json::{Value, json};
 
-const BOX: &str = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
 const ARROW_UP: char = '\u{e013}';
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// A 30 s wall-following run (the rehearsal), its calibration, keys and a
-/// site with a box the twin lacks: made once.
-struct Fixture {
-    dir: tempfile::TempDir,
-}
-
-fn fixture() -> &'static Fixture {
-    static F: OnceLock<Fixture> = OnceLock::new();
-    F.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let d = dir.path();
-        let out = twindrive(&[
-            "simulate",
-            "scenarios/wall_following.toml",
-            "--duration-s",
-            "30",
-            "--out",
-            s(&d.join("wf")),
-        ]);
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        std::fs::write(
-            d.join("calib.json"),
-            r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678}"#,
-        )
-        .unwrap();
-        let out = twindrive(&["keygen", "--out", s(&d.join("keys"))]);
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
-        std::fs::write(
-            d.join("site_box.toml"),
-            site.replace("[world]\n", &format!("[world]\n{BOX}\n")),
-        )
-        .unwrap();
-        Fixture { dir }
-    })
-}
-
-impl Fixture {
-    fn path(&self, p: &str) -> PathBuf {
-        self.dir.path().join(p)
-    }
 }
 
 fn screenshots() -> PathBuf {

@@ -9,68 +9,12 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use common::{Proc, port, repo, text, twindrive};
-
-const BOX: &str = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
+use common::{Proc, fixture, port, repo, text, twindrive};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// A case-study plan (a 30 s mission) and a key pair, made once.
-struct Fixture {
-    dir: tempfile::TempDir,
-}
-
-fn fixture() -> &'static Fixture {
-    static F: OnceLock<Fixture> = OnceLock::new();
-    F.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let d = dir.path();
-        let out = twindrive(&[
-            "simulate",
-            "scenarios/wall_following.toml",
-            "--duration-s",
-            "30",
-            "--out",
-            s(&d.join("wf")),
-        ]);
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        std::fs::write(
-            d.join("calib.json"),
-            r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678}"#,
-        )
-        .unwrap();
-        let out = twindrive(&[
-            "plan",
-            s(&d.join("wf")),
-            "--calibration",
-            s(&d.join("calib.json")),
-            "--out",
-            s(&d.join("plan/plan.json")),
-        ]);
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        for k in ["keys", "other"] {
-            let out = twindrive(&["keygen", "--out", s(&d.join(k))]);
-            assert!(out.status.success(), "{}", text(&out.stderr));
-        }
-        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
-        std::fs::write(
-            d.join("site_box.toml"),
-            site.replace("[world]\n", &format!("[world]\n{BOX}\n")),
-        )
-        .unwrap();
-        Fixture { dir }
-    })
-}
-
-impl Fixture {
-    fn path(&self, p: &str) -> PathBuf {
-        self.dir.path().join(p)
-    }
 }
 
 struct Mission {

@@ -47,3 +47,66 @@ pub fn port() -> u16 {
         .unwrap()
         .port()
 }
+
+/// A box on the case study's route that the twin lacks.
+pub const BOX: &str = "rectangles = [{ min = [1.9, 0.9], max = [2.1, 1.2] }]";
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Made once per test binary: a 30 s case-study run (`wf/`), its
+/// calibration (`calib.json`), a plan from them (`plan/plan.json`), two key
+/// pairs (`keys/`, `other/`) and a site with a box the twin lacks
+/// (`site_box.toml`).
+pub struct Fixture {
+    dir: tempfile::TempDir,
+}
+
+pub fn fixture() -> &'static Fixture {
+    static F: std::sync::OnceLock<Fixture> = std::sync::OnceLock::new();
+    F.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let out = twindrive(&[
+            "simulate",
+            "scenarios/wall_following.toml",
+            "--duration-s",
+            "30",
+            "--out",
+            s(&d.join("wf")),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        std::fs::write(
+            d.join("calib.json"),
+            r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678}"#,
+        )
+        .unwrap();
+        let out = twindrive(&[
+            "plan",
+            s(&d.join("wf")),
+            "--calibration",
+            s(&d.join("calib.json")),
+            "--out",
+            s(&d.join("plan/plan.json")),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        for k in ["keys", "other"] {
+            let out = twindrive(&["keygen", "--out", s(&d.join(k))]);
+            assert!(out.status.success(), "{}", text(&out.stderr));
+        }
+        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
+        std::fs::write(
+            d.join("site_box.toml"),
+            site.replace("[world]\n", &format!("[world]\n{BOX}\n")),
+        )
+        .unwrap();
+        Fixture { dir }
+    })
+}
+
+impl Fixture {
+    pub fn path(&self, p: &str) -> PathBuf {
+        self.dir.path().join(p)
+    }
+}
