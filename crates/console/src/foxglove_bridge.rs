@@ -236,18 +236,13 @@ impl Bridge {
         for (channel, s) in self.scans.iter().zip(&ws.scenario().range_sensors) {
             let info = &s.info;
             let n = info.beams as usize;
-            let (sin, cos) = p.heading_rad.sin_cos();
             let (first, last) = (info.beam_angle_rad(0), info.beam_angle_rad(info.beams - 1));
+            let [x, y, heading] = ws.mount_in_world(info);
             channel.log_with_time(
                 &LaserScan {
                     timestamp: ts,
                     frame_id: FRAME.into(),
-                    pose: Some(pose(
-                        p.x_m + cos * info.mount.x_m - sin * info.mount.y_m,
-                        p.y_m + sin * info.mount.x_m + cos * info.mount.y_m,
-                        0.05,
-                        p.heading_rad + info.mount.heading_rad,
-                    )),
+                    pose: Some(pose(x, y, 0.05, heading)),
                     start_angle: first,
                     end_angle: last,
                     ranges: ranges[k..k + n].to_vec(),

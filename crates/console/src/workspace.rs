@@ -401,6 +401,17 @@ impl Workspace {
         }
     }
 
+    /// Where a range sensor is now: x, y (m) and heading (rad) in the world.
+    pub fn mount_in_world(&self, info: &twindrive_log::RangeSensorInfo) -> [f64; 3] {
+        let pose = self.sim.pose();
+        let (sin, cos) = pose.heading_rad.sin_cos();
+        [
+            pose.x_m + cos * info.mount.x_m - sin * info.mount.y_m,
+            pose.y_m + sin * info.mount.x_m + cos * info.mount.y_m,
+            pose.heading_rad + info.mount.heading_rad,
+        ]
+    }
+
     /// Every beam now: origin and end in the world frame, and its range.
     pub fn beams(&self) -> Vec<[f64; 5]> {
         let pose = self.sim.pose();
@@ -408,9 +419,7 @@ impl Workspace {
         let mut k = 0;
         for s in &self.base.range_sensors {
             let info = &s.info;
-            let (sin, cos) = pose.heading_rad.sin_cos();
-            let ox = pose.x_m + cos * info.mount.x_m - sin * info.mount.y_m;
-            let oy = pose.y_m + sin * info.mount.x_m + cos * info.mount.y_m;
+            let [ox, oy, _] = self.mount_in_world(info);
             for b in 0..info.beams {
                 let range = self.latest_ranges.get(k).copied().unwrap_or(f64::NAN);
                 k += 1;
