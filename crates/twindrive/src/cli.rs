@@ -41,7 +41,9 @@ pub enum Command {
     /// Input: a simulator output directory (log.csv + log.meta.json), or
     /// --encoders E.csv (`t,left_ticks,right_ticks` cumulative counts, or
     /// `t,left_rad_s,right_rad_s`) with --poses P.csv (`t,x,y,theta`; theta
-    /// may be empty for position-only references). Writes --out (JSON) and,
+    /// may be empty for position-only references), or --bag REC.mcap (a
+    /// rosbag2 recording: JointState wheels or a tick topic, and a
+    /// PoseStamped, Odometry or TF reference). Writes --out (JSON) and,
     /// beside it, figures of each parameter over time with its ±3σ band and
     /// of the innovations, and TUM trajectories of the reference and of dead
     /// reckoning with the initial and calibrated parameters.
@@ -156,6 +158,18 @@ pub enum Command {
     /// banner, re-plan. Files go to --out (plans, rehearsals, robot logs,
     /// reports, console.token). Runs until Ctrl-C.
     Console(ConsoleArgs),
+    /// Write a mission log as a rosbag2 recording (MCAP) that ROS 2 tools play.
+    ///
+    /// Standard types only: /joint_states (JointState), /odom (Odometry, dead
+    /// reckoning with the nominal parameters), /ground_truth (Odometry),
+    /// /tracker/pose (PoseStamped), /cmd_vel (Twist), /bump
+    /// (irobot_create_msgs HazardDetectionVector), one Range (INFRARED) or
+    /// LaserScan topic per range sensor, /tf (odom->base_link,
+    /// map->odom), /tf_static (base_link-><sensor>_link), /map
+    /// (OccupancyGrid, latched) and /plan (Path, latched) with --plan.
+    /// Writes DIR/metadata.yaml and DIR/<name>_0.mcap; `ros2 bag play DIR`
+    /// plays it.
+    Rosbag(RosbagArgs),
     /// Measure what decoupling buys: direct against decoupled operation
     /// over latency and loss, the upload against the link's ideal, and one
     /// master supervising a fleet through a zenoh router.
@@ -596,6 +610,55 @@ pub struct PlanArgs {
     pub out: PathBuf,
 }
 
+#[derive(Debug, clap::Args)]
+pub struct RosbagArgs {
+    /// Mission log: a directory `simulate` wrote, or a log MCAP (robot logs,
+    /// rehearsals).
+    pub log: PathBuf,
+    /// Output bag directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// A plan JSON to add as /plan (nav_msgs/msg/Path).
+    #[arg(long)]
+    pub plan: Option<PathBuf>,
+    /// Scenario TOML whose world becomes /map (default: the built-in
+    /// scenario the log names; none for other scenarios).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Message definitions of this ROS 2 distribution (they differ in
+    /// sensor_msgs/msg/Range).
+    #[arg(long, value_enum, default_value_t = DistroArg::Jazzy)]
+    pub distro: DistroArg,
+    /// Unix time (seconds) of the log's t = 0; by default the bag starts at
+    /// the epoch.
+    #[arg(long, default_value_t = 0.0)]
+    pub start_time: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DistroArg {
+    Humble,
+    Jazzy,
+}
+
+/// Which JointState field carries the wheels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum JointSignalArg {
+    /// Position when every message has it, else velocity.
+    Auto,
+    Position,
+    Velocity,
+}
+
+/// Where message times come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StampsArg {
+    /// header.stamp (the recording time for types without a header).
+    Header,
+    /// The time the recorder received each message.
+    Log,
+}
+
 /// Which estimate `calibrate` reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -611,8 +674,50 @@ pub enum Method {
 
 #[derive(Debug, clap::Args)]
 pub struct CalibrateArgs {
-    /// Simulator output directory (instead of --encoders/--poses).
+    /// Simulator output directory (instead of --encoders/--poses or --bag).
     pub log_dir: Option<PathBuf>,
+    /// A rosbag2 recording (an .mcap file or a bag directory): wheels from
+    /// --left-joint/--right-joint (or --ticks-topic), reference from
+    /// --pose-topic. Times count from the first reference pose's whole
+    /// second (`data.time_origin_s` in the output).
+    #[arg(long, value_name = "REC.mcap|BAG_DIR", conflicts_with_all = ["log_dir", "encoders", "poses"], requires = "pose_topic")]
+    pub bag: Option<PathBuf>,
+    /// sensor_msgs/msg/JointState topic with the wheel joints.
+    #[arg(long, default_value = "/joint_states", requires = "bag")]
+    pub joint_topic: String,
+    /// Name of the left wheel's joint.
+    #[arg(long, requires_all = ["bag", "right_joint"])]
+    pub left_joint: Option<String>,
+    /// Name of the right wheel's joint.
+    #[arg(long, requires_all = ["bag", "left_joint"])]
+    pub right_joint: Option<String>,
+    /// Joint position (rad) or velocity (rad/s, integrated).
+    #[arg(long, value_enum, default_value_t = JointSignalArg::Auto)]
+    pub joint_signal: JointSignalArg,
+    /// A topic with cumulative tick counts instead of joints (needs
+    /// --left-field, --right-field and --ticks-per-rev).
+    #[arg(long, requires_all = ["bag", "left_field", "right_field", "ticks_per_rev"], conflicts_with = "left_joint")]
+    pub ticks_topic: Option<String>,
+    /// Field of the left count, e.g. `left_ticks` or `data[0]`.
+    #[arg(long, requires = "ticks_topic")]
+    pub left_field: Option<String>,
+    /// Field of the right count, e.g. `right_ticks` or `data[1]`.
+    #[arg(long, requires = "ticks_topic")]
+    pub right_field: Option<String>,
+    /// Reference pose topic: geometry_msgs PoseStamped or
+    /// PoseWithCovarianceStamped, nav_msgs Odometry, or tf2_msgs TFMessage.
+    #[arg(long, requires = "bag")]
+    pub pose_topic: Option<String>,
+    /// The robot's child frame on a TF topic (checked against
+    /// child_frame_id for Odometry).
+    #[arg(long, requires = "pose_topic")]
+    pub pose_frame: Option<String>,
+    /// The parent frame on a TF topic, when several publish the child.
+    #[arg(long, requires = "pose_frame")]
+    pub pose_parent: Option<String>,
+    /// Message times: header stamps, or the recorder's receive times.
+    #[arg(long, value_enum, default_value_t = StampsArg::Header)]
+    pub stamps: StampsArg,
     /// Encoder CSV: `t,left_ticks,right_ticks` or `t,left_rad_s,right_rad_s`.
     #[arg(long, requires = "poses")]
     pub encoders: Option<PathBuf>,

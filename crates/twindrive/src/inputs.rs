@@ -8,6 +8,8 @@ use twindrive_estimation::{PoseSample, WheelSample};
 use twindrive_log::MissionLog;
 use twindrive_log::calib_csv::{EncoderCsv, PoseCsv, WheelColumns};
 
+use crate::cli::{CalibrateArgs, JointSignalArg, StampsArg};
+
 /// Encoder ticks of a simulated log as cumulative wheel angles.
 pub fn wheels_from_log(log: &MissionLog) -> Vec<WheelSample> {
     log.wheel_angles()
@@ -90,6 +92,87 @@ pub fn poses_from_csv(p: &PoseCsv) -> Vec<PoseSample> {
             heading_rad: (!p.theta_rad[i].is_nan()).then_some(p.theta_rad[i]),
         })
         .collect()
+}
+
+/// Wheel angles and reference poses from a rosbag2 recording, with times
+/// counted from the first pose's whole second (returned third).
+pub fn from_bag(
+    args: &CalibrateArgs,
+    signs: [f64; 2],
+) -> anyhow::Result<(Vec<WheelSample>, Vec<PoseSample>, f64)> {
+    use twindrive_ros::extract::{self, JointSignal, PoseSource, Stamps, WheelSource};
+    let path = args.bag.as_deref().expect("called with --bag");
+    let bag = twindrive_ros::Bag::open(path)?;
+    let stamps = match args.stamps {
+        StampsArg::Header => Stamps::Header,
+        StampsArg::Log => Stamps::LogTime,
+    };
+    let wheel_source = match (&args.ticks_topic, &args.left_joint, &args.right_joint) {
+        (Some(topic), _, _) => WheelSource::Ticks {
+            topic: topic.clone(),
+            left_field: args.left_field.clone().expect("clap requires it"),
+            right_field: args.right_field.clone().expect("clap requires it"),
+            ticks_per_rev: args.ticks_per_rev.expect("clap requires it"),
+        },
+        (None, Some(l), Some(r)) => WheelSource::Joints {
+            topic: args.joint_topic.clone(),
+            left: l.clone(),
+            right: r.clone(),
+            signal: match args.joint_signal {
+                JointSignalArg::Auto => JointSignal::Auto,
+                JointSignalArg::Position => JointSignal::Position,
+                JointSignalArg::Velocity => JointSignal::Velocity,
+            },
+        },
+        _ => bail!(
+            "--bag: name the wheels with --left-joint and --right-joint (on --joint-topic, default /joint_states), \
+             or with --ticks-topic, --left-field and --right-field; the bag has: {}",
+            bag.describe_topics()
+        ),
+    };
+    let pose_source = PoseSource {
+        topic: args.pose_topic.clone().expect("clap requires it"),
+        frame: args.pose_frame.clone(),
+        parent: args.pose_parent.clone(),
+    };
+    let (wheels, poses) = std::thread::scope(|scope| {
+        let w = scope.spawn(|| extract::wheel_track(&bag, &wheel_source, stamps));
+        let p = extract::pose_track(&bag, &pose_source, stamps);
+        (w.join(), p)
+    });
+    let wheels = wheels.map_err(|_| anyhow::anyhow!("reading the wheels panicked"))??;
+    let poses = poses?;
+    tracing::info!(
+        wheel_samples = wheels.samples.len(),
+        wheel_signal = %wheels.used,
+        other_messages = wheels.skipped,
+        poses = poses.samples.len(),
+        pose_type = %poses.used,
+        "read the bag"
+    );
+    let origin = poses.samples[0].0.floor();
+    Ok((
+        wheels
+            .samples
+            .iter()
+            .map(|&(t, l, r)| WheelSample {
+                t_s: t - origin,
+                left_rad: signs[0] * l,
+                right_rad: signs[1] * r,
+            })
+            .collect(),
+        poses
+            .samples
+            .iter()
+            .map(|&(t, x, y, h)| PoseSample {
+                t_s: t - origin,
+                x_m: x,
+                y_m: y,
+                heading_rad: Some(h),
+            })
+            .collect(),
+        origin,
+    ))
 }
 
 /// Shifts encoder times onto the pose clock.

@@ -43,6 +43,8 @@ pub struct Job {
     pub ticks_per_rev: Option<u32>,
     /// The true pose track, when the log has one (simulations).
     pub truth: Option<Vec<(f64, Pose)>>,
+    /// Subtracted from the input's times (bags: Unix seconds).
+    pub time_origin_s: f64,
 }
 
 /// `calib.json`.
@@ -106,6 +108,8 @@ pub struct DataSummary {
     pub start_s: f64,
     pub end_s: f64,
     pub ticks_per_rev: Option<u32>,
+    /// Added to every time in this report to get the input's own times.
+    pub time_origin_s: f64,
 }
 
 /// What the figures and trajectories are drawn from.
@@ -360,6 +364,7 @@ pub fn calibrate(
             start_s: poses[0].t_s,
             end_s: poses.last().expect("non-empty").t_s,
             ticks_per_rev: job.ticks_per_rev,
+            time_origin_s: job.time_origin_s,
         },
     };
 
@@ -393,56 +398,65 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
             bail!("{name} must be 1 or -1, got {s}");
         }
     }
-    let (wheels, poses, default_initial, ticks_per_rev, truth) =
-        match (&args.log_dir, &args.encoders, &args.poses) {
-            (Some(dir), None, None) => {
-                let log = twindrive_log::read_log_dir(dir)?;
-                let mut wheels = inputs::wheels_from_log(&log);
-                for w in &mut wheels {
-                    w.left_rad *= signs[0];
-                    w.right_rad *= signs[1];
-                }
-                let n = log.header.nominal;
-                let tpr = log.header.ticks_per_rev;
-                if let Some(t) = args.ticks_per_rev
-                    && t != tpr
-                {
-                    bail!("--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}");
-                }
-                let truth: Vec<(f64, Pose)> = log
-                    .steps
-                    .iter()
-                    .map(|s| (s.t_s(), s.ground_truth))
-                    .collect();
-                (
-                    wheels,
-                    inputs::poses_from_log(&log),
-                    Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
-                    Some(tpr),
-                    Some(truth),
-                )
+    let mut time_origin_s = 0.0;
+    let (wheels, poses, default_initial, ticks_per_rev, truth) = match (
+        &args.log_dir,
+        &args.encoders,
+        &args.poses,
+    ) {
+        (None, None, None) if args.bag.is_some() => {
+            let (wheels, poses, origin) = inputs::from_bag(args, signs)?;
+            time_origin_s = origin;
+            (wheels, poses, None, args.ticks_per_rev, None)
+        }
+        (Some(dir), None, None) => {
+            let log = twindrive_log::read_log_dir(dir)?;
+            let mut wheels = inputs::wheels_from_log(&log);
+            for w in &mut wheels {
+                w.left_rad *= signs[0];
+                w.right_rad *= signs[1];
             }
-            (None, Some(enc), Some(pose)) => {
-                // The two files are read side by side.
-                let (e, p) = std::thread::scope(|scope| {
-                    let e = scope.spawn(|| twindrive_log::calib_csv::read_encoder_csv(enc));
-                    let p = twindrive_log::calib_csv::read_pose_csv(pose);
-                    (e.join(), p)
-                });
-                let e = e.map_err(|_| anyhow::anyhow!("reading the encoder log panicked"))??;
-                let p = p?;
-                (
-                    inputs::wheels_from_csv(&e, enc, args.ticks_per_rev, signs)?,
-                    inputs::poses_from_csv(&p),
-                    None,
-                    args.ticks_per_rev,
-                    None,
-                )
+            let n = log.header.nominal;
+            let tpr = log.header.ticks_per_rev;
+            if let Some(t) = args.ticks_per_rev
+                && t != tpr
+            {
+                bail!("--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}");
             }
-            _ => bail!(
-                "give either a simulator log directory, or both --encoders E.csv and --poses P.csv"
-            ),
-        };
+            let truth: Vec<(f64, Pose)> = log
+                .steps
+                .iter()
+                .map(|s| (s.t_s(), s.ground_truth))
+                .collect();
+            (
+                wheels,
+                inputs::poses_from_log(&log),
+                Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
+                Some(tpr),
+                Some(truth),
+            )
+        }
+        (None, Some(enc), Some(pose)) => {
+            // The two files are read side by side.
+            let (e, p) = std::thread::scope(|scope| {
+                let e = scope.spawn(|| twindrive_log::calib_csv::read_encoder_csv(enc));
+                let p = twindrive_log::calib_csv::read_pose_csv(pose);
+                (e.join(), p)
+            });
+            let e = e.map_err(|_| anyhow::anyhow!("reading the encoder log panicked"))??;
+            let p = p?;
+            (
+                inputs::wheels_from_csv(&e, enc, args.ticks_per_rev, signs)?,
+                inputs::poses_from_csv(&p),
+                None,
+                args.ticks_per_rev,
+                None,
+            )
+        }
+        _ => bail!(
+            "give a simulator log directory, both --encoders E.csv and --poses P.csv, or --bag REC.mcap"
+        ),
+    };
     if wheels.len() < 2 {
         bail!(
             "the encoder log has {} samples; need at least 2",
@@ -455,7 +469,7 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
     let initial = match (&args.initial, default_initial) {
         (Some(text), _) => parse_initial(text)?,
         (None, Some(i)) => i,
-        (None, None) => bail!("--initial DL,DR,B (metres) is needed for CSV inputs"),
+        (None, None) => bail!("--initial DL,DR,B (metres) is needed for CSV and bag inputs"),
     };
     let offset = match args.time_offset.trim() {
         "auto" => Offset::Auto,
@@ -489,6 +503,7 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
         batch_window_s: positive("--batch-window-s", args.batch_window_s)?,
         ticks_per_rev,
         truth,
+        time_origin_s,
     })
 }
 

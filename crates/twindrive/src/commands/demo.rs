@@ -57,6 +57,7 @@ fn calibration_job(
                 .map(|s| (s.t_s(), s.ground_truth))
                 .collect(),
         ),
+        time_origin_s: 0.0,
     }
 }
 

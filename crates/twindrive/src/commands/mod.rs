@@ -10,6 +10,7 @@ mod keys;
 mod ops;
 mod plan;
 mod prune;
+mod rosbag;
 mod simulate;
 mod verify_plan;
 
@@ -38,6 +39,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Robot(a) => ops::robot(&a),
         Command::Master(a) => ops::master(&a),
         Command::Console(a) => console::run(&a),
+        Command::Rosbag(a) => rosbag::run(&a),
         Command::Experiment { command } => experiment::run(&command),
         Command::Router {
             listen,

@@ -1,0 +1,797 @@
+//! What calibration needs from a recording: cumulative wheel angles and a
+//! reference pose track, each on its own clock.
+//!
+//! Wheels come from `sensor_msgs/msg/JointState` (two named joints; the
+//! position in radians, or the velocity integrated) or from any message
+//! with two integer tick fields. Poses come from
+//! `geometry_msgs/msg/PoseStamped`, `geometry_msgs/msg/PoseWithCovarianceStamped`,
+//! `nav_msgs/msg/Odometry` or a `tf2_msgs/msg/TFMessage` child frame. Fields
+//! are found by name in the definition stored in the file, so a message only
+//! has to have the fields, not a particular version of the type.
+
+use crate::bag::{Bag, BagError};
+use crate::schema::{Arity, Base, FieldPath, Primitive, Schema};
+use crate::value::Value;
+
+/// Where message times come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stamps {
+    /// `header.stamp` (the sensor's clock); the log time for types without a header.
+    Header,
+    /// The time the recorder received the message.
+    LogTime,
+}
+
+/// Which JointState field carries the wheels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointSignal {
+    /// Position when the messages carry it, else velocity.
+    Auto,
+    Position,
+    Velocity,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum WheelSource {
+    Joints {
+        topic: String,
+        left: String,
+        right: String,
+        signal: JointSignal,
+    },
+    /// Two integer fields (`a.b`, or `data[0]` for an array element).
+    Ticks {
+        topic: String,
+        left_field: String,
+        right_field: String,
+        ticks_per_rev: u32,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseSource {
+    pub topic: String,
+    /// The child frame of a TF topic (required there); for Odometry, checked
+    /// against `child_frame_id` when given.
+    pub frame: Option<String>,
+    /// The parent frame of a TF topic, when several parents publish the child.
+    pub parent: Option<String>,
+}
+
+/// `(t_s, left_rad, right_rad)`, time-ordered.
+pub type WheelTrack = Vec<(f64, f64, f64)>;
+/// `(t_s, x_m, y_m, heading_rad)`, time-ordered.
+pub type PoseTrack = Vec<(f64, f64, f64, f64)>;
+
+/// What came out of a topic besides the samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Extracted<T> {
+    pub samples: T,
+    /// Messages on the topic that did not carry what was asked for (other
+    /// joints, other TF frames).
+    pub skipped: u64,
+    /// `position` or `velocity` for joints; the type for poses.
+    pub used: String,
+}
+
+fn seconds(ns: i64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+/// `header.stamp` of a message whose type has a standard header.
+fn header_stamp(schema: &Schema) -> Option<(FieldPath, FieldPath)> {
+    Some((
+        schema.path("header.stamp.sec").ok()?,
+        schema.path("header.stamp.nanosec").ok()?,
+    ))
+}
+
+fn stamp_ns(v: &Value, paths: &(FieldPath, FieldPath)) -> Result<i64, String> {
+    let sec = v
+        .at(&paths.0)
+        .and_then(Value::as_i64)
+        .ok_or("no header.stamp.sec")?;
+    let nsec = v
+        .at(&paths.1)
+        .and_then(Value::as_i64)
+        .ok_or("no header.stamp.nanosec")?;
+    Ok(sec * 1_000_000_000 + nsec)
+}
+
+/// The message time by `stamps`.
+fn message_time(
+    v: &Value,
+    log_time_ns: u64,
+    stamps: Stamps,
+    header: Option<&(FieldPath, FieldPath)>,
+) -> Result<f64, String> {
+    match (stamps, header) {
+        (Stamps::Header, Some(h)) => Ok(seconds(stamp_ns(v, h)?)),
+        _ => Ok(seconds(log_time_ns as i64)),
+    }
+}
+
+/// Header stamps that are all zero were never filled in by the publisher.
+fn check_stamped<T>(
+    bag: &Bag,
+    topic: &str,
+    samples: &[(f64, T)],
+    stamps: Stamps,
+) -> Result<(), BagError> {
+    if stamps == Stamps::Header && samples.len() > 1 && samples.iter().all(|(t, _)| *t == 0.0) {
+        return Err(topic_error(
+            bag,
+            topic,
+            "every header.stamp is zero (the publisher does not stamp its messages); pass --stamps log to use the recording time".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Sorts by time and drops repeated times (a republished sample), keeping the first.
+fn ordered<T: Copy>(mut v: Vec<(f64, T)>) -> Vec<(f64, T)> {
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    v.dedup_by(|b, a| a.0 == b.0);
+    v
+}
+
+/// Cumulative wheel angles from `source`.
+pub fn wheel_track(
+    bag: &Bag,
+    source: &WheelSource,
+    stamps: Stamps,
+) -> Result<Extracted<WheelTrack>, BagError> {
+    match source {
+        WheelSource::Joints {
+            topic,
+            left,
+            right,
+            signal,
+        } => joints(bag, topic, left, right, *signal, stamps),
+        WheelSource::Ticks {
+            topic,
+            left_field,
+            right_field,
+            ticks_per_rev,
+        } => ticks(bag, topic, left_field, right_field, *ticks_per_rev, stamps),
+    }
+}
+
+fn topic_error(bag: &Bag, topic: &str, message: String) -> BagError {
+    BagError::Topic {
+        path: bag.path().to_path_buf(),
+        topic: topic.to_string(),
+        message,
+    }
+}
+
+fn joints(
+    bag: &Bag,
+    topic: &str,
+    left: &str,
+    right: &str,
+    signal: JointSignal,
+    stamps: Stamps,
+) -> Result<Extracted<WheelTrack>, BagError> {
+    let schema = bag.schema(topic)?;
+    let field = |name: &str| {
+        schema.path(name).map_err(|e| {
+            topic_error(
+                bag,
+                topic,
+                format!("{e}; wheel joints are read from sensor_msgs/msg/JointState"),
+            )
+        })
+    };
+    let (names, position, velocity) = (field("name")?, field("position")?, field("velocity")?);
+    let header = header_stamp(&schema);
+    let mut raw: Vec<(f64, [Option<f64>; 4])> = Vec::new();
+    let mut seen_names: Vec<String> = Vec::new();
+    let mut skipped = 0;
+    bag.for_each(topic, |m| {
+        let list = m
+            .value
+            .at(&names)
+            .and_then(Value::as_array)
+            .ok_or("no `name` list")?;
+        let idx = |joint: &str| list.iter().position(|n| n.as_str() == Some(joint));
+        let (Some(l), Some(r)) = (idx(left), idx(right)) else {
+            for n in list.iter().filter_map(Value::as_str) {
+                if !seen_names.iter().any(|s| s == n) && seen_names.len() < 32 {
+                    seen_names.push(n.to_string());
+                }
+            }
+            skipped += 1;
+            return Ok(());
+        };
+        let t = message_time(m.value, m.log_time_ns, stamps, header.as_ref())?;
+        let get = |p: &FieldPath, i: usize| {
+            m.value
+                .at(p)
+                .and_then(Value::as_array)
+                .and_then(|a| a.get(i))
+                .and_then(Value::as_f64)
+        };
+        let values = [
+            get(&position, l),
+            get(&position, r),
+            get(&velocity, l),
+            get(&velocity, r),
+        ];
+        if let Some(bad) = values.iter().flatten().find(|v| !v.is_finite()) {
+            return Err(format!("joint value {bad} is not finite"));
+        }
+        raw.push((t, values));
+        Ok(())
+    })?;
+    if raw.is_empty() {
+        return Err(topic_error(
+            bag,
+            topic,
+            format!(
+                "no message names both joints `{left}` and `{right}`; the joints named are: {}",
+                if seen_names.is_empty() {
+                    "none".to_string()
+                } else {
+                    seen_names.join(", ")
+                }
+            ),
+        ));
+    }
+    check_stamped(bag, topic, &raw, stamps)?;
+    let raw = ordered(raw);
+    let has_position = raw.iter().all(|(_, v)| v[0].is_some() && v[1].is_some());
+    let has_velocity = raw.iter().all(|(_, v)| v[2].is_some() && v[3].is_some());
+    let use_position = match signal {
+        JointSignal::Position | JointSignal::Auto if has_position => true,
+        JointSignal::Velocity | JointSignal::Auto if has_velocity => false,
+        _ => {
+            return Err(topic_error(
+                bag,
+                topic,
+                format!(
+                    "the joints have no {} in every message (position in all: {has_position}, velocity in all: {has_velocity})",
+                    match signal {
+                        JointSignal::Position => "position",
+                        JointSignal::Velocity => "velocity",
+                        JointSignal::Auto => "position or velocity",
+                    }
+                ),
+            ));
+        }
+    };
+    let samples = if use_position {
+        raw.iter()
+            .map(|(t, v)| (*t, v[0].expect("checked"), v[1].expect("checked")))
+            .collect()
+    } else {
+        // Trapezoid rule over the wheel speeds.
+        let mut out = Vec::with_capacity(raw.len());
+        let (mut l, mut r) = (0.0, 0.0);
+        for (i, (t, v)) in raw.iter().enumerate() {
+            if i > 0 {
+                let (tp, vp) = &raw[i - 1];
+                let dt = t - tp;
+                l += 0.5 * dt * (v[2].expect("checked") + vp[2].expect("checked"));
+                r += 0.5 * dt * (v[3].expect("checked") + vp[3].expect("checked"));
+            }
+            out.push((*t, l, r));
+        }
+        out
+    };
+    Ok(Extracted {
+        samples,
+        skipped,
+        used: if use_position { "position" } else { "velocity" }.into(),
+    })
+}
+
+/// A field path with an optional trailing array index: `data[1]`.
+fn element_path(schema: &Schema, text: &str) -> Result<(FieldPath, Option<usize>), String> {
+    let (path, index) = match text.strip_suffix(']').and_then(|t| t.rsplit_once('[')) {
+        Some((p, i)) => (
+            p,
+            Some(
+                i.parse::<usize>()
+                    .map_err(|_| format!("`{text}`: `{i}` is not an array index"))?,
+            ),
+        ),
+        None => (text, None),
+    };
+    let fp = schema.path(path)?;
+    let numeric = matches!(fp.ty.base, Base::Primitive(p) if p != Primitive::Bool);
+    let shape_ok = match (fp.ty.arity, index) {
+        (Arity::Single, None) => true,
+        (Arity::Fixed(n), Some(i)) => i < n,
+        (Arity::Sequence(_), Some(_)) => true,
+        _ => false,
+    };
+    if !numeric || !shape_ok {
+        return Err(format!(
+            "`{text}` is not a number field{}",
+            if index.is_none() && fp.ty.arity != Arity::Single {
+                " (it is an array: add an index such as `[0]`)"
+            } else {
+                ""
+            }
+        ));
+    }
+    Ok((fp, index))
+}
+
+fn ticks(
+    bag: &Bag,
+    topic: &str,
+    left_field: &str,
+    right_field: &str,
+    ticks_per_rev: u32,
+    stamps: Stamps,
+) -> Result<Extracted<WheelTrack>, BagError> {
+    if ticks_per_rev == 0 {
+        return Err(topic_error(
+            bag,
+            topic,
+            "ticks per revolution must be > 0".into(),
+        ));
+    }
+    let schema = bag.schema(topic)?;
+    let (l, r) = (
+        element_path(&schema, left_field).map_err(|e| topic_error(bag, topic, e))?,
+        element_path(&schema, right_field).map_err(|e| topic_error(bag, topic, e))?,
+    );
+    let header = header_stamp(&schema);
+    let k = std::f64::consts::TAU / f64::from(ticks_per_rev);
+    let mut raw = Vec::new();
+    bag.for_each(topic, |m| {
+        let read = |(p, i): &(FieldPath, Option<usize>), name: &str| -> Result<f64, String> {
+            let v = m.value.at(p).ok_or_else(|| format!("no field `{name}`"))?;
+            let v = match (v, i) {
+                (Value::Array(a), Some(i)) => a.get(*i),
+                (Value::Bytes(b), Some(i)) => {
+                    return b
+                        .get(*i)
+                        .map(|b| f64::from(*b))
+                        .ok_or_else(|| format!("`{name}`: the array is shorter"));
+                }
+                (v, None) => Some(v),
+                _ => None,
+            };
+            v.and_then(Value::as_f64)
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("`{name}` is missing or not a finite number"))
+        };
+        let t = message_time(m.value, m.log_time_ns, stamps, header.as_ref())?;
+        raw.push((t, (read(&l, left_field)? * k, read(&r, right_field)? * k)));
+        Ok(())
+    })?;
+    Ok(Extracted {
+        samples: ordered(raw)
+            .into_iter()
+            .map(|(t, (a, b))| (t, a, b))
+            .collect(),
+        skipped: 0,
+        used: "ticks".into(),
+    })
+}
+
+/// The reference poses from `source`.
+pub fn pose_track(
+    bag: &Bag,
+    source: &PoseSource,
+    stamps: Stamps,
+) -> Result<Extracted<PoseTrack>, BagError> {
+    let topic = source.topic.as_str();
+    let schema = bag.schema(topic)?;
+    let type_name = schema.root().name.clone();
+    let terr = |m: String| topic_error(bag, topic, m);
+    if type_name == "tf2_msgs/msg/TFMessage" {
+        let child = source.frame.as_deref().ok_or_else(|| {
+            terr("a TF topic holds many frames: name the robot's with --pose-frame".into())
+        })?;
+        return tf_track(bag, &schema, topic, child, source.parent.as_deref(), stamps);
+    }
+    let pose_prefix = match type_name.as_str() {
+        "geometry_msgs/msg/PoseStamped" => "pose",
+        "geometry_msgs/msg/PoseWithCovarianceStamped" | "nav_msgs/msg/Odometry" => "pose.pose",
+        other => {
+            return Err(terr(format!(
+                "is {other}; a reference pose is read from geometry_msgs/msg/PoseStamped, \
+                 geometry_msgs/msg/PoseWithCovarianceStamped, nav_msgs/msg/Odometry or tf2_msgs/msg/TFMessage"
+            )));
+        }
+    };
+    if source.parent.is_some() {
+        return Err(terr("--pose-parent applies to TF topics only".into()));
+    }
+    let child_check = match (&source.frame, type_name.as_str()) {
+        (Some(f), "nav_msgs/msg/Odometry") => {
+            Some((schema.path("child_frame_id").map_err(terr)?, f.clone()))
+        }
+        (Some(_), _) => {
+            return Err(terr(format!(
+                "--pose-frame selects a TF child frame or checks an Odometry child frame; {type_name} has neither"
+            )));
+        }
+        (None, _) => None,
+    };
+    let p = |s: &str| schema.path(&format!("{pose_prefix}.{s}")).map_err(terr);
+    let fields = [
+        p("position.x")?,
+        p("position.y")?,
+        p("orientation.x")?,
+        p("orientation.y")?,
+        p("orientation.z")?,
+        p("orientation.w")?,
+    ];
+    let header = header_stamp(&schema);
+    let mut raw = Vec::new();
+    let mut skipped = 0;
+    bag.for_each(topic, |m| {
+        if let Some((path, want)) = &child_check
+            && m.value.at(path).and_then(Value::as_str) != Some(want.as_str())
+        {
+            skipped += 1;
+            return Ok(());
+        }
+        let t = message_time(m.value, m.log_time_ns, stamps, header.as_ref())?;
+        let v: Vec<f64> = fields
+            .iter()
+            .map(|f| m.value.at(f).and_then(Value::as_f64).unwrap_or(f64::NAN))
+            .collect();
+        raw.push((t, planar(&v)?));
+        Ok(())
+    })?;
+    check_stamped(bag, topic, &raw, stamps)?;
+    finish_poses(bag, topic, raw, skipped, type_name)
+}
+
+fn tf_track(
+    bag: &Bag,
+    schema: &Schema,
+    topic: &str,
+    child: &str,
+    parent: Option<&str>,
+    stamps: Stamps,
+) -> Result<Extracted<PoseTrack>, BagError> {
+    let terr = |m: String| topic_error(bag, topic, m);
+    let transforms = schema.path("transforms").map_err(terr)?;
+    let Base::Message(ts) = transforms.ty.base else {
+        return Err(terr("`transforms` is not a list of messages".into()));
+    };
+    // Paths inside one TransformStamped.
+    let inner = |dotted: &str| -> Result<Vec<usize>, BagError> {
+        let mut ty = ts;
+        let mut out = Vec::new();
+        for part in dotted.split('.') {
+            let t = schema.type_at(ty);
+            let i = t
+                .fields
+                .iter()
+                .position(|f| f.name == part)
+                .ok_or_else(|| terr(format!("{} has no field `{part}`", t.name)))?;
+            out.push(i);
+            if let Base::Message(n) = t.fields[i].ty.base {
+                ty = n;
+            }
+        }
+        Ok(out)
+    };
+    let get = |v: &Value, idx: &[usize]| -> Option<Value> {
+        let mut v = v;
+        for &i in idx {
+            v = v.as_message()?.get(i)?;
+        }
+        Some(v.clone())
+    };
+    let child_idx = inner("child_frame_id")?;
+    let parent_idx = inner("header.frame_id")?;
+    let sec = inner("header.stamp.sec")?;
+    let nsec = inner("header.stamp.nanosec")?;
+    let nums = [
+        inner("transform.translation.x")?,
+        inner("transform.translation.y")?,
+        inner("transform.rotation.x")?,
+        inner("transform.rotation.y")?,
+        inner("transform.rotation.z")?,
+        inner("transform.rotation.w")?,
+    ];
+    let mut raw = Vec::new();
+    let mut frames: Vec<String> = Vec::new();
+    let mut skipped = 0;
+    bag.for_each(topic, |m| {
+        let list = m
+            .value
+            .at(&transforms)
+            .and_then(Value::as_array)
+            .ok_or("no `transforms` list")?;
+        let mut found = false;
+        for tr in list {
+            let c = get(tr, &child_idx);
+            let p = get(tr, &parent_idx);
+            let (Some(c), Some(p)) = (
+                c.as_ref().and_then(Value::as_str),
+                p.as_ref().and_then(Value::as_str),
+            ) else {
+                continue;
+            };
+            let c = c.trim_start_matches('/');
+            let p = p.trim_start_matches('/');
+            if c != child.trim_start_matches('/')
+                || parent.is_some_and(|want| want.trim_start_matches('/') != p)
+            {
+                let name = format!("{p} -> {c}");
+                if frames.len() < 32 && !frames.contains(&name) {
+                    frames.push(name);
+                }
+                continue;
+            }
+            let t = match stamps {
+                Stamps::Header => seconds(
+                    get(tr, &sec).and_then(|v| v.as_i64()).unwrap_or(0) * 1_000_000_000
+                        + get(tr, &nsec).and_then(|v| v.as_i64()).unwrap_or(0),
+                ),
+                Stamps::LogTime => seconds(m.log_time_ns as i64),
+            };
+            let v: Vec<f64> = nums
+                .iter()
+                .map(|i| get(tr, i).and_then(|v| v.as_f64()).unwrap_or(f64::NAN))
+                .collect();
+            raw.push((t, planar(&v)?));
+            found = true;
+        }
+        if !found {
+            skipped += 1;
+        }
+        Ok(())
+    })?;
+    if raw.is_empty() {
+        return Err(terr(format!(
+            "no transform to child frame `{child}`{}; the transforms are: {}",
+            parent.map(|p| format!(" from `{p}`")).unwrap_or_default(),
+            if frames.is_empty() {
+                "none".to_string()
+            } else {
+                frames.join(", ")
+            }
+        )));
+    }
+    check_stamped(bag, topic, &raw, stamps)?;
+    finish_poses(bag, topic, raw, skipped, "tf2_msgs/msg/TFMessage".into())
+}
+
+/// x, y and heading from position and quaternion; refuses a quaternion
+/// that is not a rotation.
+fn planar(v: &[f64]) -> Result<(f64, f64, f64), String> {
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err("the pose has a missing or non-finite number".into());
+    }
+    let q = crate::msgs::Quaternion {
+        x: v[2],
+        y: v[3],
+        z: v[4],
+        w: v[5],
+    };
+    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+    if (norm - 1.0).abs() > 1e-3 {
+        return Err(format!(
+            "the orientation quaternion has norm {norm:.4}, not 1 (an unset orientation?)"
+        ));
+    }
+    Ok((v[0], v[1], q.yaw_rad()))
+}
+
+fn finish_poses(
+    bag: &Bag,
+    topic: &str,
+    raw: Vec<(f64, (f64, f64, f64))>,
+    skipped: u64,
+    used: String,
+) -> Result<Extracted<PoseTrack>, BagError> {
+    if raw.is_empty() {
+        return Err(topic_error(bag, topic, "no poses".into()));
+    }
+    Ok(Extracted {
+        samples: ordered(raw)
+            .into_iter()
+            .map(|(t, (x, y, h))| (t, x, y, h))
+            .collect(),
+        skipped,
+        used,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bag::{BagWriter, Qos};
+    use crate::msgs::*;
+
+    fn bag(dir: &std::path::Path) -> Bag {
+        let path = dir.join("t.mcap");
+        let f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut w = BagWriter::new(f, "t.mcap", Distro::Jazzy).unwrap();
+        let js = w.topic::<JointState>("/joint_states", Qos::SENSOR).unwrap();
+        let tf = w.topic::<TFMessage>("/tf", Qos::SENSOR).unwrap();
+        let od = w.topic::<Odometry>("/odom", Qos::SENSOR).unwrap();
+        for k in 0..20u64 {
+            let t = 5_000_000_000 + k * 100_000_000;
+            // Stamps 1 s behind the recorder's clock.
+            let stamp = t - 1_000_000_000;
+            // An arm's joint state in between.
+            w.write(
+                js,
+                t,
+                &JointState {
+                    header: Header::new(stamp, ""),
+                    name: vec!["arm".into()],
+                    position: vec![0.0],
+                    velocity: vec![],
+                    effort: vec![],
+                },
+            )
+            .unwrap();
+            w.write(
+                js,
+                t,
+                &JointState {
+                    header: Header::new(stamp, ""),
+                    name: vec!["r".into(), "l".into()],
+                    position: vec![2.0 * k as f64, k as f64],
+                    velocity: vec![20.0, 10.0],
+                    effort: vec![],
+                },
+            )
+            .unwrap();
+            w.write(
+                tf,
+                t,
+                &TFMessage {
+                    transforms: vec![
+                        TransformStamped::planar(stamp, "odom", "base_link", 9.0, 9.0, 0.0),
+                        TransformStamped::planar(
+                            stamp,
+                            "world",
+                            "robot",
+                            0.1 * k as f64,
+                            1.0,
+                            0.25,
+                        ),
+                    ],
+                },
+            )
+            .unwrap();
+            w.write(
+                od,
+                t,
+                &Odometry {
+                    header: Header::new(stamp, "odom"),
+                    child_frame_id: "base_link".into(),
+                    pose: PoseWithCovariance {
+                        pose: crate::msgs::Pose::planar(k as f64, 0.0, -0.5),
+                        covariance: Covariance::default(),
+                    },
+                    twist: TwistWithCovariance::default(),
+                },
+            )
+            .unwrap();
+        }
+        w.finish().unwrap();
+        Bag::open(&path).unwrap()
+    }
+
+    #[test]
+    fn joints_ticks_and_poses_come_out_on_the_chosen_clock() {
+        let dir = tempfile::tempdir().unwrap();
+        let b = bag(dir.path());
+        let src = |signal| WheelSource::Joints {
+            topic: "/joint_states".into(),
+            left: "l".into(),
+            right: "r".into(),
+            signal,
+        };
+        let w = wheel_track(&b, &src(JointSignal::Auto), Stamps::Header).unwrap();
+        assert_eq!(w.used, "position");
+        assert_eq!(w.skipped, 20);
+        assert_eq!(w.samples.len(), 20);
+        let (t, l, r) = w.samples[3];
+        assert!((t - 4.3).abs() < 1e-9 && (l, r) == (3.0, 6.0));
+        let v = wheel_track(&b, &src(JointSignal::Velocity), Stamps::LogTime).unwrap();
+        assert_eq!(v.used, "velocity");
+        assert!((v.samples[10].0 - 6.0).abs() < 1e-9);
+        assert!((v.samples[10].1 - 10.0).abs() < 1e-9 && (v.samples[10].2 - 20.0).abs() < 1e-9);
+
+        let ticks = WheelSource::Ticks {
+            topic: "/joint_states".into(),
+            left_field: "position[1]".into(),
+            right_field: "velocity[0]".into(),
+            ticks_per_rev: 4,
+        };
+        let e = wheel_track(&b, &ticks, Stamps::Header)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("message 0") && e.contains("position[1]"), "{e}");
+
+        let tf = PoseSource {
+            topic: "/tf".into(),
+            frame: Some("robot".into()),
+            parent: None,
+        };
+        let p = pose_track(&b, &tf, Stamps::Header).unwrap();
+        assert_eq!(p.samples.len(), 20);
+        let (t, x, y, h) = p.samples[5];
+        assert!(
+            (t - 4.5).abs() < 1e-9
+                && (x - 0.5).abs() < 1e-12
+                && y == 1.0
+                && (h - 0.25).abs() < 1e-12
+        );
+        let odom = PoseSource {
+            topic: "/odom".into(),
+            frame: Some("base_link".into()),
+            parent: None,
+        };
+        let p = pose_track(&b, &odom, Stamps::LogTime).unwrap();
+        assert!((p.samples[2].0 - 5.2).abs() < 1e-9 && (p.samples[2].3 + 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn wrong_names_are_listed() {
+        let dir = tempfile::tempdir().unwrap();
+        let b = bag(dir.path());
+        let e = wheel_track(
+            &b,
+            &WheelSource::Joints {
+                topic: "/joint_states".into(),
+                left: "wheel_left_joint".into(),
+                right: "r".into(),
+                signal: JointSignal::Auto,
+            },
+            Stamps::Header,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("the joints named are: arm, r, l"), "{e}");
+        let e = pose_track(
+            &b,
+            &PoseSource {
+                topic: "/tf".into(),
+                frame: Some("base_footprint".into()),
+                parent: None,
+            },
+            Stamps::Header,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("odom -> base_link") && e.contains("world -> robot"),
+            "{e}"
+        );
+        let e = pose_track(
+            &b,
+            &PoseSource {
+                topic: "/tf".into(),
+                frame: None,
+                parent: None,
+            },
+            Stamps::Header,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--pose-frame"), "{e}");
+        let e = pose_track(
+            &b,
+            &PoseSource {
+                topic: "/joint_states".into(),
+                frame: None,
+                parent: None,
+            },
+            Stamps::Header,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("is sensor_msgs/msg/JointState; a reference pose"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,21 @@
+//! ROS 2 without a ROS install.
+//!
+//! ROS 2 messages are CDR bytes described by `.msg` definitions, and rosbag2
+//! recordings are MCAP files that store those definitions beside the bytes.
+//! This crate reads both at run time ([`Schema`], [`Value`], [`Bag`]) and
+//! writes the standard messages twindrive produces ([`msgs`], [`BagWriter`]).
+
+pub mod bag;
+pub mod export;
+pub mod extract;
+pub mod msgs;
+mod schema;
+mod value;
+
+pub use bag::{Bag, BagError, BagWriter, MessageRef, Qos, TopicId, TopicInfo};
+pub use msgs::{Distro, RosMessage};
+pub use schema::{
+    Arity, Base, Field, FieldPath, FieldType, MessageType, Primitive, Schema, SchemaError,
+    normalize_type_name,
+};
+pub use value::{DecodeError, Value};

@@ -1,0 +1,101 @@
+//! `twindrive rosbag`: a mission log as a rosbag2 recording.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use twindrive_ros::export::{ExportOptions, write_log_bag};
+use twindrive_ros::msgs::Distro;
+
+use crate::cli::{DistroArg, RosbagArgs};
+use crate::output::Staging;
+
+/// A mission log: a directory `simulate` wrote, or an MCAP file.
+fn read_log(path: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
+    if path.is_dir() {
+        Ok(twindrive_log::read_log_dir(path)?)
+    } else {
+        Ok(twindrive_log::read_mcap(path)?)
+    }
+}
+
+pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
+    if !(args.start_time.is_finite() && args.start_time >= 0.0 && args.start_time < 4.0e9) {
+        bail!(
+            "--start-time: expected Unix seconds between 0 and 4e9, got {}",
+            args.start_time
+        );
+    }
+    let log = read_log(&args.log)?;
+    let map = match &args.scenario {
+        Some(p) => Some(
+            twindrive_sim::Scenario::load(p)
+                .with_context(|| format!("--scenario {}", p.display()))?
+                .world
+                .log_map(),
+        ),
+        None => match twindrive_sim::builtin::load(&log.header.scenario) {
+            Some(s) => Some(s?.world.log_map()),
+            None => {
+                tracing::warn!(
+                    scenario = %log.header.scenario,
+                    "the log's scenario is not built in and no --scenario was given: the bag has no /map"
+                );
+                None
+            }
+        },
+    };
+    let plan: Option<Vec<(u64, twindrive_kinematics::Pose)>> = match &args.plan {
+        Some(p) => {
+            let plan = super::verify_plan::read_plan(p)?;
+            let poses = plan
+                .samples
+                .iter()
+                .map(|s| twindrive_log::ns_from_seconds(s.t_s).map(|t| (t, s.pose())))
+                .collect::<Option<Vec<_>>>()
+                .with_context(|| {
+                    format!("{}: a sample time is negative or not finite", p.display())
+                })?;
+            Some(poses)
+        }
+        None => None,
+    };
+    let options = ExportOptions {
+        distro: match args.distro {
+            DistroArg::Humble => Distro::Humble,
+            DistroArg::Jazzy => Distro::Jazzy,
+        },
+        start_ns: (args.start_time * 1e9).round() as u64,
+        map: map.as_ref(),
+        plan: plan.as_deref(),
+    };
+    let name = args
+        .out
+        .file_name()
+        .and_then(|n| n.to_str())
+        .filter(|n| !n.is_empty() && *n != "..")
+        .with_context(|| format!("--out {}: name a bag directory", args.out.display()))?;
+    let file_name = format!("{name}_0.mcap");
+    let staging = Staging::new(&args.out, "rosbag")?;
+    let mut summary = None;
+    staging.write_with(&file_name, |w| {
+        summary = Some(write_log_bag(&log, &options, w, &file_name)?);
+        Ok(())
+    })?;
+    let summary = summary.expect("written");
+    staging.write_with("metadata.yaml", |w| {
+        w.write_all(summary.metadata_yaml.as_bytes())?;
+        Ok(())
+    })?;
+    staging.commit()?;
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "wrote {}/ ({file_name}, metadata.yaml):",
+        args.out.display()
+    )?;
+    for (topic, ty, n) in &summary.topics {
+        writeln!(o, "  {topic:<24} {ty:<45} {n:>8}")?;
+    }
+    Ok(())
+}

@@ -1,0 +1,525 @@
+//! ROS 2 interop, checked against independent implementations (the Python
+//! packages `rosbags` and `mcap-ros2-support`, installed by
+//! `scripts/ros-deps.sh`):
+//!
+//! - recordings *they* write from a simulated drive calibrate to the true
+//!   parameters, with the clock offset between the robot's and the capture
+//!   system's stamps found;
+//! - every topic `twindrive rosbag` writes decodes with their decoders
+//!   (rosbags with the distribution's own definitions, mcap-ros2-support with
+//!   the ones stored in the file) to the log's values;
+//! - bad recordings and wrong names get errors that name the topic and the
+//!   message.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{fixture, repo, text, twindrive};
+use serde_json::Value;
+
+const TRUTH: [f64; 3] = [0.0652, 0.0665, 0.2678];
+const NOMINAL: &str = "0.066,0.066,0.26";
+const NOISE: [&str; 6] = [
+    "--position-std-m",
+    "0.001",
+    "--heading-std-rad",
+    "0.002",
+    "--wheel-noise",
+    "1e-6",
+];
+const LAG_S: f64 = 0.25;
+const JOINTS: [&str; 4] = [
+    "--left-joint",
+    "wheel_left_joint",
+    "--right-joint",
+    "wheel_right_joint",
+];
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The venv's python with the pinned peers (installs them once).
+fn python() -> &'static Path {
+    static P: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    P.get_or_init(|| {
+        let o = Command::new("bash")
+            .arg(repo().join("scripts/ros-deps.sh"))
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "scripts/ros-deps.sh failed (it needs python3 with venv and pip, and network access to PyPI once):\n{}",
+            text(&o.stderr)
+        );
+        PathBuf::from(text(&o.stdout).trim())
+    })
+}
+
+fn py(script: &str, args: &[&str]) -> String {
+    let o = Command::new(python())
+        .arg(repo().join("scripts/ros").join(script))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{script} {args:?}: {}", text(&o.stderr));
+    text(&o.stdout)
+}
+
+/// A 130 s calibration drive (the same as tests/calibrate.rs uses).
+fn calibration_drive() -> &'static Path {
+    static D: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    D.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let o = twindrive(&[
+            "simulate",
+            "scenarios/calibration_drive.toml",
+            "--duration-s",
+            "130",
+            "--out",
+            s(&dir.path().join("sim")),
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        dir
+    })
+    .path()
+}
+
+fn calibrate(bag: &Path, out: &Path, extra: &[&str]) -> (std::process::Output, Option<Value>) {
+    let mut args = vec![
+        "calibrate",
+        "--bag",
+        s(bag),
+        "--initial",
+        NOMINAL,
+        "--time-offset",
+        "auto",
+        "--out",
+        s(out),
+    ];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&NOISE);
+    let o = twindrive(&args);
+    let json = std::fs::read(out)
+        .ok()
+        .map(|b| serde_json::from_slice(&b).unwrap());
+    (o, json)
+}
+
+fn assert_recovered(j: &Value, offset_s: f64) {
+    let p = ["left_diameter_m", "right_diameter_m", "wheelbase_m"].map(|k| j[k].as_f64().unwrap());
+    for i in 0..3 {
+        assert!((p[i] / TRUTH[i] - 1.0).abs() < 1e-3, "{p:?} vs {TRUTH:?}");
+    }
+    let found = j["clock_offset_s"].as_f64().unwrap();
+    assert!(
+        (found - offset_s).abs() < 0.01,
+        "clock offset {found} vs {offset_s}"
+    );
+    assert_eq!(j["identifiability"]["well_determined"], true);
+}
+
+#[test]
+fn recordings_written_by_rosbags_and_mcap_ros2_calibrate_to_the_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = calibration_drive().join("sim");
+    let lag = LAG_S.to_string();
+
+    // rosbags: a bag directory (metadata v9), joint positions, TF reference.
+    let bag = tmp.path().join("tf_bag");
+    py(
+        "make_bag.py",
+        &[
+            s(&sim),
+            s(&bag),
+            "--writer",
+            "rosbags",
+            "--robot-clock-lag-s",
+            &lag,
+        ],
+    );
+    let out = tmp.path().join("a/calib.json");
+    let mut extra = JOINTS.to_vec();
+    extra.extend(["--pose-topic", "/tf", "--pose-frame", "robot"]);
+    let (o, j) = calibrate(&bag, &out, &extra);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let j = j.unwrap();
+    assert_recovered(&j, LAG_S);
+    assert_eq!(j["data"]["time_origin_s"], 1.7e9);
+
+    // mcap-ros2-support: one file, joint velocities only, PoseStamped.
+    let file = tmp.path().join("pose.mcap");
+    py(
+        "make_bag.py",
+        &[
+            s(&sim),
+            s(&file),
+            "--writer",
+            "mcap_ros2",
+            "--robot-clock-lag-s",
+            &lag,
+        ],
+    );
+    let out = tmp.path().join("b/calib.json");
+    let mut extra = JOINTS.to_vec();
+    extra.extend(["--pose-topic", "/mocap/pose"]);
+    let (o, j) = calibrate(&file, &out, &extra);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_recovered(&j.unwrap(), LAG_S);
+
+    // Without the offset search the lag shows (the run still completes).
+    let out = tmp.path().join("c/calib.json");
+    let mut args = vec![
+        "calibrate",
+        "--bag",
+        s(&file),
+        "--initial",
+        NOMINAL,
+        "--out",
+        s(&out),
+        "--pose-topic",
+        "/mocap/pose",
+    ];
+    args.extend(JOINTS);
+    args.extend(NOISE);
+    let o = twindrive(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let j: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(j["clock_offset_s"], 0.0);
+}
+
+#[test]
+fn twindrive_calibrates_from_its_own_exported_bag() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bag = tmp.path().join("drive");
+    let o = twindrive(&[
+        "rosbag",
+        s(&calibration_drive().join("sim")),
+        "--out",
+        s(&bag),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = tmp.path().join("calib.json");
+    let mut args = JOINTS.to_vec();
+    args.extend(["--pose-topic", "/tracker/pose"]);
+    let (o, j) = calibrate(&bag, &out, &args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_recovered(&j.unwrap(), 0.0);
+}
+
+fn close(a: &Value, b: f64, tol: f64) -> bool {
+    a.as_f64().is_some_and(|a| (a - b).abs() <= tol)
+}
+
+fn yaw(q: &Value) -> f64 {
+    let f = |k: &str| q[k].as_f64().unwrap();
+    (2.0 * (f("w") * f("z") + f("x") * f("y"))).atan2(1.0 - 2.0 * (f("y").powi(2) + f("z").powi(2)))
+}
+
+#[test]
+fn exported_bags_decode_with_independent_decoders_to_the_log() {
+    let f = fixture();
+    let log = twindrive_log::read_log_dir(&f.path("wf")).unwrap();
+    let plan: Value =
+        serde_json::from_slice(&std::fs::read(f.path("plan/plan.json")).unwrap()).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    for distro in ["jazzy", "humble"] {
+        let bag = tmp.path().join(format!("wf_{distro}"));
+        let o = twindrive(&[
+            "rosbag",
+            s(&f.path("wf")),
+            "--out",
+            s(&bag),
+            "--plan",
+            s(&f.path("plan/plan.json")),
+            "--distro",
+            distro,
+            "--start-time",
+            "1700000000.5",
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        assert!(bag.join(format!("wf_{distro}_0.mcap")).is_file());
+        let found: Value = serde_json::from_str(&py("check_bag.py", &[s(&bag), distro])).unwrap();
+        let topic = |t: &str| -> &Value {
+            let v = &found[t];
+            assert!(
+                v.is_object(),
+                "no topic {t} in {:?}",
+                found.as_object().unwrap().keys()
+            );
+            v
+        };
+        let count = |t: &str| topic(t)["count"].as_u64().unwrap() as usize;
+
+        let encoder_steps: Vec<&twindrive_log::StepRecord> = log
+            .steps
+            .iter()
+            .filter(|s| s.encoder_ticks.is_some())
+            .collect();
+        let last_enc = encoder_steps.last().unwrap();
+        let tracker_steps = log.steps.iter().filter(|s| s.tracker.is_some()).count();
+        for t in [
+            "/joint_states",
+            "/odom",
+            "/ground_truth",
+            "/cmd_vel",
+            "/bump",
+        ] {
+            assert_eq!(count(t), encoder_steps.len(), "{t}");
+        }
+        assert_eq!(count("/tracker/pose"), tracker_steps);
+        assert_eq!(count("/tf"), encoder_steps.len() + tracker_steps);
+
+        // Stamps: the log's time plus --start-time.
+        let js = &topic("/joint_states")["last"];
+        let stamp = js["header"]["stamp"]["sec"].as_f64().unwrap()
+            + js["header"]["stamp"]["nanosec"].as_f64().unwrap() * 1e-9;
+        assert!(
+            (stamp - (1_700_000_000.5 + last_enc.t_s())).abs() < 1e-6,
+            "{stamp}"
+        );
+        assert_eq!(
+            js["name"],
+            serde_json::json!(["wheel_left_joint", "wheel_right_joint"])
+        );
+        let k = std::f64::consts::TAU / f64::from(log.header.ticks_per_rev);
+        let [l, r] = last_enc.encoder_ticks.unwrap();
+        assert!(close(&js["position"][0], l as f64 * k, 1e-12));
+        assert!(close(&js["position"][1], r as f64 * k, 1e-12));
+
+        let gt = &topic("/ground_truth")["last"]["pose"]["pose"];
+        assert!(close(
+            &gt["position"]["x"],
+            last_enc.ground_truth.x_m,
+            1e-12
+        ));
+        assert!(close(
+            &gt["position"]["y"],
+            last_enc.ground_truth.y_m,
+            1e-12
+        ));
+        let dh = twindrive_kinematics::wrap_angle(
+            yaw(&gt["orientation"]) - last_enc.ground_truth.heading_rad,
+        );
+        assert!(dh.abs() < 1e-9, "{dh}");
+
+        // Dead reckoning with the nominal parameters stays near the truth
+        // on a 30 s drive (in the odom frame, which starts at the start pose).
+        let od = &topic("/odom")["last"];
+        assert_eq!(od["header"]["frame_id"], "odom");
+        assert_eq!(od["child_frame_id"], "base_link");
+
+        // Every bump sample has one BUMP detection.
+        let bumps = encoder_steps.iter().filter(|s| s.bump).count();
+        assert!(bumps > 0, "the case study bumps");
+        let bump_last = &topic("/bump")["last"];
+        assert_eq!(
+            bump_last["detections"].as_array().unwrap().len(),
+            usize::from(last_enc.bump)
+        );
+
+        // One Range topic per single-beam sensor, INFRARED, with the log's readings.
+        for (i, sensor) in log.header.range_sensors.iter().enumerate() {
+            let name = format!("/{}", sensor.name);
+            let readings: Vec<f64> = (0..log.steps.len())
+                .filter_map(|k| log.range_reading(k, i).map(|r| r[0]))
+                .collect();
+            assert_eq!(count(&name), readings.len(), "{name}");
+            let last = &topic(&name)["last"];
+            if sensor.beams == 1 {
+                assert_eq!(topic(&name)["type"], "sensor_msgs/msg/Range");
+                assert_eq!(last["radiation_type"], 1);
+                assert!(close(
+                    &last["range"],
+                    f64::from(*readings.last().unwrap() as f32),
+                    0.0
+                ));
+                assert_eq!(last["header"]["frame_id"], format!("{}_link", sensor.name));
+                assert_eq!(last.get("variance").is_some(), distro == "jazzy", "{last}");
+            } else {
+                assert_eq!(topic(&name)["type"], "sensor_msgs/msg/LaserScan");
+            }
+        }
+        let statics = topic("/tf_static")["first"]["transforms"]
+            .as_array()
+            .unwrap()
+            .clone();
+        assert_eq!(statics.len(), log.header.range_sensors.len());
+        for (t, sensor) in statics.iter().zip(&log.header.range_sensors) {
+            assert_eq!(t["header"]["frame_id"], "base_link");
+            assert!(close(
+                &t["transform"]["translation"]["x"],
+                sensor.mount.x_m,
+                1e-12
+            ));
+            assert!((yaw(&t["transform"]["rotation"]) - sensor.mount.heading_rad).abs() < 1e-9);
+        }
+
+        // The map: walls drawn as occupied cells, the rest free.
+        let map = &topic("/map")["first"];
+        let cells = &map["data"];
+        let n = cells["len"].as_u64().unwrap();
+        assert_eq!(
+            n,
+            map["info"]["width"].as_u64().unwrap() * map["info"]["height"].as_u64().unwrap()
+        );
+        let occupied = cells["counts"]["100"].as_u64().unwrap_or(0);
+        assert!(occupied > 100 && occupied < n / 2, "{occupied} of {n}");
+
+        // The plan, latched, with the plan's poses.
+        let path = &topic("/plan")["first"];
+        let poses = path["poses"].as_array().unwrap();
+        let samples = plan["samples"].as_array().unwrap();
+        assert_eq!(poses.len(), samples.len());
+        let lp = &poses.last().unwrap()["pose"]["position"];
+        assert!(close(
+            &lp["x"],
+            samples.last().unwrap()["x_m"].as_f64().unwrap(),
+            1e-12
+        ));
+    }
+    // The metadata says which distribution's definitions were used.
+    let yaml = std::fs::read_to_string(tmp.path().join("wf_humble/metadata.yaml")).unwrap();
+    assert!(yaml.contains("ros_distro: humble"), "{yaml}");
+}
+
+#[test]
+fn bad_recordings_and_wrong_names_say_which_topic_and_message() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bag = tmp.path().join("drive");
+    let o = twindrive(&[
+        "rosbag",
+        s(&calibration_drive().join("sim")),
+        "--out",
+        s(&bag),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = tmp.path().join("res/calib.json");
+    let run = |extra: &[&str]| {
+        let (o, j) = calibrate(&bag, &out, extra);
+        assert!(!o.status.success(), "{extra:?} should fail");
+        assert!(j.is_none(), "no output on failure");
+        text(&o.stderr)
+    };
+    let run_joints = |pose: &[&str]| {
+        let mut args = JOINTS.to_vec();
+        args.extend_from_slice(pose);
+        run(&args)
+    };
+    let e = run(&[
+        "--left-joint",
+        "left",
+        "--right-joint",
+        "right",
+        "--pose-topic",
+        "/tracker/pose",
+    ]);
+    assert!(
+        e.contains("topic `/joint_states`") && e.contains("wheel_left_joint, wheel_right_joint"),
+        "{e}"
+    );
+    let e = run_joints(&["--pose-topic", "/mocap"]);
+    assert!(
+        e.contains("topic `/mocap`: not in the bag")
+            && e.contains("/tracker/pose (geometry_msgs/msg/PoseStamped"),
+        "{e}"
+    );
+    let e = run_joints(&["--pose-topic", "/tf"]);
+    assert!(e.contains("--pose-frame"), "{e}");
+    let e = run_joints(&["--pose-topic", "/tf", "--pose-frame", "robot"]);
+    assert!(
+        e.contains("odom -> base_link") && e.contains("map -> odom"),
+        "{e}"
+    );
+    let e = run(&[
+        "--ticks-topic",
+        "/joint_states",
+        "--left-field",
+        "name[0]",
+        "--right-field",
+        "position[1]",
+        "--ticks-per-rev",
+        "512",
+        "--pose-topic",
+        "/tracker/pose",
+    ]);
+    assert!(e.contains("`name[0]` is not a number field"), "{e}");
+
+    // A recording cut short (no summary, no footer).
+    let file = tmp.path().join("pose.mcap");
+    py(
+        "make_bag.py",
+        &[
+            s(&calibration_drive().join("sim")),
+            s(&file),
+            "--writer",
+            "mcap_ros2",
+        ],
+    );
+    let bytes = std::fs::read(&file).unwrap();
+    let broken = tmp.path().join("cut.mcap");
+    std::fs::write(&broken, &bytes[..bytes.len() / 2]).unwrap();
+    let mut args = JOINTS.to_vec();
+    args.extend(["--pose-topic", "/mocap/pose"]);
+    let (o, j) = calibrate(&broken, &out, &args);
+    assert!(!o.status.success() && j.is_none());
+    let e = text(&o.stderr);
+    assert!(e.contains("cut.mcap") && e.contains("mcap recover"), "{e}");
+
+    // A message whose bytes end early: named by topic and index.
+    let bad = tmp.path().join("bad.mcap");
+    write_truncated_joint_state(&bad, 7);
+    let (o, j) = calibrate(&bad, &out, &args);
+    assert!(!o.status.success() && j.is_none());
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("topic `/joint_states`, message 7") && e.contains("ends before"),
+        "{e}"
+    );
+    assert!(!e.contains("panicked"), "{e}");
+}
+
+/// Ten JointState messages and a pose stream, message `bad` cut short.
+fn write_truncated_joint_state(path: &Path, bad: usize) {
+    use twindrive_ros::msgs::{self, Distro, Header, JointState, PoseStamped, RosMessage};
+    let mut w = mcap::Writer::new(std::io::BufWriter::new(
+        std::fs::File::create(path).unwrap(),
+    ))
+    .unwrap();
+    let channel = |w: &mut mcap::Writer<_>, topic: &str, ty: &str| {
+        let def = msgs::definition(ty, Distro::Jazzy).unwrap();
+        let schema = w.add_schema(ty, "ros2msg", def.as_bytes()).unwrap();
+        w.add_channel(schema, topic, "cdr", &Default::default())
+            .unwrap()
+    };
+    let js = channel(&mut w, "/joint_states", JointState::TYPE);
+    let ps = channel(&mut w, "/mocap/pose", PoseStamped::TYPE);
+    for k in 0..10u64 {
+        let t = 1_000_000_000 + k * 100_000_000;
+        let mut bytes = msgs::encode(&JointState {
+            header: Header::new(t, ""),
+            name: vec!["wheel_left_joint".into(), "wheel_right_joint".into()],
+            position: vec![k as f64, k as f64],
+            velocity: vec![],
+            effort: vec![],
+        });
+        if k as usize == bad {
+            bytes.truncate(bytes.len() - 20);
+        }
+        let header = |channel_id| mcap::records::MessageHeader {
+            channel_id,
+            sequence: k as u32,
+            log_time: t,
+            publish_time: t,
+        };
+        w.write_to_known_channel(&header(js), &bytes).unwrap();
+        let pose = msgs::encode(&PoseStamped {
+            header: Header::new(t, "world"),
+            pose: msgs::Pose::planar(0.1 * k as f64, 0.0, 0.0),
+        });
+        w.write_to_known_channel(&header(ps), &pose).unwrap();
+    }
+    w.finish().unwrap();
+}

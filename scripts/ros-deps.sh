@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# The independent ROS 2 implementations the ROS interop tests check
+# twindrive against: `rosbags` (a pure-Python rosbag2 reader/writer with its
+# own CDR serializer and the standard message types of each distribution)
+# and `mcap-ros2-support` (Foxglove's decoder, which reads the definitions
+# stored in the file). Pinned, in .venv-ros at the repository root. Prints
+# the venv's python. Does nothing when they are installed.
+set -euo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+VENV=$ROOT/.venv-ros
+PINS=(rosbags==0.11.9 mcap-ros2-support==0.6.0 mcap==1.6.0)
+
+if [[ ! -x $VENV/bin/python ]]; then
+    python3 -m venv "$VENV"
+fi
+if ! "$VENV/bin/python" -m pip freeze 2>/dev/null | grep -qx "rosbags==0.11.9" \
+    || ! "$VENV/bin/python" -m pip freeze 2>/dev/null | grep -qx "mcap-ros2-support==0.6.0"; then
+    echo "ros-deps: installing ${PINS[*]} into $VENV" >&2
+    "$VENV/bin/python" -m pip install -q --disable-pip-version-check "${PINS[@]}" >&2
+fi
+echo "$VENV/bin/python"
