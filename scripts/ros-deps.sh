@@ -1,20 +1,25 @@
 #!/usr/bin/env bash
 # The independent ROS 2 implementations the ROS interop tests check
 # twindrive against: `rosbags` (a pure-Python rosbag2 reader/writer with its
-# own CDR serializer and the standard message types of each distribution)
-# and `mcap-ros2-support` (Foxglove's decoder, which reads the definitions
-# stored in the file). Pinned, in .venv-ros at the repository root. Prints
+# own CDR serializer, RIHS01 type hashes and the standard message types of
+# each distribution), `mcap-ros2-support` (Foxglove's decoder, which reads
+# the definitions stored in the file) and `eclipse-zenoh` (the fake ROS 2
+# driver's session). Pinned, in .venv-ros at the repository root. Prints
 # the venv's python. Does nothing when they are installed.
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv-ros
-PINS=(rosbags==0.11.9 mcap-ros2-support==0.6.0 mcap==1.6.0)
+PINS=(rosbags==0.11.9 mcap-ros2-support==0.6.0 mcap==1.6.0 eclipse-zenoh==1.10.2)
 
 if [[ ! -x $VENV/bin/python ]]; then
     python3 -m venv "$VENV"
 fi
-if ! "$VENV/bin/python" -m pip freeze 2>/dev/null | grep -qx "rosbags==0.11.9" \
-    || ! "$VENV/bin/python" -m pip freeze 2>/dev/null | grep -qx "mcap-ros2-support==0.6.0"; then
+installed=$("$VENV/bin/python" -m pip freeze 2>/dev/null || true)
+missing=0
+for pin in "${PINS[@]}"; do
+    grep -qx "$pin" <<<"$installed" || missing=1
+done
+if [[ $missing == 1 ]]; then
     echo "ros-deps: installing ${PINS[*]} into $VENV" >&2
     "$VENV/bin/python" -m pip install -q --disable-pip-version-check "${PINS[@]}" >&2
 fi

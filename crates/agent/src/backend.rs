@@ -1,8 +1,9 @@
 //! The boundary between the agent and the robot it drives: wheel commands
 //! out; encoder counts, range readings, the bumper and any absolute pose in.
-//! One backend today, a simulator running the robot's **site** (its own
-//! scenario, which the master never sees); a backend for real hardware
-//! implements the same trait and nothing else changes.
+//! Two backends: a simulator running the robot's **site** (its own
+//! scenario, which the master never sees), and a ROS 2 robot
+//! (`crate::ros`, carried over zenoh by `twindrive_net::ros`); both
+//! implement the same trait and nothing else changes.
 
 use twindrive_kinematics::Pose;
 use twindrive_log::{LogHeader, StepRecord};
@@ -28,6 +29,9 @@ pub struct Reading {
     pub fresh_ranges_m: Vec<f64>,
     /// Contact stopped the robot this period, where the backend can tell.
     pub blocked: bool,
+    /// A sensor the robot steers by went silent: the backend has stopped
+    /// the wheels, and the executive hands back.
+    pub fault: Option<String>,
 }
 
 /// A robot the agent can drive.
@@ -111,6 +115,7 @@ impl RobotBackend for SimBackend {
             record: *r,
             fresh_ranges_m: self.out.ranges.clone(),
             blocked: self.out.blocked,
+            fault: None,
         })
     }
 

@@ -47,16 +47,36 @@ pub enum Stop {
     RangeResidual { median_residual_m: f64 },
     /// Nothing heard from the master for this long.
     DeadMan { silent_s: f64 },
+    /// Hand-back: the robot lost a sensor it steers by (a silent
+    /// `/joint_states`); the backend has already stopped the wheels.
+    SensorFault { what: String },
 }
+
+/// The reasons (as [`Stop::reason`] names them) that hand control back.
+pub const HANDBACK_REASONS: [&str; 4] = [
+    "unexpected_bump",
+    "deviation",
+    "range_residual",
+    "sensor_fault",
+];
 
 impl Stop {
     /// Whether control goes back to the operator (reality departed from
-    /// the twin).
+    /// the twin, or the robot lost a sensor it steers by).
     pub fn is_handback(&self) -> bool {
-        matches!(
-            self,
-            Stop::UnexpectedBump | Stop::Deviation { .. } | Stop::RangeResidual { .. }
-        )
+        HANDBACK_REASONS.contains(&self.reason())
+    }
+
+    /// The reason's name on the wire and in journals.
+    pub fn reason(&self) -> &'static str {
+        match self {
+            Stop::Finished => "finished",
+            Stop::UnexpectedBump => "unexpected_bump",
+            Stop::Deviation { .. } => "deviation",
+            Stop::RangeResidual { .. } => "range_residual",
+            Stop::DeadMan { .. } => "dead_man",
+            Stop::SensorFault { .. } => "sensor_fault",
+        }
     }
 }
 
@@ -177,6 +197,9 @@ impl Executive {
             || self.plan.samples[lo..hi.max(lo)]
                 .iter()
                 .any(|s| s.expected_bump);
+        if let Some(what) = &reading.fault {
+            return Some(Stop::SensorFault { what: what.clone() });
+        }
         if reading.bump && !predicted {
             return Some(Stop::UnexpectedBump);
         }

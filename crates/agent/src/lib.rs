@@ -17,6 +17,7 @@ pub mod executive;
 pub mod master;
 pub mod operator;
 pub mod robot;
+pub mod ros;
 pub mod twin;
 
 use twindrive_link::upload::ChunkStore;

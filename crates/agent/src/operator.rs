@@ -410,10 +410,7 @@ impl<S: ChunkStore> Operator<S> {
             }
             PlanPhase::Stopped { reason } => {
                 self.mark_executed(transfer);
-                let handback = matches!(
-                    reason.as_str(),
-                    "unexpected_bump" | "deviation" | "range_residual"
-                );
+                let handback = crate::executive::HANDBACK_REASONS.contains(&reason.as_str());
                 self.note("stopped", reason.clone());
                 if current && !handback {
                     self.report.failure = Some(format!("the robot stopped: {reason}"));

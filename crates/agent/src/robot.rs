@@ -726,7 +726,7 @@ impl<B: RobotBackend> RobotAgent<B> {
         let plan_t_s = r.window.back().map_or(0.0, |w| w.plan_t_s);
         let reason = match (&stop, &note) {
             (_, Some(n)) => n.clone(),
-            (Some(s), None) => stop_reason(s),
+            (Some(s), None) => s.reason().to_string(),
             (None, None) => "stopped".into(),
         };
         if matches!(stop, Some(Stop::Finished)) && note.is_none() {
@@ -781,7 +781,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             };
             let handback = Handback {
                 plan: r.transfer,
-                reason: stop_reason(s),
+                reason: s.reason().to_string(),
                 plan_t_s,
                 progress: r.exec.progress() as u32,
                 pose: self.pose,
@@ -984,17 +984,6 @@ impl<B: RobotBackend> RobotAgent<B> {
         .flatten()
         .min()
     }
-}
-
-fn stop_reason(stop: &Stop) -> String {
-    match stop {
-        Stop::Finished => "finished",
-        Stop::UnexpectedBump => "unexpected_bump",
-        Stop::Deviation { .. } => "deviation",
-        Stop::RangeResidual { .. } => "range_residual",
-        Stop::DeadMan { .. } => "dead_man",
-    }
-    .into()
 }
 
 /// Feeds one period's encoders and absolute pose to the online EKF,

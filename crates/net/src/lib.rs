@@ -16,6 +16,8 @@
 //! number, time stamp); chunking is the protocol's own, so zenoh never
 //! fragments a large message.
 
+pub mod ros;
+
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::path::Path;

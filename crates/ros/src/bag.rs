@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::msgs::{self, Distro, RosMessage};
+use crate::qos::Qos;
 use crate::schema::Schema;
 use crate::value::Value;
 
@@ -257,41 +258,6 @@ impl Bag {
     }
 }
 
-/// rmw QoS policy values as rosbag2 (metadata version 8) writes them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Qos {
-    pub reliable: bool,
-    /// Late joiners get the last message (latched: `/map`, `/tf_static`).
-    pub transient_local: bool,
-    pub depth: u32,
-}
-
-impl Qos {
-    pub const SENSOR: Qos = Qos {
-        reliable: true,
-        transient_local: false,
-        depth: 10,
-    };
-    pub const LATCHED: Qos = Qos {
-        reliable: true,
-        transient_local: true,
-        depth: 1,
-    };
-
-    /// The `offered_qos_profiles` text: a YAML list of one profile.
-    pub fn yaml(&self) -> String {
-        // rmw enums: history 1 keep-last; reliability 1 reliable, 2 best
-        // effort; durability 1 transient local, 2 volatile; liveliness 1
-        // automatic. Durations 0 are the rmw defaults (infinite).
-        format!(
-            "- history: 1\n  depth: {}\n  reliability: {}\n  durability: {}\n  deadline:\n    sec: 0\n    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n  avoid_ros_namespace_conventions: false",
-            self.depth,
-            if self.reliable { 1 } else { 2 },
-            if self.transient_local { 1 } else { 2 },
-        )
-    }
-}
-
 /// A topic handle from [`BagWriter::topic`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TopicId(usize);
@@ -299,6 +265,8 @@ pub struct TopicId(usize);
 struct WrittenTopic {
     name: String,
     type_name: &'static str,
+    /// RIHS01 (Jazzy on; Humble has no type hashes).
+    type_hash: String,
     qos: Qos,
     channel: u16,
     count: u64,
@@ -336,22 +304,32 @@ impl<W: Write + Seek> BagWriter<W> {
 
     /// Declares `name` with messages of type `T`.
     pub fn topic<T: RosMessage>(&mut self, name: &str, qos: Qos) -> mcap::McapResult<TopicId> {
+        let text =
+            msgs::definition(T::TYPE, self.distro).expect("every RosMessage has a definition");
         let schema = match self.schemas.get(T::TYPE) {
             Some(id) => *id,
             None => {
-                let text = msgs::definition(T::TYPE, self.distro)
-                    .expect("every RosMessage has a definition");
                 let id = self.mcap.add_schema(T::TYPE, "ros2msg", text.as_bytes())?;
                 self.schemas.insert(T::TYPE, id);
                 id
             }
         };
+        let type_hash = match self.distro {
+            Distro::Humble => String::new(),
+            Distro::Jazzy => Schema::parse(T::TYPE, &text)
+                .expect("the built-in definitions parse")
+                .type_hash(),
+        };
         let mut meta = BTreeMap::new();
         meta.insert("offered_qos_profiles".to_string(), qos.yaml());
+        if !type_hash.is_empty() {
+            meta.insert("topic_type_hash".to_string(), type_hash.clone());
+        }
         let channel = self.mcap.add_channel(schema, name, "cdr", &meta)?;
         self.topics.push(WrittenTopic {
             name: name.to_string(),
             type_name: T::TYPE,
+            type_hash,
             qos,
             channel,
             count: 0,
@@ -437,7 +415,7 @@ impl<W: Write + Seek> BagWriter<W> {
             let _ = writeln!(y, "        type: {}", t.type_name);
             let _ = writeln!(y, "        serialization_format: cdr");
             let _ = writeln!(y, "        offered_qos_profiles: {}", quote(&t.qos.yaml()));
-            let _ = writeln!(y, "        type_description_hash: \"\"");
+            let _ = writeln!(y, "        type_description_hash: {}", quote(&t.type_hash));
             let _ = writeln!(y, "      message_count: {}", t.count);
         }
         let _ = writeln!(y, "  compression_format: \"\"");
@@ -470,8 +448,10 @@ mod tests {
         let path = dir.join("b_0.mcap");
         let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
         let mut w = BagWriter::new(file, "b_0.mcap", Distro::Jazzy).unwrap();
-        let js = w.topic::<JointState>("/joint_states", Qos::SENSOR).unwrap();
-        let pose = w.topic::<PoseStamped>("/pose", Qos::SENSOR).unwrap();
+        let js = w
+            .topic::<JointState>("/joint_states", Qos::DEFAULT)
+            .unwrap();
+        let pose = w.topic::<PoseStamped>("/pose", Qos::DEFAULT).unwrap();
         for k in 0..5u64 {
             let t = 1_000_000_000 + k * 10_000_000;
             w.write(

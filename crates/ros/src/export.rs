@@ -24,12 +24,13 @@ use std::io::{Seek, Write};
 use twindrive_kinematics::{DiffDriveParams, Pose, arc_step_wheels};
 use twindrive_log::{MissionLog, WorldMap};
 
-use crate::bag::{BagWriter, Qos};
+use crate::bag::BagWriter;
 use crate::msgs::{
     Covariance, Distro, HazardDetection, HazardDetectionVector, Header, JointState, LaserScan,
     MapMetaData, OccupancyGrid, Odometry, Path, PoseStamped, PoseWithCovariance, Range, TFMessage,
     Time, TransformStamped, Twist, TwistWithCovariance,
 };
+use crate::qos::Qos;
 
 /// Joint names of the wheels in `/joint_states` (as TurtleBot 3 names them).
 pub const LEFT_WHEEL_JOINT: &str = "wheel_left_joint";
@@ -101,22 +102,22 @@ pub fn write_log_bag<W: Write + Seek>(
         Some(_) => Some(bag.topic::<Path>("/plan", Qos::LATCHED)?),
         None => None,
     };
-    let joints = bag.topic::<JointState>("/joint_states", Qos::SENSOR)?;
-    let odom = bag.topic::<Odometry>("/odom", Qos::SENSOR)?;
-    let truth = bag.topic::<Odometry>("/ground_truth", Qos::SENSOR)?;
-    let tracker = bag.topic::<PoseStamped>("/tracker/pose", Qos::SENSOR)?;
-    let cmd_vel = bag.topic::<Twist>("/cmd_vel", Qos::SENSOR)?;
-    let bump = bag.topic::<HazardDetectionVector>("/bump", Qos::SENSOR)?;
-    let tf = bag.topic::<TFMessage>("/tf", Qos::SENSOR)?;
+    let joints = bag.topic::<JointState>("/joint_states", Qos::DEFAULT)?;
+    let odom = bag.topic::<Odometry>("/odom", Qos::DEFAULT)?;
+    let truth = bag.topic::<Odometry>("/ground_truth", Qos::DEFAULT)?;
+    let tracker = bag.topic::<PoseStamped>("/tracker/pose", Qos::DEFAULT)?;
+    let cmd_vel = bag.topic::<Twist>("/cmd_vel", Qos::DEFAULT)?;
+    let bump = bag.topic::<HazardDetectionVector>("/bump", Qos::DEFAULT)?;
+    let tf = bag.topic::<TFMessage>("/tf", Qos::DEFAULT)?;
     let sensors: Vec<_> = h
         .range_sensors
         .iter()
         .map(|s| {
             let name = format!("/{}", s.name);
             if s.beams == 1 {
-                bag.topic::<Range>(&name, Qos::SENSOR)
+                bag.topic::<Range>(&name, Qos::DEFAULT)
             } else {
-                bag.topic::<LaserScan>(&name, Qos::SENSOR)
+                bag.topic::<LaserScan>(&name, Qos::DEFAULT)
             }
         })
         .collect::<Result<_, _>>()?;

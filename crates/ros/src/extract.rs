@@ -414,15 +414,7 @@ pub fn pose_track(
         }
         (None, _) => None,
     };
-    let p = |s: &str| schema.path(&format!("{pose_prefix}.{s}")).map_err(terr);
-    let fields = [
-        p("position.x")?,
-        p("position.y")?,
-        p("orientation.x")?,
-        p("orientation.y")?,
-        p("orientation.z")?,
-        p("orientation.w")?,
-    ];
+    let fields = crate::live::pose_paths(&schema, pose_prefix).map_err(terr)?;
     let header = header_stamp(&schema);
     let mut raw = Vec::new();
     let mut skipped = 0;
@@ -438,7 +430,7 @@ pub fn pose_track(
             .iter()
             .map(|f| m.value.at(f).and_then(Value::as_f64).unwrap_or(f64::NAN))
             .collect();
-        raw.push((t, planar(&v)?));
+        raw.push((t, crate::live::planar_pose(&v)?));
         Ok(())
     })?;
     check_stamped(bag, topic, &raw, stamps)?;
@@ -536,7 +528,7 @@ fn tf_track(
                 .iter()
                 .map(|i| get(tr, i).and_then(|v| v.as_f64()).unwrap_or(f64::NAN))
                 .collect();
-            raw.push((t, planar(&v)?));
+            raw.push((t, crate::live::planar_pose(&v)?));
             found = true;
         }
         if !found {
@@ -557,27 +549,6 @@ fn tf_track(
     }
     check_stamped(bag, topic, &raw, stamps)?;
     finish_poses(bag, topic, raw, skipped, "tf2_msgs/msg/TFMessage".into())
-}
-
-/// x, y and heading from position and quaternion; refuses a quaternion
-/// that is not a rotation.
-fn planar(v: &[f64]) -> Result<(f64, f64, f64), String> {
-    if v.iter().any(|x| !x.is_finite()) {
-        return Err("the pose has a missing or non-finite number".into());
-    }
-    let q = crate::msgs::Quaternion {
-        x: v[2],
-        y: v[3],
-        z: v[4],
-        w: v[5],
-    };
-    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
-    if (norm - 1.0).abs() > 1e-3 {
-        return Err(format!(
-            "the orientation quaternion has norm {norm:.4}, not 1 (an unset orientation?)"
-        ));
-    }
-    Ok((v[0], v[1], q.yaw_rad()))
 }
 
 fn finish_poses(
@@ -603,16 +574,19 @@ fn finish_poses(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bag::{BagWriter, Qos};
+    use crate::bag::BagWriter;
     use crate::msgs::*;
+    use crate::qos::Qos;
 
     fn bag(dir: &std::path::Path) -> Bag {
         let path = dir.join("t.mcap");
         let f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
         let mut w = BagWriter::new(f, "t.mcap", Distro::Jazzy).unwrap();
-        let js = w.topic::<JointState>("/joint_states", Qos::SENSOR).unwrap();
-        let tf = w.topic::<TFMessage>("/tf", Qos::SENSOR).unwrap();
-        let od = w.topic::<Odometry>("/odom", Qos::SENSOR).unwrap();
+        let js = w
+            .topic::<JointState>("/joint_states", Qos::DEFAULT)
+            .unwrap();
+        let tf = w.topic::<TFMessage>("/tf", Qos::DEFAULT).unwrap();
+        let od = w.topic::<Odometry>("/odom", Qos::DEFAULT).unwrap();
         for k in 0..20u64 {
             let t = 5_000_000_000 + k * 100_000_000;
             // Stamps 1 s behind the recorder's clock.

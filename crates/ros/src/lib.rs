@@ -8,12 +8,17 @@
 pub mod bag;
 pub mod export;
 pub mod extract;
+pub mod live;
 pub mod msgs;
+mod qos;
+pub mod rmw_zenoh;
 mod schema;
+mod type_hash;
 mod value;
 
-pub use bag::{Bag, BagError, BagWriter, MessageRef, Qos, TopicId, TopicInfo};
+pub use bag::{Bag, BagError, BagWriter, MessageRef, TopicId, TopicInfo};
 pub use msgs::{Distro, RosMessage};
+pub use qos::Qos;
 pub use schema::{
     Arity, Base, Field, FieldPath, FieldType, MessageType, Primitive, Schema, SchemaError,
     normalize_type_name,

@@ -52,6 +52,22 @@ const DEFINITIONS: &[(&str, &str, &[&str])] = &[
         &["builtin_interfaces/msg/Time"],
     ),
     ("std_msgs/msg/String", "string data\n", &[]),
+    ("std_msgs/msg/Bool", "bool data\n", &[]),
+    (
+        "std_msgs/msg/MultiArrayDimension",
+        "string label\nuint32 size\nuint32 stride\n",
+        &[],
+    ),
+    (
+        "std_msgs/msg/MultiArrayLayout",
+        "std_msgs/MultiArrayDimension[] dim\nuint32 data_offset\n",
+        &["std_msgs/msg/MultiArrayDimension"],
+    ),
+    (
+        "std_msgs/msg/Float64MultiArray",
+        "std_msgs/MultiArrayLayout layout\nfloat64[] data\n",
+        &["std_msgs/msg/MultiArrayLayout"],
+    ),
     (
         "geometry_msgs/msg/Point",
         "float64 x\nfloat64 y\nfloat64 z\n",
@@ -290,6 +306,34 @@ pub struct StringMsg {
     pub data: String,
 }
 message!(StringMsg, "std_msgs/msg/String");
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Bool {
+    pub data: bool,
+}
+message!(Bool, "std_msgs/msg/Bool");
+
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct MultiArrayDimension {
+    pub label: String,
+    pub size: u32,
+    pub stride: u32,
+}
+
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct MultiArrayLayout {
+    pub dim: Vec<MultiArrayDimension>,
+    pub data_offset: u32,
+}
+
+/// What a ros2_control `JointGroupVelocityController` takes: one velocity
+/// per joint, in the controller's joint order.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Float64MultiArray {
+    pub layout: MultiArrayLayout,
+    pub data: Vec<f64>,
+}
+message!(Float64MultiArray, "std_msgs/msg/Float64MultiArray");
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Vector3 {

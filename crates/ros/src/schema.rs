@@ -22,8 +22,10 @@ pub struct SchemaError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Primitive {
     Bool,
-    /// `byte` (an octet) and `char` (ROS 2 maps it to `uint8`).
+    /// `byte`: an octet.
     Byte,
+    /// `char`: ROS 2 maps it to `uint8`.
+    Char,
     I8,
     U8,
     I16,
@@ -40,7 +42,8 @@ impl Primitive {
     fn from_name(name: &str) -> Option<Self> {
         Some(match name {
             "bool" => Self::Bool,
-            "byte" | "char" => Self::Byte,
+            "byte" => Self::Byte,
+            "char" => Self::Char,
             "int8" => Self::I8,
             "uint8" => Self::U8,
             "int16" => Self::I16,
@@ -83,6 +86,8 @@ pub enum Arity {
 pub struct FieldType {
     pub base: Base,
     pub arity: Arity,
+    /// `N` of `string<=N` (the bytes on the wire are those of any string).
+    pub string_bound: Option<usize>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -216,6 +221,7 @@ impl Schema {
             if let Some(FieldType {
                 base: Base::Message(next),
                 arity: Arity::Single,
+                ..
             }) = last
             {
                 ty = next;
@@ -313,7 +319,15 @@ fn parse_type(
         }
     };
     // `string<=N` bounds only limit the length; they do not change the bytes.
-    let element = element.split("<=").next().unwrap_or(element);
+    let (element, string_bound) = match element.split_once("<=") {
+        Some((e, bound)) => (
+            e,
+            Some(bound.parse::<usize>().map_err(|_| {
+                format!("`{text}`: the string bound `{bound}` is not a whole number")
+            })?),
+        ),
+        None => (element, None),
+    };
     let base = if let Some(p) = Primitive::from_name(element) {
         Base::Primitive(p)
     } else if element == "string" {
@@ -332,7 +346,14 @@ fn parse_type(
             format!("the type `{element}` is neither a primitive nor defined in the schema (no `MSG: {full}` section)")
         })?)
     };
-    Ok(FieldType { base, arity })
+    if string_bound.is_some() && !matches!(base, Base::String | Base::WString) {
+        return Err(format!("`{text}`: only strings take a `<=N` length bound"));
+    }
+    Ok(FieldType {
+        base,
+        arity,
+        string_bound,
+    })
 }
 
 #[cfg(test)]

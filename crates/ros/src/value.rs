@@ -181,7 +181,7 @@ impl Schema {
         n: usize,
         de: &mut CdrDeserializer<'_, BO>,
     ) -> Result<Value, DecodeError> {
-        if let Base::Primitive(Primitive::U8 | Primitive::Byte) = base {
+        if let Base::Primitive(Primitive::U8 | Primitive::Byte | Primitive::Char) = base {
             let mut bytes = Vec::with_capacity(n.min(1 << 20));
             for _ in 0..n {
                 bytes.push(read::<u8, BO>(de, "a byte")?);
@@ -204,7 +204,7 @@ impl Schema {
         Ok(match base {
             Base::Primitive(p) => match p {
                 P::Bool => Value::Bool(read::<bool, BO>(de, "a bool")?),
-                P::Byte | P::U8 => Value::UInt(read::<u8, BO>(de, "a uint8")?.into()),
+                P::Byte | P::Char | P::U8 => Value::UInt(read::<u8, BO>(de, "a uint8")?.into()),
                 P::I8 => Value::Int(read::<i8, BO>(de, "an int8")?.into()),
                 P::I16 => Value::Int(read::<i16, BO>(de, "an int16")?.into()),
                 P::U16 => Value::UInt(read::<u16, BO>(de, "a uint16")?.into()),

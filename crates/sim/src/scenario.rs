@@ -26,6 +26,9 @@ pub struct ScenarioFile {
     pub bump: BumpSection,
     pub tracker: Option<TrackerSection>,
     pub controller: ControllerSection,
+    /// A robot site's ROS 2 drivers (`twindrive robot` reads this section
+    /// itself; the simulator ignores it).
+    pub ros: Option<toml::Table>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -170,6 +170,21 @@ pub enum Command {
     /// Writes DIR/metadata.yaml and DIR/<name>_0.mcap; `ros2 bag play DIR`
     /// plays it.
     Rosbag(RosbagArgs),
+    /// Run a site's simulator behind a pipe, as a stand-in for a robot's
+    /// hardware (scripts/ros/fake_driver.py puts ROS 2 drivers around it).
+    ///
+    /// Reads lines `LEFT_RAD_S RIGHT_RAD_S STEPS` on stdin; drives the site's
+    /// robot that many simulation steps with those wheel speeds and answers
+    /// each line with one JSON line: `t_s`, `wheel_rad` (cumulative wheel
+    /// angles from the encoders), `wheel_rad_s`, `bump`, `blocked` (during
+    /// those steps), `ranges_m` (the latest reading of every beam, null
+    /// before the first), `pose` (the true pose, x y heading). Ends at end
+    /// of input.
+    SiteSim {
+        /// The site scenario TOML.
+        #[arg(long, value_name = "SITE.toml")]
+        site: PathBuf,
+    },
     /// Measure what decoupling buys: direct against decoupled operation
     /// over latency and loss, the upload against the link's ideal, and one
     /// master supervising a fleet through a zenoh router.
@@ -331,7 +346,9 @@ pub struct RobotArgs {
     #[arg(long, value_name = "ID")]
     pub id: String,
     /// The site: the scenario the robot's simulator backend runs (its true
-    /// kinematics, noise and world, which the master never sees).
+    /// kinematics, noise and world, which the master never sees); with a
+    /// `[ros]` section, the robot is a ROS 2 robot driven through its own
+    /// drivers over rmw_zenoh, and the scenario describes it.
     #[arg(long, value_name = "SITE.toml")]
     pub site: PathBuf,
     /// A master's public key (from `twindrive keygen`) whose plans this
@@ -346,7 +363,8 @@ pub struct RobotArgs {
     /// Bytes per second the robot may send (status, hand-back, log back-fill).
     #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0)]
     pub telemetry_budget: f64,
-    /// Run the simulated site this many times faster than real time.
+    /// Run the simulated site this many times faster than real time (1 for
+    /// a ROS 2 robot).
     #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,
     /// Exit after this many seconds (default: run until stopped).

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{Proc, fixture, port, repo, text, twindrive};
+use common::{Proc, finish, fixture, port, repo, text, twindrive};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -137,26 +137,6 @@ impl Mission {
 
     fn report(&self) -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(self.out().join("report.json")).unwrap()).unwrap()
-    }
-}
-
-/// Waits for the master to exit (bounded); its exit code and stderr.
-fn finish(mut p: Proc, limit_s: f64) -> (Option<i32>, String) {
-    let start = Instant::now();
-    loop {
-        if let Some(status) = p.0.try_wait().unwrap() {
-            let mut err = String::new();
-            if let Some(mut e) = p.0.stderr.take() {
-                use std::io::Read;
-                let _ = e.read_to_string(&mut err);
-            }
-            return (status.code(), err);
-        }
-        assert!(
-            start.elapsed().as_secs_f64() < limit_s,
-            "the master did not finish in {limit_s} s"
-        );
-        std::thread::sleep(Duration::from_millis(100));
     }
 }
 

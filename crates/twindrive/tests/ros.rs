@@ -523,3 +523,278 @@ fn write_truncated_joint_state(path: &Path, bad: usize) {
     }
     w.finish().unwrap();
 }
+
+#[test]
+fn type_hashes_match_rosbags_for_every_message_twindrive_knows() {
+    let types: Vec<&str> = twindrive_ros::msgs::known_types().collect();
+    let theirs: Value = serde_json::from_str(&py("type_hashes.py", &types)).unwrap();
+    for t in types {
+        assert_eq!(
+            twindrive_ros::rmw_zenoh::type_hash(t).as_deref(),
+            theirs[t].as_str(),
+            "{t}"
+        );
+    }
+}
+
+/// A ROS 2 robot for the agent: a router for its ROS network, the fake
+/// driver (the site simulator behind rmw_zenoh, bytes by rosbags and
+/// eclipse-zenoh), the robot agent with a `[ros]` site, and a master.
+struct RosRobot {
+    dir: tempfile::TempDir,
+    _router: common::Proc,
+    driver: Option<common::Proc>,
+    robot: common::Proc,
+    robot_port: u16,
+}
+
+const ROS_SECTION: &str = r#"
+[ros]
+connect = ["tcp/127.0.0.1:PORT"]
+
+[ros.command]
+
+[ros.joint_states]
+left_joint = "wheel_left_joint"
+right_joint = "wheel_right_joint"
+timeout_s = 0.5
+
+[[ros.ranges]]
+topic = "side_ir"
+sensor = "side_ir"
+
+[ros.hazard]
+topic = "hazard_detection"
+type = "irobot_create_msgs/msg/HazardDetectionVector"
+
+[ros.odom]
+topic = "odom"
+type = "nav_msgs/msg/Odometry"
+"#;
+
+impl RosRobot {
+    fn start(driver_extra: &[&str]) -> Self {
+        use std::process::Stdio;
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let ros_port = common::port();
+        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap()
+            + &ROS_SECTION.replace("PORT", &ros_port.to_string());
+        std::fs::write(d.join("site.toml"), site).unwrap();
+        let bin = env!("CARGO_BIN_EXE_twindrive");
+        let router = common::Proc(
+            Command::new(bin)
+                .args(["router", "--listen", &format!("tcp/127.0.0.1:{ros_port}")])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap(),
+        );
+        let mut args: Vec<String> = [
+            repo().join("scripts/ros/fake_driver.py").to_str().unwrap(),
+            "--connect",
+            &format!("tcp/127.0.0.1:{ros_port}"),
+            "--site",
+            s(&d.join("site.toml")),
+            "--twindrive",
+            bin,
+            "--stats",
+            s(&d.join("driver.json")),
+            "--run-for",
+            "150",
+        ]
+        .iter()
+        .map(|a| a.to_string())
+        .collect();
+        args.extend(driver_extra.iter().map(|a| a.to_string()));
+        let driver = common::Proc(
+            Command::new(python())
+                .args(&args)
+                .stdout(Stdio::null())
+                .stderr(std::fs::File::create(d.join("driver.log")).unwrap())
+                .spawn()
+                .unwrap(),
+        );
+        let robot_port = common::port();
+        let robot = common::Proc(
+            Command::new(bin)
+                .args([
+                    "robot",
+                    "--id",
+                    "tb1",
+                    "--site",
+                    s(&d.join("site.toml")),
+                    "--trust",
+                    s(&fixture().path("keys/master.pub")),
+                    "--state-dir",
+                    s(&d.join("robot")),
+                    "--listen",
+                    &format!("tcp/127.0.0.1:{robot_port}"),
+                    "--run-for",
+                    "150",
+                ])
+                .stdout(Stdio::null())
+                .stderr(std::fs::File::create(d.join("robot.log")).unwrap())
+                .spawn()
+                .unwrap(),
+        );
+        Self {
+            dir,
+            _router: router,
+            driver: Some(driver),
+            robot,
+            robot_port,
+        }
+    }
+
+    /// Runs a master to the end: its exit code and report.
+    fn master(&self) -> (Option<i32>, Value) {
+        let out = self.dir.path().join("master");
+        let m = common::Proc(
+            Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                .args([
+                    "master",
+                    "--plan",
+                    s(&fixture().path("plan/plan.json")),
+                    "--key",
+                    s(&fixture().path("keys/master.key")),
+                    "--robot",
+                    "tb1",
+                    "--connect",
+                    &format!("tcp/127.0.0.1:{}", self.robot_port),
+                    "--out",
+                    s(&out),
+                    "--timeout",
+                    "90",
+                    "--log-wait",
+                    "5",
+                ])
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let (code, err) = common::finish(m, 120.0);
+        let report = std::fs::read(out.join("report.json"))
+            .map(|b| serde_json::from_slice(&b).unwrap())
+            .unwrap_or_else(|_| {
+                panic!("no report; master: {err}\nrobot: {}", self.log("robot.log"))
+            });
+        (code, report)
+    }
+
+    fn log(&self, name: &str) -> String {
+        std::fs::read_to_string(self.dir.path().join(name)).unwrap_or_default()
+    }
+
+    /// Stops the driver (SIGTERM: it writes its statistics) and reads them.
+    fn driver_stats(&mut self) -> Value {
+        let d = self.driver.take().unwrap();
+        let pid = d.0.id().to_string();
+        let _ = Command::new("kill").args(["-TERM", &pid]).status();
+        let path = self.dir.path().join("driver.json");
+        let start = std::time::Instant::now();
+        while !path.exists() {
+            assert!(
+                start.elapsed().as_secs() < 20,
+                "the fake driver wrote no statistics: {}",
+                self.log("driver.log")
+            );
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        drop(d);
+        serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+    }
+}
+
+#[test]
+fn a_plan_runs_on_a_ros2_robot_through_rmw_zenoh() {
+    let mut r = RosRobot::start(&[]);
+    let (code, report) = r.master();
+    assert_eq!(code, Some(0), "{report}\nrobot: {}", r.log("robot.log"));
+    assert_eq!(report["outcome"], "completed");
+    assert_eq!(report["collisions"], 0);
+    let _ = &r.robot;
+    let stats = r.driver_stats();
+    // The agent drove the robot through /cmd_vel, every sample with an
+    // rmw_zenoh attachment, numbered from 1.
+    let commands = stats["commands"].as_u64().unwrap();
+    assert!(commands > 200, "{stats}");
+    assert!(stats["moving_commands"].as_u64().unwrap() > 100, "{stats}");
+    assert_eq!(stats["bad_attachments"], 0);
+    assert_eq!(stats["decode_errors"], 0);
+    let seq: Vec<i64> = stats["sequence_numbers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_i64().unwrap())
+        .collect();
+    assert_eq!(seq[0], 1);
+    assert!(seq.windows(2).all(|w| w[1] > w[0]));
+    // rosbags' RIHS01 hashes are twindrive's.
+    for (t, h) in stats["type_hashes"].as_object().unwrap() {
+        assert_eq!(
+            twindrive_ros::rmw_zenoh::type_hash(t).as_deref(),
+            h.as_str(),
+            "{t}"
+        );
+    }
+    // The ROS graph sees the agent: its node, subscriptions and publisher.
+    let tokens: Vec<&str> = stats["liveliness"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    let js_hash = twindrive_ros::rmw_zenoh::type_hash("sensor_msgs/msg/JointState").unwrap();
+    let twist_hash = twindrive_ros::rmw_zenoh::type_hash("geometry_msgs/msg/Twist").unwrap();
+    for want in [
+        "/NN/%/%/twindrive_agent".to_string(),
+        format!("/MS/%/%/twindrive_agent/%joint_states/sensor_msgs::msg::dds_::JointState_/{js_hash}/"),
+        format!("/MP/%/%/twindrive_agent/%cmd_vel/geometry_msgs::msg::dds_::Twist_/{twist_hash}/"),
+        "/MS/%/%/twindrive_agent/%side_ir/sensor_msgs::msg::dds_::Range_/".to_string(),
+        "/MS/%/%/twindrive_agent/%hazard_detection/irobot_create_msgs::msg::dds_::HazardDetectionVector_/".to_string(),
+    ] {
+        assert!(
+            tokens.iter().any(|t| t.starts_with("@ros2_lv/0/") && t.contains(&want)),
+            "no token with {want} in {tokens:#?}"
+        );
+    }
+}
+
+#[test]
+fn silent_joint_states_stop_the_wheels_and_hand_back() {
+    let mut r = RosRobot::start(&["--stall-joints-after", "3"]);
+    let (code, report) = r.master();
+    assert_eq!(code, Some(3), "{report}\nrobot: {}", r.log("robot.log"));
+    assert_eq!(report["outcome"], "handed_back", "{report}");
+    let handback = &report["handbacks"][0];
+    assert!(handback.to_string().contains("sensor_fault"), "{handback}");
+    let stats = r.driver_stats();
+    assert!(stats["stalled_at_s"].as_f64().is_some(), "{stats}");
+    // After the driver hung, the agent commanded zero within the timeout
+    // (0.5 s) plus a few periods, and never moved the robot again.
+    let after: Vec<(f64, f64, f64)> = stats["after_stall"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| {
+            (
+                v[0].as_f64().unwrap(),
+                v[1].as_f64().unwrap(),
+                v[2].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    let first_zero = after
+        .iter()
+        .find(|(_, v, w)| *v == 0.0 && *w == 0.0)
+        .unwrap_or_else(|| panic!("no zero command after the stall: {after:?}"));
+    assert!(first_zero.0 < 0.5 + 0.2, "{after:?}");
+    assert!(
+        after
+            .iter()
+            .all(|(t, v, w)| *t <= first_zero.0 || (*v == 0.0 && *w == 0.0)),
+        "{after:?}"
+    );
+}

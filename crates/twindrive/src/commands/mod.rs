@@ -12,6 +12,7 @@ mod plan;
 mod prune;
 mod rosbag;
 mod simulate;
+mod site_sim;
 mod verify_plan;
 
 use crate::cli::{Args, Command};
@@ -40,6 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Master(a) => ops::master(&a),
         Command::Console(a) => console::run(&a),
         Command::Rosbag(a) => rosbag::run(&a),
+        Command::SiteSim { site } => site_sim::run(&site),
         Command::Experiment { command } => experiment::run(&command),
         Command::Router {
             listen,

@@ -84,18 +84,89 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
         );
     }
     let site = Scenario::load(&args.site).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
-    let start = site.robot.start;
-    // The site runs as long as the robot does.
-    let backend = SimBackend::new(site, start, 1e6).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
+    let ros = read_ros_section(&args.site)?;
     let mut config = AgentConfig::new(&args.id, &args.state_dir, trusted);
     // The agent's clock: zero now, in Unix time and for the driver alike.
     let zero = std::time::Instant::now();
     config.unix_time_at_zero_s = unix_now_s()?;
     config.telemetry_budget_bytes_s = args.telemetry_budget;
     config.time_scale = args.time_scale;
+    let rt = runtime()?;
+    match ros {
+        None => {
+            let start = site.robot.start;
+            // The site runs as long as the robot does.
+            let backend =
+                SimBackend::new(site, start, 1e6).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
+            run_agent(args, config, backend, zero, &rt)
+        }
+        Some(ros) => {
+            if args.time_scale != 1.0 {
+                bail!(
+                    "--time-scale: a ROS 2 robot runs in real time (1), got {}",
+                    args.time_scale
+                );
+            }
+            let bridge = twindrive_agent::ros::RosBridge::new(ros, &site, 0.0)
+                .map_err(|e| anyhow::anyhow!("--site {}: {e}", args.site.display()))?;
+            let options = SessionOptions {
+                listen: Vec::new(),
+                connect: bridge.config().connect.clone(),
+                config_file: None,
+                mode: None,
+            };
+            let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
+            let (backend, ros_session) = rt.block_on(async {
+                let session = twindrive_net::open_session_patiently(&options, deadline).await?;
+                let backend = twindrive_net::ros::RosBackend::open(
+                    &session,
+                    bridge,
+                    zero,
+                    Some(site.world.log_map()),
+                )
+                .await?;
+                anyhow::Ok((backend, session))
+            })?;
+            eprintln!(
+                "robot {}: driving a ROS 2 robot through rmw_zenoh at {}",
+                args.id,
+                options.connect.join(", ")
+            );
+            let result = run_agent(args, config, backend, zero, &rt);
+            rt.block_on(async {
+                let _ = ros_session.close().await;
+            });
+            result
+        }
+    }
+}
+
+/// The `[ros]` section of a site file, if it has one, with errors that
+/// name its line.
+fn read_ros_section(site: &Path) -> anyhow::Result<Option<twindrive_agent::ros::RosConfig>> {
+    #[derive(serde::Deserialize)]
+    struct RosOnly {
+        ros: Option<twindrive_agent::ros::RosConfig>,
+        #[serde(flatten)]
+        _rest: toml::Table,
+    }
+    let text = std::fs::read_to_string(site)
+        .with_context(|| format!("--site: reading {}", site.display()))?;
+    let parsed: RosOnly =
+        toml::from_str(&text).map_err(|e| anyhow::anyhow!("--site {}: {e}", site.display()))?;
+    Ok(parsed.ros)
+}
+
+/// Runs the agent with `backend` until stopped.
+fn run_agent<B: twindrive_agent::backend::RobotBackend>(
+    args: &RobotArgs,
+    config: AgentConfig,
+    backend: B,
+    zero: std::time::Instant,
+    rt: &tokio::runtime::Runtime,
+) -> anyhow::Result<()> {
     let mut agent = RobotAgent::new(config, backend)
         .with_context(|| format!("--state-dir {}", args.state_dir.display()))?;
-    let rt = runtime()?;
     let options = session_options(&args.zenoh, None);
     let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
     rt.block_on(async {
@@ -700,7 +771,8 @@ pub(super) fn write_robot_log(
 }
 
 /// `comparison.svg|png`: the plan's path against the robot's true one;
-/// `range_residuals.svg|png`: measured minus predicted range over time.
+/// `range_residuals.svg|png`: measured minus predicted range over time
+/// (when the log has range readings).
 fn comparison_figures(
     log: &twindrive_log::MissionLog,
     plan: &MissionPlan,
@@ -732,6 +804,10 @@ fn comparison_figures(
         markers: &[],
     }
     .write(&dir.join("comparison"))?;
+    if residuals.is_empty() {
+        // A log that ended before any range reading (a fault at the start).
+        return Ok(());
+    }
     let thin = twindrive_plot::decimate(residuals, 0.0);
     TimeFigure {
         title: "range readings: measured minus the twin's prediction",

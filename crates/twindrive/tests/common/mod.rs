@@ -39,6 +39,27 @@ impl Drop for Proc {
     }
 }
 
+/// Waits for `p` to exit (bounded: a test fails rather than hangs); its
+/// exit code and stderr.
+pub fn finish(mut p: Proc, limit_s: f64) -> (Option<i32>, String) {
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = p.0.try_wait().unwrap() {
+            let mut err = String::new();
+            if let Some(mut e) = p.0.stderr.take() {
+                use std::io::Read;
+                let _ = e.read_to_string(&mut err);
+            }
+            return (status.code(), err);
+        }
+        assert!(
+            start.elapsed().as_secs_f64() < limit_s,
+            "the process did not finish in {limit_s} s"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
 /// A free loopback port.
 pub fn port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
