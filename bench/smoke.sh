@@ -10,7 +10,7 @@ cd "$ROOT"
 export SMOKE=1
 export PEERS=${PEERS:-1}
 
-for script in sim_vs_irsim.sh ekf_vs_filterpy.sh prune_vs_distance_matrix.sh calibrate_one_hour.sh; do
+for script in sim_vs_irsim.sh ekf_vs_filterpy.sh prune_vs_distance_matrix.sh calibrate_one_hour.sh rosbag_vs_rosbags.sh; do
     echo "== bench/$script (smoke, peers $PEERS)" >&2
     bash "bench/$script"
 done

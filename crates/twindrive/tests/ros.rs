@@ -760,6 +760,24 @@ fn a_plan_runs_on_a_ros2_robot_through_rmw_zenoh() {
             "no token with {want} in {tokens:#?}"
         );
     }
+    // The robot's own log of the plan, as a rosbag2 bag ROS tools read.
+    let logs = r.dir.path().join("robot/logs");
+    let log = std::fs::read_dir(&logs)
+        .unwrap()
+        .next()
+        .expect("the robot logged the plan")
+        .unwrap()
+        .path()
+        .join("log.mcap");
+    let bag = r.dir.path().join("robot_bag");
+    let o = twindrive(&["rosbag", s(&log), "--out", s(&bag)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let found: Value = serde_json::from_str(&py("check_bag.py", &[s(&bag), "jazzy"])).unwrap();
+    assert!(
+        found["/joint_states"]["count"].as_u64().unwrap() > 100,
+        "{found}"
+    );
+    assert!(found["/side_ir"]["count"].as_u64().unwrap() > 100);
 }
 
 #[test]
