@@ -204,35 +204,56 @@ impl Bag {
 
     /// Decodes every message of `topic` in log-time order and hands it to
     /// `f`; an error from the decoder or from `f` names the topic and the
-    /// message's index.
+    /// message's index. Returns how many there were.
     pub fn for_each(
         &self,
         topic: &str,
         mut f: impl FnMut(MessageRef<'_>) -> Result<(), String>,
     ) -> Result<u64, BagError> {
-        let schema = self.schema(topic)?;
-        let mut index = 0u64;
+        Ok(self.for_each_of(&[topic], |_, m| f(m))?[0])
+    }
+
+    /// Decodes every message of any of `topics` in one pass over the bag,
+    /// in log-time order, and hands `f` the topic's position in `topics`
+    /// and the message. Returns the count per topic.
+    pub fn for_each_of(
+        &self,
+        topics: &[&str],
+        mut f: impl FnMut(usize, MessageRef<'_>) -> Result<(), String>,
+    ) -> Result<Vec<u64>, BagError> {
+        let schemas = topics
+            .iter()
+            .map(|t| self.schema(t))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut counts = vec![0u64; topics.len()];
         for file in &self.files {
             let stream = mcap::MessageStream::new(&file.bytes).map_err(|e| BagError::File {
                 path: file.path.clone(),
                 message: e.to_string(),
             })?;
-            let mut batch: Vec<(u64, Arc<[u8]>)> = Vec::new();
+            // Channel id → position in `topics`, learnt as channels appear.
+            let mut wanted: std::collections::HashMap<u16, Option<usize>> = Default::default();
+            let mut batch: Vec<(u64, usize, Vec<u8>)> = Vec::new();
             for m in stream {
                 let m = m.map_err(|e| BagError::File {
                     path: file.path.clone(),
                     message: format!("reading messages: {e}"),
                 })?;
-                if m.channel.topic == topic {
-                    batch.push((m.log_time, Arc::from(m.data.into_owned())));
+                let k = *wanted
+                    .entry(m.channel.id)
+                    .or_insert_with(|| topics.iter().position(|t| *t == m.channel.topic));
+                if let Some(k) = k {
+                    batch.push((m.log_time, k, m.data.into_owned()));
                 }
             }
-            // Chunks may overlap in time; messages are used in log-time order.
-            batch.sort_by_key(|(t, _)| *t);
-            for (log_time_ns, data) in batch {
+            // Chunks may overlap in time; messages are used in log-time
+            // order (a stable sort keeps each topic's own order on ties).
+            batch.sort_by_key(|(t, _, _)| *t);
+            for (log_time_ns, k, data) in batch {
+                let (schema, index) = (&schemas[k], counts[k]);
                 let merr = |message: String| BagError::Message {
                     path: file.path.clone(),
-                    topic: topic.to_string(),
+                    topic: topics[k].to_string(),
                     index,
                     log_time_ns,
                     message,
@@ -244,17 +265,20 @@ impl Bag {
                         e.message
                     ))
                 })?;
-                f(MessageRef {
-                    index,
-                    log_time_ns,
-                    value: &value,
-                    schema: &schema,
-                })
+                f(
+                    k,
+                    MessageRef {
+                        index,
+                        log_time_ns,
+                        value: &value,
+                        schema,
+                    },
+                )
                 .map_err(merr)?;
-                index += 1;
+                counts[k] += 1;
             }
         }
-        Ok(index)
+        Ok(counts)
     }
 }
 

@@ -204,12 +204,40 @@ fn a_fleet_of_three_robot_processes_completes_through_a_router_with_every_log_ba
     let results: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("results.json")).unwrap()).unwrap();
     let run = &results["fleet"][0];
+    // On failure, the robots' journals say where each log got to.
+    let journals = || -> String {
+        ["r001", "r002", "r003"]
+            .iter()
+            .map(|id| {
+                let j = std::fs::read_to_string(
+                    dir.path()
+                        .join("runs/n3/robots")
+                        .join(id)
+                        .join("journal.jsonl"),
+                )
+                .unwrap_or_default();
+                let events: Vec<String> = j
+                    .lines()
+                    .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+                    .filter(|v| v["event"] != "upload_progress")
+                    .map(|v| format!("{:.1} {}", v["t"].as_f64().unwrap_or(0.0), v["event"]))
+                    .collect();
+                format!("{id}: {}", events.join(", "))
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
     assert_eq!(run["robots"], 3);
     assert_eq!(run["completed"], 3, "{run}");
     // Each robot handed back once (its site's kinematics are not the
     // twin's) and ran a continuation: two logs each, all back-filled.
     assert!(run["handbacks"].as_u64().unwrap() >= 3, "{run}");
-    assert_eq!(run["logs_expected"], run["logs_backfilled"], "{run}");
+    assert_eq!(
+        run["logs_expected"],
+        run["logs_backfilled"],
+        "{run}\n{}\nmaster: {err}",
+        journals()
+    );
     assert!(run["logs_backfilled"].as_u64().unwrap() >= 6, "{run}");
     assert!(run["master_cpu_s"].as_f64().unwrap() > 0.0, "{run}");
     assert!(
