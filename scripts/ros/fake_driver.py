@@ -25,13 +25,16 @@ usage: fake_driver.py --connect E --site SITE.toml --twindrive BIN --stats OUT.j
 import argparse
 import json
 import math
+import os
 import signal
 import subprocess
 import sys
 import threading
 import time
 import tomllib
+import traceback
 
+import numpy as np
 import zenoh
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
@@ -162,102 +165,111 @@ def main():
 
     sim = subprocess.Popen([a.twindrive, "site-sim", "--site", a.site], stdin=subprocess.PIPE,
                            stdout=subprocess.PIPE, text=True)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        stop = threading.Event()
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        signal.signal(signal.SIGINT, lambda *_: stop.set())
 
-    def header(frame):
-        ns = time.time_ns()
-        return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
-            sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame)
+        def header(frame):
+            ns = time.time_ns()
+            return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
+                sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame)
 
-    import numpy as np
-
-    started = time.monotonic()
-    moved_at = None
-    next_tick = started
-    while not stop.is_set() and time.monotonic() - started < a.run_for:
-        now = time.monotonic()
-        with lock:
-            fresh = now - cmd["at"] <= a.cmd_timeout
-            v, w = (cmd["v"], cmd["w"]) if fresh else (0.0, 0.0)
-        left = (v - 0.5 * w * separation) / radius
-        right = (v + 0.5 * w * separation) / radius
-        sim.stdin.write(f"{left!r} {right!r} {steps}\n")
-        sim.stdin.flush()
-        line = sim.stdout.readline()
-        if not line:
-            break
-        s = json.loads(line)
-        if moved_at is None and (abs(left) > 1e-9 or abs(right) > 1e-9):
-            moved_at = now
-        stalled = a.stall_joints_after is not None and moved_at is not None \
-            and now - moved_at > a.stall_joints_after
-        if stalled and stats["stalled_at_s"] is None:
+        started = time.monotonic()
+        moved_at = None
+        next_tick = started
+        while not stop.is_set() and time.monotonic() - started < a.run_for:
+            now = time.monotonic()
             with lock:
-                stats["stalled_at_s"] = now
-        if not stalled:
-            pub_joints(T["sensor_msgs/msg/JointState"](
-                header=header(""), name=["wheel_left_joint", "wheel_right_joint"],
-                position=np.array(s["wheel_rad"], dtype=np.float64),
-                velocity=np.array(s["wheel_rad_s"], dtype=np.float64),
-                effort=np.array([], dtype=np.float64)))
-        x, y, th = s["pose"]
-        P = T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)))
-        pub_odom(T["nav_msgs/msg/Odometry"](
-            header=header("odom"), child_frame_id="base_link",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=P, covariance=np.zeros(36)),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](
-                    linear=T["geometry_msgs/msg/Vector3"](x=v, y=0.0, z=0.0),
-                    angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=w)),
-                covariance=np.zeros(36))))
-        detections = []
-        HD = T["irobot_create_msgs/msg/HazardDetection"]
-        if s["bump"]:
-            detections.append(HD(header=header("bump_front"), type=1))
-        if s["blocked"]:
-            detections.append(HD(header=header("base_link"), type=3))
-        pub_hazard(T["irobot_create_msgs/msg/HazardDetectionVector"](header=header("base_link"), detections=detections))
-        offset = 0
-        for sensor, kind, put in pub_ranges:
-            beams = sensor.get("beams", 1)
-            values = [math.inf if r is None else r for r in s["ranges_m"][offset:offset + beams]]
-            offset += beams
-            if kind == "sensor_msgs/msg/Range":
-                put(T[kind](header=header(sensor["name"] + "_link"), radiation_type=1,
-                            field_of_view=float(sensor.get("fov_rad", 0.0)),
-                            min_range=float(sensor["min_range_m"]), max_range=float(sensor["max_range_m"]),
-                            range=float(values[0]), variance=0.0))
-            else:
-                fov = float(sensor.get("fov_rad", 2 * math.pi))
-                put(T[kind](header=header(sensor["name"] + "_link"), angle_min=-fov / 2, angle_max=fov / 2,
-                            angle_increment=fov / max(beams - 1, 1), time_increment=0.0, scan_time=period,
-                            range_min=float(sensor["min_range_m"]), range_max=float(sensor["max_range_m"]),
-                            ranges=np.array(values, dtype=np.float32), intensities=np.array([], dtype=np.float32)))
-        next_tick += period
-        time.sleep(max(0.0, next_tick - time.monotonic()))
+                fresh = now - cmd["at"] <= a.cmd_timeout
+                v, w = (cmd["v"], cmd["w"]) if fresh else (0.0, 0.0)
+            left = (v - 0.5 * w * separation) / radius
+            right = (v + 0.5 * w * separation) / radius
+            sim.stdin.write(f"{left!r} {right!r} {steps}\n")
+            sim.stdin.flush()
+            line = sim.stdout.readline()
+            if not line:
+                break
+            s = json.loads(line)
+            if moved_at is None and (abs(left) > 1e-9 or abs(right) > 1e-9):
+                moved_at = now
+            stalled = a.stall_joints_after is not None and moved_at is not None \
+                and now - moved_at > a.stall_joints_after
+            if stalled and stats["stalled_at_s"] is None:
+                with lock:
+                    stats["stalled_at_s"] = now
+            if not stalled:
+                pub_joints(T["sensor_msgs/msg/JointState"](
+                    header=header(""), name=["wheel_left_joint", "wheel_right_joint"],
+                    position=np.array(s["wheel_rad"], dtype=np.float64),
+                    velocity=np.array(s["wheel_rad_s"], dtype=np.float64),
+                    effort=np.array([], dtype=np.float64)))
+            x, y, th = s["pose"]
+            P = T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)))
+            pub_odom(T["nav_msgs/msg/Odometry"](
+                header=header("odom"), child_frame_id="base_link",
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=P, covariance=np.zeros(36)),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=T["geometry_msgs/msg/Twist"](
+                        linear=T["geometry_msgs/msg/Vector3"](x=v, y=0.0, z=0.0),
+                        angular=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=w)),
+                    covariance=np.zeros(36))))
+            detections = []
+            HD = T["irobot_create_msgs/msg/HazardDetection"]
+            if s["bump"]:
+                detections.append(HD(header=header("bump_front"), type=1))
+            if s["blocked"]:
+                detections.append(HD(header=header("base_link"), type=3))
+            pub_hazard(T["irobot_create_msgs/msg/HazardDetectionVector"](header=header("base_link"), detections=detections))
+            offset = 0
+            for sensor, kind, put in pub_ranges:
+                beams = sensor.get("beams", 1)
+                values = [math.inf if r is None else r for r in s["ranges_m"][offset:offset + beams]]
+                offset += beams
+                if kind == "sensor_msgs/msg/Range":
+                    put(T[kind](header=header(sensor["name"] + "_link"), radiation_type=1,
+                                field_of_view=float(sensor.get("fov_rad", 0.0)),
+                                min_range=float(sensor["min_range_m"]), max_range=float(sensor["max_range_m"]),
+                                range=float(values[0]), variance=0.0))
+                else:
+                    fov = float(sensor.get("fov_rad", 2 * math.pi))
+                    put(T[kind](header=header(sensor["name"] + "_link"), angle_min=-fov / 2, angle_max=fov / 2,
+                                angle_increment=fov / max(beams - 1, 1), time_increment=0.0, scan_time=period,
+                                range_min=float(sensor["min_range_m"]), range_max=float(sensor["max_range_m"]),
+                                ranges=np.array(values, dtype=np.float32), intensities=np.array([], dtype=np.float32)))
+            next_tick += period
+            time.sleep(max(0.0, next_tick - time.monotonic()))
 
-    # What a `ros2 node list` / `ros2 topic info` would see.
-    tokens = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=2.0) if r.ok]
-    sim.stdin.close()
-    sim.wait(timeout=10)
-    with lock:
-        stats["liveliness"] = sorted(tokens)
-        stats["type_hashes"] = {t: store.hash_rihs01(t) for t in [
-            "geometry_msgs/msg/Twist", "sensor_msgs/msg/JointState", "nav_msgs/msg/Odometry",
-            "sensor_msgs/msg/Range", "sensor_msgs/msg/LaserScan",
-            "irobot_create_msgs/msg/HazardDetectionVector"]}
-        if stats["stalled_at_s"] is not None:
-            stats["stalled_at_s"] -= started
-        with open(a.stats + ".tmp", "w") as f:
-            json.dump(stats, f)
-        import os
-        os.replace(a.stats + ".tmp", a.stats)
-    session.close()
+        # What a `ros2 node list` / `ros2 topic info` would see.
+        tokens = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=2.0) if r.ok]
+        sim.stdin.close()
+        sim.wait(timeout=10)
+        with lock:
+            stats["liveliness"] = sorted(tokens)
+            stats["type_hashes"] = {t: store.hash_rihs01(t) for t in [
+                "geometry_msgs/msg/Twist", "sensor_msgs/msg/JointState", "nav_msgs/msg/Odometry",
+                "sensor_msgs/msg/Range", "sensor_msgs/msg/LaserScan",
+                "irobot_create_msgs/msg/HazardDetectionVector"]}
+            if stats["stalled_at_s"] is not None:
+                stats["stalled_at_s"] -= started
+            with open(a.stats + ".tmp", "w") as f:
+                json.dump(stats, f)
+            os.replace(a.stats + ".tmp", a.stats)
+    finally:
+        # The site simulator goes with the driver, however the driver ends.
+        if sim.poll() is None:
+            sim.kill()
+        sim.wait()
+        session.close()
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        main()
+    except Exception:  # noqa: BLE001 - report, then exit for real
+        traceback.print_exc()
+        sys.stderr.flush()
+        # zenoh's threads would keep a failed driver alive.
+        os._exit(1)

@@ -213,32 +213,20 @@ impl RosBridge {
             role: Role::Joints,
             decoder: Decoder::joints(&j.left_joint, &j.right_joint)?,
         }];
-        let offsets: Vec<usize> = header
-            .range_sensors
-            .iter()
-            .scan(0, |acc, s| {
-                let o = *acc;
-                *acc += s.beams as usize;
-                Some(o)
-            })
-            .collect();
+        let offsets = header.beam_offsets();
         for (i, r) in config.ranges.iter().enumerate() {
-            let k = header
-                .range_sensors
-                .iter()
-                .position(|s| s.name == r.sensor)
-                .ok_or_else(|| {
-                    format!(
-                        "ros.ranges[{i}].sensor: the site has no range sensor `{}` (it has: {})",
-                        r.sensor,
-                        header
-                            .range_sensors
-                            .iter()
-                            .map(|s| s.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    )
-                })?;
+            let k = header.sensor_index(&r.sensor).ok_or_else(|| {
+                format!(
+                    "ros.ranges[{i}].sensor: the site has no range sensor `{}` (it has: {})",
+                    r.sensor,
+                    header
+                        .range_sensors
+                        .iter()
+                        .map(|s| s.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })?;
             let beams = header.range_sensors[k].beams as usize;
             if (beams == 1) != (r.type_name == "sensor_msgs/msg/Range") {
                 return Err(format!(
@@ -301,7 +289,7 @@ impl RosBridge {
         if !(controller.0 > 0.0 && controller.1 > 0.0) {
             return Err("ros.command: wheel_radius_m and wheel_separation_m must be > 0".into());
         }
-        let beams: usize = header.range_sensors.iter().map(|s| s.beams as usize).sum();
+        let beams = header.beams_per_step();
         let start = header.start;
         Ok(Self {
             command_topic: fully_qualified(ns, &c.topic),

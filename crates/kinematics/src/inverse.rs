@@ -23,9 +23,41 @@ pub fn body_velocity(params: &DiffDriveParams, left_rad_s: f64, right_rad_s: f64
     )
 }
 
+/// Cumulative wheel angles (rad, from zero) at each of `samples`' times,
+/// from wheel speeds (rad/s) sampled at those times: the trapezoid rule.
+pub fn wheel_angles_from_speeds(
+    samples: impl IntoIterator<Item = (f64, [f64; 2])>,
+) -> Vec<(f64, [f64; 2])> {
+    let mut out: Vec<(f64, [f64; 2])> = Vec::new();
+    let mut previous: Option<(f64, [f64; 2])> = None;
+    let mut angle = [0.0; 2];
+    for (t, speed) in samples {
+        if let Some((tp, vp)) = previous {
+            let dt = t - tp;
+            for w in 0..2 {
+                angle[w] += 0.5 * dt * (speed[w] + vp[w]);
+            }
+        }
+        previous = Some((t, speed));
+        out.push((t, angle));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn speeds_integrate_by_the_trapezoid_rule() {
+        let a =
+            wheel_angles_from_speeds([(0.0, [0.0, 1.0]), (1.0, [2.0, 1.0]), (3.0, [2.0, -1.0])]);
+        assert_eq!(
+            a,
+            vec![(0.0, [0.0, 0.0]), (1.0, [1.0, 1.0]), (3.0, [5.0, 1.0])]
+        );
+        assert!(wheel_angles_from_speeds([]).is_empty());
+    }
 
     #[test]
     fn round_trip() {

@@ -15,7 +15,7 @@ pub use arc::{
     arc_step, arc_step_wheels, body_increment, encoder_increment, sinc, sinc_derivative,
     wheel_travel_m,
 };
-pub use inverse::{body_velocity, wheel_speeds};
+pub use inverse::{body_velocity, wheel_angles_from_speeds, wheel_speeds};
 pub use jacobian::{
     AugmentedState, Mat6, Mat6x2, StateVec, StepJacobian, Transition, step_augmented,
     step_jacobians, step_with_jacobian, step_with_jacobians,

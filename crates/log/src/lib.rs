@@ -79,6 +79,30 @@ pub struct LogHeader {
     pub range_sensors: Vec<RangeSensorInfo>,
 }
 
+impl LogHeader {
+    /// Total beams over all range sensors.
+    pub fn beams_per_step(&self) -> usize {
+        self.range_sensors.iter().map(|s| s.beams as usize).sum()
+    }
+
+    /// Offset of each sensor's first beam within a step's readings.
+    pub fn beam_offsets(&self) -> Vec<usize> {
+        self.range_sensors
+            .iter()
+            .scan(0usize, |acc, s| {
+                let start = *acc;
+                *acc += s.beams as usize;
+                Some(start)
+            })
+            .collect()
+    }
+
+    /// Index of the range sensor called `name`.
+    pub fn sensor_index(&self, name: &str) -> Option<usize> {
+        self.range_sensors.iter().position(|s| s.name == name)
+    }
+}
+
 /// A range sensor as mounted on the robot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -161,24 +185,12 @@ impl MissionLog {
 
     /// Total beams over all range sensors.
     pub fn beams_per_step(&self) -> usize {
-        self.header
-            .range_sensors
-            .iter()
-            .map(|s| s.beams as usize)
-            .sum()
+        self.header.beams_per_step()
     }
 
     /// Offset of each sensor's first beam within a step's readings.
     pub fn beam_offsets(&self) -> Vec<usize> {
-        self.header
-            .range_sensors
-            .iter()
-            .scan(0usize, |acc, s| {
-                let start = *acc;
-                *acc += s.beams as usize;
-                Some(start)
-            })
-            .collect()
+        self.header.beam_offsets()
     }
 
     /// The readings of `sensor` at `step`, or `None` if it did not sample then.
@@ -196,10 +208,7 @@ impl MissionLog {
 
     /// Index of the range sensor called `name`.
     pub fn sensor_index(&self, name: &str) -> Option<usize> {
-        self.header
-            .range_sensors
-            .iter()
-            .position(|s| s.name == name)
+        self.header.sensor_index(name)
     }
 
     /// Cumulative wheel rotation `(t_s, left_rad, right_rad)` at every

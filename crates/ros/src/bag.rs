@@ -6,7 +6,6 @@
 use std::collections::BTreeMap;
 use std::io::{Seek, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use crate::msgs::{self, Distro, RosMessage};
 use crate::qos::Qos;
@@ -62,6 +61,9 @@ struct BagFile {
 pub struct Bag {
     files: Vec<BagFile>,
     topics: Vec<TopicInfo>,
+    /// Each topic's stored definition (type name, `ros2msg` text), from
+    /// the first file that has it.
+    definitions: BTreeMap<String, (String, Vec<u8>)>,
 }
 
 /// A decoded message handed to [`Bag::for_each`].
@@ -99,6 +101,7 @@ impl Bag {
         };
         let mut files = Vec::new();
         let mut topics: BTreeMap<String, TopicInfo> = BTreeMap::new();
+        let mut definitions = BTreeMap::new();
         for p in paths {
             let bytes = std::fs::read(&p).map_err(|e| io(&p, e))?;
             let bad = |message: String| BagError::File {
@@ -128,12 +131,18 @@ impl Bag {
                     message_count: 0,
                 });
                 entry.message_count += counts.get(id).copied().unwrap_or(0);
+                if let Some(schema) = &ch.schema {
+                    definitions
+                        .entry(ch.topic.clone())
+                        .or_insert_with(|| (schema.name.clone(), schema.data.to_vec()));
+                }
             }
             files.push(BagFile { path: p, bytes });
         }
         Ok(Self {
             files,
             topics: topics.into_values().collect(),
+            definitions,
         })
     }
 
@@ -160,7 +169,7 @@ impl Bag {
     }
 
     /// The schema of `topic`, parsed from the definition stored in the file.
-    pub fn schema(&self, topic: &str) -> Result<Arc<Schema>, BagError> {
+    pub fn schema(&self, topic: &str) -> Result<Schema, BagError> {
         let terr = |message: String| BagError::Topic {
             path: self.path().to_path_buf(),
             topic: topic.to_string(),
@@ -184,22 +193,13 @@ impl Bag {
                 info.type_name, info.schema_encoding
             )));
         }
-        for f in &self.files {
-            let summary = mcap::Summary::read(&f.bytes)
-                .ok()
-                .flatten()
-                .expect("read once already");
-            if let Some(ch) = summary.channels.values().find(|c| c.topic == topic)
-                && let Some(s) = &ch.schema
-            {
-                let text = std::str::from_utf8(&s.data)
-                    .map_err(|_| terr("the message definition is not UTF-8 text".into()))?;
-                return Schema::parse(&s.name, text)
-                    .map(Arc::new)
-                    .map_err(|e| terr(format!("the stored definition of {}: {e}", s.name)));
-            }
-        }
-        Err(terr("has no schema".into()))
+        let (name, data) = self
+            .definitions
+            .get(topic)
+            .ok_or_else(|| terr("has no schema".into()))?;
+        let text = std::str::from_utf8(data)
+            .map_err(|_| terr("the message definition is not UTF-8 text".into()))?;
+        Schema::parse(name, text).map_err(|e| terr(format!("the stored definition of {name}: {e}")))
     }
 
     /// Decodes every message of `topic` in log-time order and hands it to
@@ -302,7 +302,8 @@ pub struct BagWriter<W: Write + Seek> {
     distro: Distro,
     file_name: String,
     topics: Vec<WrittenTopic>,
-    schemas: BTreeMap<&'static str, u16>,
+    /// Per type: its schema id and its type hash (empty for Humble).
+    schemas: BTreeMap<&'static str, (u16, String)>,
     time_range: Option<(u64, u64)>,
     buf: Vec<u8>,
 }
@@ -328,21 +329,21 @@ impl<W: Write + Seek> BagWriter<W> {
 
     /// Declares `name` with messages of type `T`.
     pub fn topic<T: RosMessage>(&mut self, name: &str, qos: Qos) -> mcap::McapResult<TopicId> {
-        let text =
-            msgs::definition(T::TYPE, self.distro).expect("every RosMessage has a definition");
-        let schema = match self.schemas.get(T::TYPE) {
-            Some(id) => *id,
+        let (schema, type_hash) = match self.schemas.get(T::TYPE) {
+            Some(known) => known.clone(),
             None => {
+                let text = msgs::definition(T::TYPE, self.distro)
+                    .expect("every RosMessage has a definition");
                 let id = self.mcap.add_schema(T::TYPE, "ros2msg", text.as_bytes())?;
-                self.schemas.insert(T::TYPE, id);
-                id
+                let hash = match self.distro {
+                    Distro::Humble => String::new(),
+                    Distro::Jazzy => {
+                        msgs::type_hash(T::TYPE).expect("the built-in definitions parse")
+                    }
+                };
+                self.schemas.insert(T::TYPE, (id, hash.clone()));
+                (id, hash)
             }
-        };
-        let type_hash = match self.distro {
-            Distro::Humble => String::new(),
-            Distro::Jazzy => Schema::parse(T::TYPE, &text)
-                .expect("the built-in definitions parse")
-                .type_hash(),
         };
         let mut meta = BTreeMap::new();
         meta.insert("offered_qos_profiles".to_string(), qos.yaml());
@@ -375,10 +376,7 @@ impl<W: Write + Seek> BagWriter<W> {
             "topic {} written with another type",
             t.name
         );
-        self.buf.clear();
-        self.buf.extend_from_slice(&[0, 1, 0, 0]);
-        cdr_encoding::to_writer::<T, byteorder::LittleEndian, _>(&mut self.buf, msg)
-            .expect("CDR serialization into a Vec cannot fail");
+        msgs::encode_into(&mut self.buf, msg);
         self.mcap.write_to_known_channel(
             &mcap::records::MessageHeader {
                 channel_id: t.channel,

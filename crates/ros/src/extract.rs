@@ -10,6 +10,7 @@
 //! has to have the fields, not a particular version of the type.
 
 use crate::bag::{Bag, BagError};
+use crate::live::{JointPaths, Joints};
 use crate::schema::{Arity, Base, FieldPath, Primitive, Schema};
 use crate::value::Value;
 
@@ -79,10 +80,11 @@ fn seconds(ns: i64) -> f64 {
 }
 
 /// `header.stamp` of a message whose type has a standard header.
-fn header_stamp(schema: &Schema) -> Option<(FieldPath, FieldPath)> {
+/// `header.stamp` of type `ty` (0: the top-level message), if it has a header.
+fn header_stamp(schema: &Schema, ty: usize) -> Option<(FieldPath, FieldPath)> {
     Some((
-        schema.path("header.stamp.sec").ok()?,
-        schema.path("header.stamp.nanosec").ok()?,
+        schema.path_from(ty, "header.stamp.sec").ok()?,
+        schema.path_from(ty, "header.stamp.nanosec").ok()?,
     ))
 }
 
@@ -174,54 +176,34 @@ fn joints(
     stamps: Stamps,
 ) -> Result<Extracted<WheelTrack>, BagError> {
     let schema = bag.schema(topic)?;
-    let field = |name: &str| {
-        schema.path(name).map_err(|e| {
-            topic_error(
-                bag,
-                topic,
-                format!("{e}; wheel joints are read from sensor_msgs/msg/JointState"),
-            )
-        })
-    };
-    let (names, position, velocity) = (field("name")?, field("position")?, field("velocity")?);
-    let header = header_stamp(&schema);
-    let mut raw: Vec<(f64, [Option<f64>; 4])> = Vec::new();
+    let paths = JointPaths::new(&schema).map_err(|e| {
+        topic_error(
+            bag,
+            topic,
+            format!("{e}; wheel joints are read from sensor_msgs/msg/JointState"),
+        )
+    })?;
+    let header = header_stamp(&schema, 0);
+    // (t, position, velocity) of every message that names both joints.
+    type Pair = Option<[f64; 2]>;
+    let mut raw: Vec<(f64, (Pair, Pair))> = Vec::new();
     let mut seen_names: Vec<String> = Vec::new();
     let mut skipped = 0;
     bag.for_each(topic, |m| {
-        let list = m
-            .value
-            .at(&names)
-            .and_then(Value::as_array)
-            .ok_or("no `name` list")?;
-        let idx = |joint: &str| list.iter().position(|n| n.as_str() == Some(joint));
-        let (Some(l), Some(r)) = (idx(left), idx(right)) else {
-            for n in list.iter().filter_map(Value::as_str) {
-                if !seen_names.iter().any(|s| s == n) && seen_names.len() < 32 {
-                    seen_names.push(n.to_string());
+        match paths.read(m.value, left, right)? {
+            Joints::Other(list) => {
+                for n in list.iter().filter_map(Value::as_str) {
+                    if !seen_names.iter().any(|s| s == n) && seen_names.len() < 32 {
+                        seen_names.push(n.to_string());
+                    }
                 }
+                skipped += 1;
             }
-            skipped += 1;
-            return Ok(());
-        };
-        let t = message_time(m.value, m.log_time_ns, stamps, header.as_ref())?;
-        let get = |p: &FieldPath, i: usize| {
-            m.value
-                .at(p)
-                .and_then(Value::as_array)
-                .and_then(|a| a.get(i))
-                .and_then(Value::as_f64)
-        };
-        let values = [
-            get(&position, l),
-            get(&position, r),
-            get(&velocity, l),
-            get(&velocity, r),
-        ];
-        if let Some(bad) = values.iter().flatten().find(|v| !v.is_finite()) {
-            return Err(format!("joint value {bad} is not finite"));
+            Joints::Both { position, velocity } => {
+                let t = message_time(m.value, m.log_time_ns, stamps, header.as_ref())?;
+                raw.push((t, (position, velocity)));
+            }
         }
-        raw.push((t, values));
         Ok(())
     })?;
     if raw.is_empty() {
@@ -240,8 +222,8 @@ fn joints(
     }
     check_stamped(bag, topic, &raw, stamps)?;
     let raw = ordered(raw);
-    let has_position = raw.iter().all(|(_, v)| v[0].is_some() && v[1].is_some());
-    let has_velocity = raw.iter().all(|(_, v)| v[2].is_some() && v[3].is_some());
+    let has_position = raw.iter().all(|(_, (p, _))| p.is_some());
+    let has_velocity = raw.iter().all(|(_, (_, v))| v.is_some());
     let use_position = match signal {
         JointSignal::Position | JointSignal::Auto if has_position => true,
         JointSignal::Velocity | JointSignal::Auto if has_velocity => false,
@@ -262,22 +244,17 @@ fn joints(
     };
     let samples = if use_position {
         raw.iter()
-            .map(|(t, v)| (*t, v[0].expect("checked"), v[1].expect("checked")))
+            .map(|(t, (p, _))| {
+                let [l, r] = p.expect("checked");
+                (*t, l, r)
+            })
             .collect()
     } else {
-        // Trapezoid rule over the wheel speeds.
-        let mut out = Vec::with_capacity(raw.len());
-        let (mut l, mut r) = (0.0, 0.0);
-        for (i, (t, v)) in raw.iter().enumerate() {
-            if i > 0 {
-                let (tp, vp) = &raw[i - 1];
-                let dt = t - tp;
-                l += 0.5 * dt * (v[2].expect("checked") + vp[2].expect("checked"));
-                r += 0.5 * dt * (v[3].expect("checked") + vp[3].expect("checked"));
-            }
-            out.push((*t, l, r));
-        }
-        out
+        let speeds = raw.iter().map(|(t, (_, v))| (*t, v.expect("checked")));
+        twindrive_kinematics::wheel_angles_from_speeds(speeds)
+            .into_iter()
+            .map(|(t, [l, r])| (t, l, r))
+            .collect()
     };
     Ok(Extracted {
         samples,
@@ -339,7 +316,7 @@ fn ticks(
         element_path(&schema, left_field).map_err(|e| topic_error(bag, topic, e))?,
         element_path(&schema, right_field).map_err(|e| topic_error(bag, topic, e))?,
     );
-    let header = header_stamp(&schema);
+    let header = header_stamp(&schema, 0);
     let k = std::f64::consts::TAU / f64::from(ticks_per_rev);
     let mut raw = Vec::new();
     bag.for_each(topic, |m| {
@@ -415,7 +392,7 @@ pub fn pose_track(
         (None, _) => None,
     };
     let fields = crate::live::pose_paths(&schema, pose_prefix).map_err(terr)?;
-    let header = header_stamp(&schema);
+    let header = header_stamp(&schema, 0);
     let mut raw = Vec::new();
     let mut skipped = 0;
     bag.for_each(topic, |m| {
@@ -451,34 +428,11 @@ fn tf_track(
         return Err(terr("`transforms` is not a list of messages".into()));
     };
     // Paths inside one TransformStamped.
-    let inner = |dotted: &str| -> Result<Vec<usize>, BagError> {
-        let mut ty = ts;
-        let mut out = Vec::new();
-        for part in dotted.split('.') {
-            let t = schema.type_at(ty);
-            let i = t
-                .fields
-                .iter()
-                .position(|f| f.name == part)
-                .ok_or_else(|| terr(format!("{} has no field `{part}`", t.name)))?;
-            out.push(i);
-            if let Base::Message(n) = t.fields[i].ty.base {
-                ty = n;
-            }
-        }
-        Ok(out)
-    };
-    let get = |v: &Value, idx: &[usize]| -> Option<Value> {
-        let mut v = v;
-        for &i in idx {
-            v = v.as_message()?.get(i)?;
-        }
-        Some(v.clone())
-    };
-    let child_idx = inner("child_frame_id")?;
-    let parent_idx = inner("header.frame_id")?;
-    let sec = inner("header.stamp.sec")?;
-    let nsec = inner("header.stamp.nanosec")?;
+    let inner = |dotted: &str| schema.path_from(ts, dotted).map_err(terr);
+    let child_path = inner("child_frame_id")?;
+    let parent_path = inner("header.frame_id")?;
+    let stamp = header_stamp(schema, ts)
+        .ok_or_else(|| terr("a TransformStamped without header.stamp".into()))?;
     let nums = [
         inner("transform.translation.x")?,
         inner("transform.translation.y")?,
@@ -498,11 +452,9 @@ fn tf_track(
             .ok_or("no `transforms` list")?;
         let mut found = false;
         for tr in list {
-            let c = get(tr, &child_idx);
-            let p = get(tr, &parent_idx);
             let (Some(c), Some(p)) = (
-                c.as_ref().and_then(Value::as_str),
-                p.as_ref().and_then(Value::as_str),
+                tr.at(&child_path).and_then(Value::as_str),
+                tr.at(&parent_path).and_then(Value::as_str),
             ) else {
                 continue;
             };
@@ -517,16 +469,10 @@ fn tf_track(
                 }
                 continue;
             }
-            let t = match stamps {
-                Stamps::Header => seconds(
-                    get(tr, &sec).and_then(|v| v.as_i64()).unwrap_or(0) * 1_000_000_000
-                        + get(tr, &nsec).and_then(|v| v.as_i64()).unwrap_or(0),
-                ),
-                Stamps::LogTime => seconds(m.log_time_ns as i64),
-            };
+            let t = message_time(tr, m.log_time_ns, stamps, Some(&stamp))?;
             let v: Vec<f64> = nums
                 .iter()
-                .map(|i| get(tr, i).and_then(|v| v.as_f64()).unwrap_or(f64::NAN))
+                .map(|p| tr.at(p).and_then(Value::as_f64).unwrap_or(f64::NAN))
                 .collect();
             raw.push((t, crate::live::planar_pose(&v)?));
             found = true;

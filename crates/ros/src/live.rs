@@ -31,9 +31,7 @@ pub enum Sample {
 #[derive(Debug, Clone)]
 enum Kind {
     Joints {
-        names: FieldPath,
-        position: FieldPath,
-        velocity: FieldPath,
+        paths: JointPaths,
         left: String,
         right: String,
     },
@@ -41,8 +39,8 @@ enum Kind {
     Scan(FieldPath),
     HazardVector {
         detections: FieldPath,
-        /// Index of `type` inside one detection.
-        kind_index: usize,
+        /// `type` inside one detection.
+        kind: FieldPath,
     },
     Bool(FieldPath),
     Pose([FieldPath; 6]),
@@ -70,9 +68,7 @@ impl Decoder {
     pub fn joints(left: &str, right: &str) -> Result<Self, String> {
         let schema = Self::schema("sensor_msgs/msg/JointState")?;
         let kind = Kind::Joints {
-            names: schema.path("name")?,
-            position: schema.path("position")?,
-            velocity: schema.path("velocity")?,
+            paths: JointPaths::new(&schema)?,
             left: left.into(),
             right: right.into(),
         };
@@ -104,16 +100,8 @@ impl Decoder {
                 let Base::Message(t) = detections.ty.base else {
                     return Err("`detections` is not a list of messages".into());
                 };
-                let kind_index = schema
-                    .type_at(t)
-                    .fields
-                    .iter()
-                    .position(|f| f.name == "type")
-                    .ok_or("HazardDetection has no field `type`")?;
-                Kind::HazardVector {
-                    detections,
-                    kind_index,
-                }
+                let kind = schema.path_from(t, "type")?;
+                Kind::HazardVector { detections, kind }
             }
             "std_msgs/msg/Bool" => Kind::Bool(schema.path("data")?),
             other => {
@@ -152,34 +140,10 @@ impl Decoder {
         let v = self.schema.decode(bytes).map_err(|e| e.message)?;
         let num = |p: &FieldPath| v.at(p).and_then(Value::as_f64);
         match &self.kind {
-            Kind::Joints {
-                names,
-                position,
-                velocity,
-                left,
-                right,
-            } => {
-                let list = v.at(names).and_then(Value::as_array).ok_or("no `name`")?;
-                let idx = |j: &str| list.iter().position(|n| n.as_str() == Some(j));
-                let (Some(l), Some(r)) = (idx(left), idx(right)) else {
-                    return Ok(Sample::OtherJoints);
-                };
-                let pair = |p: &FieldPath| -> Result<Option<[f64; 2]>, String> {
-                    let a = v.at(p).and_then(Value::as_array).unwrap_or(&[]);
-                    match (
-                        a.get(l).and_then(Value::as_f64),
-                        a.get(r).and_then(Value::as_f64),
-                    ) {
-                        (Some(x), Some(y)) if x.is_finite() && y.is_finite() => Ok(Some([x, y])),
-                        (Some(_), Some(_)) => Err("a wheel joint value is not finite".into()),
-                        _ => Ok(None),
-                    }
-                };
-                Ok(Sample::Joints {
-                    position: pair(position)?,
-                    velocity: pair(velocity)?,
-                })
-            }
+            Kind::Joints { paths, left, right } => Ok(match paths.read(&v, left, right)? {
+                Joints::Both { position, velocity } => Sample::Joints { position, velocity },
+                Joints::Other(_) => Sample::OtherJoints,
+            }),
             Kind::Range(p) => Ok(Sample::Range(num(p).ok_or("no `range`")?)),
             Kind::Scan(p) => Ok(Sample::Scan(
                 v.at(p)
@@ -189,18 +153,11 @@ impl Decoder {
                     .map(|r| r.as_f64().unwrap_or(f64::NAN))
                     .collect(),
             )),
-            Kind::HazardVector {
-                detections,
-                kind_index,
-            } => {
+            Kind::HazardVector { detections, kind } => {
                 let mut bump = false;
                 let mut stall = false;
                 for d in v.at(detections).and_then(Value::as_array).unwrap_or(&[]) {
-                    match d
-                        .as_message()
-                        .and_then(|f| f.get(*kind_index))
-                        .and_then(Value::as_i64)
-                    {
+                    match d.at(kind).and_then(Value::as_i64) {
                         Some(BUMP) => bump = true,
                         Some(STALL) => stall = true,
                         _ => {}
@@ -218,6 +175,68 @@ impl Decoder {
                 Ok(Sample::Pose([x, y, h]))
             }
         }
+    }
+}
+
+/// The fields of a `sensor_msgs/msg/JointState` two wheel joints are read from.
+#[derive(Debug, Clone)]
+pub(crate) struct JointPaths {
+    names: FieldPath,
+    position: FieldPath,
+    velocity: FieldPath,
+}
+
+/// What one JointState says of two joints.
+pub(crate) enum Joints<'v> {
+    /// It names both: their angles and speeds, where it gives both.
+    Both {
+        position: Option<[f64; 2]>,
+        velocity: Option<[f64; 2]>,
+    },
+    /// It does not name both (another joint group): the names it has.
+    Other(&'v [Value]),
+}
+
+impl JointPaths {
+    pub(crate) fn new(schema: &Schema) -> Result<Self, String> {
+        Ok(Self {
+            names: schema.path("name")?,
+            position: schema.path("position")?,
+            velocity: schema.path("velocity")?,
+        })
+    }
+
+    /// Joints `left` and `right` of message `v`; a value given but not
+    /// finite is an error.
+    pub(crate) fn read<'v>(
+        &self,
+        v: &'v Value,
+        left: &str,
+        right: &str,
+    ) -> Result<Joints<'v>, String> {
+        let list = v
+            .at(&self.names)
+            .and_then(Value::as_array)
+            .ok_or("no `name` list")?;
+        let idx = |j: &str| list.iter().position(|n| n.as_str() == Some(j));
+        let (Some(l), Some(r)) = (idx(left), idx(right)) else {
+            return Ok(Joints::Other(list));
+        };
+        let pair = |p: &FieldPath| -> Result<Option<[f64; 2]>, String> {
+            let a = v.at(p).and_then(Value::as_array).unwrap_or(&[]);
+            let (x, y) = (
+                a.get(l).and_then(Value::as_f64),
+                a.get(r).and_then(Value::as_f64),
+            );
+            if let Some(bad) = [x, y].into_iter().flatten().find(|x| !x.is_finite()) {
+                return Err(format!("joint value {bad} is not finite"));
+            }
+            Ok(x.zip(y).map(|(x, y)| [x, y]))
+        };
+        Ok(Joints::Both {
+            position: pair(&self.position)?,
+            velocity: pair(&self.velocity)?,
+        })
     }
 }
 

@@ -252,10 +252,24 @@ pub fn definition(type_name: &str, distro: Distro) -> Option<String> {
 /// Serializes a message as ROS 2 does: the little-endian CDR encapsulation
 /// header, then the CDR body.
 pub fn encode<T: RosMessage>(msg: &T) -> Vec<u8> {
-    let mut out = vec![0, 1, 0, 0];
-    cdr_encoding::to_writer::<T, byteorder::LittleEndian, _>(&mut out, msg)
-        .expect("CDR serialization of a plain struct into a Vec cannot fail");
+    let mut out = Vec::new();
+    encode_into(&mut out, msg);
     out
+}
+
+/// [`encode`] into `out` (cleared first), reusing its allocation.
+pub fn encode_into<T: RosMessage>(out: &mut Vec<u8>, msg: &T) {
+    out.clear();
+    out.extend_from_slice(&[0, 1, 0, 0]);
+    cdr_encoding::to_writer::<T, byteorder::LittleEndian, _>(out, msg)
+        .expect("CDR serialization of a plain struct into a Vec cannot fail");
+}
+
+/// The RIHS01 hash of `type_name` with its Jazzy definition (the one
+/// rmw_zenoh keys and Jazzy bags carry), if twindrive knows the type.
+pub fn type_hash(type_name: &str) -> Option<String> {
+    let text = definition(type_name, Distro::Jazzy)?;
+    Some(crate::Schema::parse(type_name, &text).ok()?.type_hash())
 }
 
 macro_rules! message {

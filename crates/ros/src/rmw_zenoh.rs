@@ -12,9 +12,7 @@
 //!   since the Unix epoch), the publisher's 16-byte GID after its LEB128
 //!   length (one byte, 16): 33 bytes.
 
-use crate::msgs::{self, Distro};
 pub use crate::qos::Qos;
-use crate::schema::Schema;
 
 /// `pkg/msg/Type` → `pkg::msg::dds_::Type_`.
 pub fn dds_type_name(type_name: &str) -> String {
@@ -52,10 +50,7 @@ pub fn fully_qualified(namespace: &str, name: &str) -> String {
 }
 
 /// The type hash of a message type twindrive knows (Jazzy definitions).
-pub fn type_hash(type_name: &str) -> Option<String> {
-    let text = msgs::definition(type_name, Distro::Jazzy)?;
-    Some(Schema::parse(type_name, &text).ok()?.type_hash())
-}
+pub use crate::msgs::type_hash;
 
 /// The data key expression of `topic` (fully qualified) with type `type_name`.
 pub fn topic_key(domain_id: u32, topic: &str, type_name: &str, hash: &str) -> String {

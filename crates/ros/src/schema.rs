@@ -214,7 +214,14 @@ impl Schema {
 
     /// Resolves a dotted path such as `header.stamp.sec` or `pose.pose.position.x`.
     pub fn path(&self, dotted: &str) -> Result<FieldPath, String> {
-        let mut ty = 0usize;
+        self.path_from(0, dotted)
+    }
+
+    /// Resolves a dotted path inside type `ty` (an element of a message
+    /// array, such as one `TransformStamped` of a `TFMessage`); the path
+    /// applies to that element's [`Value`](crate::Value).
+    pub fn path_from(&self, ty: usize, dotted: &str) -> Result<FieldPath, String> {
+        let mut ty = ty;
         let mut indices = Vec::new();
         let mut last = None;
         for (depth, part) in dotted.split('.').enumerate() {

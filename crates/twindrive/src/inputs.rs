@@ -10,6 +10,16 @@ use twindrive_log::calib_csv::{EncoderCsv, PoseCsv, WheelColumns};
 
 use crate::cli::{CalibrateArgs, JointSignalArg, StampsArg};
 
+/// A mission log: a directory `simulate` wrote, or a log MCAP (robot logs,
+/// rehearsals).
+pub fn read_mission_log(path: &Path) -> anyhow::Result<MissionLog> {
+    if path.is_dir() {
+        Ok(twindrive_log::read_log_dir(path)?)
+    } else {
+        Ok(twindrive_log::read_mcap(path)?)
+    }
+}
+
 /// Encoder ticks of a simulated log as cumulative wheel angles.
 pub fn wheels_from_log(log: &MissionLog) -> Vec<WheelSample> {
     log.wheel_angles()
@@ -65,15 +75,10 @@ pub fn wheels_from_csv(
             }
         }
         WheelColumns::RadPerSecond => {
-            let (mut l, mut r) = (0.0, 0.0);
-            for i in 0..n {
-                if i > 0 {
-                    let dt = enc.t_s[i] - enc.t_s[i - 1];
-                    l += 0.5 * dt * (enc.left[i] + enc.left[i - 1]);
-                    r += 0.5 * dt * (enc.right[i] + enc.right[i - 1]);
-                }
+            let speeds = (0..n).map(|i| (enc.t_s[i], [enc.left[i], enc.right[i]]));
+            for (t_s, [l, r]) in twindrive_kinematics::wheel_angles_from_speeds(speeds) {
                 out.push(WheelSample {
-                    t_s: enc.t_s[i],
+                    t_s,
                     left_rad: signs[0] * l,
                     right_rad: signs[1] * r,
                 });

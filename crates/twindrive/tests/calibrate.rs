@@ -6,17 +6,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::{repo, text, twindrive};
-
-const TRUTH: [f64; 3] = [0.0652, 0.0665, 0.2678];
-const SIM_NOISE: [&str; 6] = [
-    "--position-std-m",
-    "0.001",
-    "--heading-std-rad",
-    "0.002",
-    "--wheel-noise",
-    "1e-6",
-];
+use common::{SIM_NOISE, TRUTH, repo, text, twindrive};
 
 fn simulate(scenario: &Path, out: &Path, duration: &str) {
     let o = twindrive(&[

@@ -16,19 +16,10 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{fixture, repo, text, twindrive};
+use common::{SIM_NOISE, TRUTH, fixture, repo, text, twindrive};
 use serde_json::Value;
 
-const TRUTH: [f64; 3] = [0.0652, 0.0665, 0.2678];
 const NOMINAL: &str = "0.066,0.066,0.26";
-const NOISE: [&str; 6] = [
-    "--position-std-m",
-    "0.001",
-    "--heading-std-rad",
-    "0.002",
-    "--wheel-noise",
-    "1e-6",
-];
 const LAG_S: f64 = 0.25;
 const JOINTS: [&str; 4] = [
     "--left-joint",
@@ -87,6 +78,24 @@ fn calibration_drive() -> &'static Path {
     .path()
 }
 
+/// The calibration drive as `twindrive rosbag` writes it.
+fn calibration_bag() -> &'static Path {
+    static D: std::sync::OnceLock<(tempfile::TempDir, PathBuf)> = std::sync::OnceLock::new();
+    &D.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let bag = dir.path().join("drive");
+        let o = twindrive(&[
+            "rosbag",
+            s(&calibration_drive().join("sim")),
+            "--out",
+            s(&bag),
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        (dir, bag)
+    })
+    .1
+}
+
 fn calibrate(bag: &Path, out: &Path, extra: &[&str]) -> (std::process::Output, Option<Value>) {
     let mut args = vec![
         "calibrate",
@@ -100,7 +109,7 @@ fn calibrate(bag: &Path, out: &Path, extra: &[&str]) -> (std::process::Output, O
         s(out),
     ];
     args.extend_from_slice(extra);
-    args.extend_from_slice(&NOISE);
+    args.extend_from_slice(&SIM_NOISE);
     let o = twindrive(&args);
     let json = std::fs::read(out)
         .ok()
@@ -183,7 +192,7 @@ fn recordings_written_by_rosbags_and_mcap_ros2_calibrate_to_the_truth() {
         "/mocap/pose",
     ];
     args.extend(JOINTS);
-    args.extend(NOISE);
+    args.extend(SIM_NOISE);
     let o = twindrive(&args);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let j: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
@@ -193,18 +202,11 @@ fn recordings_written_by_rosbags_and_mcap_ros2_calibrate_to_the_truth() {
 #[test]
 fn twindrive_calibrates_from_its_own_exported_bag() {
     let tmp = tempfile::tempdir().unwrap();
-    let bag = tmp.path().join("drive");
-    let o = twindrive(&[
-        "rosbag",
-        s(&calibration_drive().join("sim")),
-        "--out",
-        s(&bag),
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    let bag = calibration_bag();
     let out = tmp.path().join("calib.json");
     let mut args = JOINTS.to_vec();
     args.extend(["--pose-topic", "/tracker/pose"]);
-    let (o, j) = calibrate(&bag, &out, &args);
+    let (o, j) = calibrate(bag, &out, &args);
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert_recovered(&j.unwrap(), 0.0);
 }
@@ -388,17 +390,10 @@ fn exported_bags_decode_with_independent_decoders_to_the_log() {
 #[test]
 fn bad_recordings_and_wrong_names_say_which_topic_and_message() {
     let tmp = tempfile::tempdir().unwrap();
-    let bag = tmp.path().join("drive");
-    let o = twindrive(&[
-        "rosbag",
-        s(&calibration_drive().join("sim")),
-        "--out",
-        s(&bag),
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    let bag = calibration_bag();
     let out = tmp.path().join("res/calib.json");
     let run = |extra: &[&str]| {
-        let (o, j) = calibrate(&bag, &out, extra);
+        let (o, j) = calibrate(bag, &out, extra);
         assert!(!o.status.success(), "{extra:?} should fail");
         assert!(j.is_none(), "no output on failure");
         text(&o.stderr)

@@ -1,8 +1,6 @@
 //! `twindrive console`: checks the command line, loads the twin, the key
 //! and a rehearsal, and hands over to `twindrive-console`.
 
-use std::path::Path;
-
 use anyhow::{Context, bail};
 use twindrive_console::ConsoleConfig;
 use twindrive_link::envelope::Supervision;
@@ -10,15 +8,6 @@ use twindrive_net::SessionOptions;
 use twindrive_sim::Scenario;
 
 use crate::cli::ConsoleArgs;
-
-/// A mission log: a directory `simulate` wrote, or an MCAP file.
-fn read_log(path: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
-    if path.is_dir() {
-        twindrive_log::read_log_dir(path).with_context(|| format!("--rehearsal {}", path.display()))
-    } else {
-        twindrive_log::read_mcap(path).with_context(|| format!("--rehearsal {}", path.display()))
-    }
-}
 
 pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
     super::ops::check_supervisor_args(&args.robot, args.telemetry_budget, args.supervise)?;
@@ -48,7 +37,14 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
     };
     let link = super::ops::link_profile(args.link.as_deref())?;
     let key = super::ops::signing_key(args.key.as_deref())?;
-    let rehearsal = args.rehearsal.as_deref().map(read_log).transpose()?;
+    let rehearsal = args
+        .rehearsal
+        .as_deref()
+        .map(|p| {
+            crate::inputs::read_mission_log(p)
+                .with_context(|| format!("--rehearsal {}", p.display()))
+        })
+        .transpose()?;
     if let Some(log) = &rehearsal
         && log.steps.len() < 20
     {

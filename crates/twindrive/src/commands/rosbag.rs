@@ -1,7 +1,6 @@
 //! `twindrive rosbag`: a mission log as a rosbag2 recording.
 
 use std::io::Write;
-use std::path::Path;
 
 use anyhow::{Context, bail};
 use twindrive_ros::export::{ExportOptions, write_log_bag};
@@ -10,15 +9,6 @@ use twindrive_ros::msgs::Distro;
 use crate::cli::{DistroArg, RosbagArgs};
 use crate::output::Staging;
 
-/// A mission log: a directory `simulate` wrote, or an MCAP file.
-fn read_log(path: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
-    if path.is_dir() {
-        Ok(twindrive_log::read_log_dir(path)?)
-    } else {
-        Ok(twindrive_log::read_mcap(path)?)
-    }
-}
-
 pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
     if !(args.start_time.is_finite() && args.start_time >= 0.0 && args.start_time < 4.0e9) {
         bail!(
@@ -26,7 +16,7 @@ pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
             args.start_time
         );
     }
-    let log = read_log(&args.log)?;
+    let log = crate::inputs::read_mission_log(&args.log)?;
     let map = match &args.scenario {
         Some(p) => Some(
             twindrive_sim::Scenario::load(p)

@@ -60,6 +60,20 @@ pub fn finish(mut p: Proc, limit_s: f64) -> (Option<i32>, String) {
     }
 }
 
+/// The true [left diameter, right diameter, wheelbase] (m) of the built-in
+/// scenarios' robot.
+pub const TRUTH: [f64; 3] = [0.0652, 0.0665, 0.2678];
+
+/// `calibrate`'s noise settings for the simulator's tracker and encoders.
+pub const SIM_NOISE: [&str; 6] = [
+    "--position-std-m",
+    "0.001",
+    "--heading-std-rad",
+    "0.002",
+    "--wheel-noise",
+    "1e-6",
+];
+
 /// A free loopback port.
 pub fn port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
