@@ -11,15 +11,16 @@ if [[ $SMOKE == 1 ]]; then
 fi
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
+source bench/profile.sh
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 
-cargo build --release -q -p twindrive
-cargo run --release -q -p twindrive-estimation --example one_hour_log -- "$WORK/log" "$DURATION_S" >&2
+cargo build "${PROFILE_FLAG[@]}" -q -p twindrive
+cargo run "${PROFILE_FLAG[@]}" -q -p twindrive-estimation --example one_hour_log -- "$WORK/log" "$DURATION_S" >&2
 runs=()
 for i in 1 2 3; do
     start=$EPOCHREALTIME
-    ./target/release/twindrive calibrate --encoders "$WORK/log/encoders.csv" --poses "$WORK/log/poses.csv" \
+    ./target/$PROFILE_DIR/twindrive calibrate --encoders "$WORK/log/encoders.csv" --poses "$WORK/log/poses.csv" \
         --ticks-per-rev 512 --initial 0.066,0.066,0.26 --position-std-m 0.001 --heading-std-rad 0.002 \
         --wheel-noise 1e-6 --out "$WORK/out/calib.json" > /dev/null
     end=$EPOCHREALTIME

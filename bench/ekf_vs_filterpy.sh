@@ -23,10 +23,11 @@ RTOL=1e-6
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv-filterpy
 cd "$ROOT"
+source bench/profile.sh
 
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
-example() { cargo run --release -q -p twindrive-estimation --example ekf_throughput -- "$@"; }
+example() { cargo run "${PROFILE_FLAG[@]}" -q -p twindrive-estimation --example ekf_throughput -- "$@"; }
 
 echo "writing the input ..." >&2
 example --write-input "$TMP/input.csv"

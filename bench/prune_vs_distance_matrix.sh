@@ -27,11 +27,12 @@ FAST_REPEAT=${FAST_REPEAT:-50}
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv-numpy
 cd "$ROOT"
+source bench/profile.sh
 
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
-cargo build --release -q -p twindrive-mission --example prune_peer
-PEER=$ROOT/target/release/examples/prune_peer
+cargo build "${PROFILE_FLAG[@]}" -q -p twindrive-mission --example prune_peer
+PEER=$ROOT/target/$PROFILE_DIR/examples/prune_peer
 
 echo "writing a $N-sample path (seed $SEED) ..." >&2
 "$PEER" --write "$N" "$SEED" "$TMP/path.csv" "$TMP/config.json"

@@ -16,16 +16,17 @@ if [[ $SMOKE == 1 ]]; then
 fi
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
+source bench/profile.sh
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 
 value_of() { awk -v k="$1" '$1 == k { v = $2 } END { if (v == "") exit 1; print v }'; }
 
-cargo build --release -q -p twindrive
-cargo build --release -q -p twindrive-ros --example bag_decode
-./target/release/twindrive simulate scenarios/office_drive.toml --duration-s "$DURATION_S" --out "$WORK/sim" > /dev/null
-./target/release/twindrive rosbag "$WORK/sim" --scenario scenarios/office_drive.toml --out "$WORK/bag" > /dev/null
-out=$(./target/release/examples/bag_decode "$WORK/bag")
+cargo build "${PROFILE_FLAG[@]}" -q -p twindrive
+cargo build "${PROFILE_FLAG[@]}" -q -p twindrive-ros --example bag_decode
+./target/$PROFILE_DIR/twindrive simulate scenarios/office_drive.toml --duration-s "$DURATION_S" --out "$WORK/sim" > /dev/null
+./target/$PROFILE_DIR/twindrive rosbag "$WORK/sim" --scenario scenarios/office_drive.toml --out "$WORK/bag" > /dev/null
+out=$(./target/$PROFILE_DIR/examples/bag_decode "$WORK/bag")
 messages=$(value_of messages <<<"$out")
 td=$(value_of twindrive_decode_s <<<"$out")
 size=$(du -k "$WORK/bag" | awk '{ print $1 }')

@@ -21,6 +21,7 @@ TWINDRIVE_STEPS=${TWINDRIVE_STEPS:-200000}
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv-irsim
 cd "$ROOT"
+source bench/profile.sh
 
 # last "<key> <float>" line of stdin
 value_of() { awk -v k="$1" '$1 == k { v = $2 } END { if (v == "") exit 1; print v }'; }
@@ -29,7 +30,7 @@ irsim() {
     MPLBACKEND=Agg "$VENV/bin/python" bench/irsim/run_irsim.py "$@" | value_of irsim_steps_per_s
 }
 twindrive() {
-    cargo run --release -q -p twindrive-sim --example throughput -- \
+    cargo run "${PROFILE_FLAG[@]}" -q -p twindrive-sim --example throughput -- \
         "$1" --steps "$TWINDRIVE_STEPS" | value_of steps_per_s
 }
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Every benchmark in smoke mode: tiny sizes, a few seconds each, so that a
-# change that breaks a benchmark is caught before it lands. The numbers it
-# prints mean nothing.
+# Every benchmark in smoke mode: tiny sizes, a few seconds each, on the dev
+# build the tests use (bench/profile.sh), so that a change that breaks a
+# benchmark is caught before it lands. The numbers it prints mean nothing.
 # Usage: bench/smoke.sh            (from any directory; with the Python peers)
 #        PEERS=0 bench/smoke.sh    (twindrive's side only: what scripts/test.sh runs)
 set -euo pipefail
@@ -16,13 +16,11 @@ for script in sim_vs_irsim.sh ekf_vs_filterpy.sh prune_vs_distance_matrix.sh cal
 done
 echo "== upload efficiency (smoke; twindrive experiment upload)" >&2
 cargo run -q -p twindrive -- experiment upload --smoke --seeds 1
-# The criterion benches, each benchmark run once as a test (only the crates
-# that have benches, so the zenoh crate is not built in release for this).
 echo "== loopback, two processes over zenoh (smoke; a dev build, the one the tests use)" >&2
 cargo run -q -p twindrive-net --example loopback -- --smoke
 echo "== the console: frame time in the browser, a fleet's telemetry to pages (smoke)" >&2
 bash bench/console_frame_time.sh
 bash bench/console_fleet.sh
-echo "== cargo bench (test mode)" >&2
-cargo bench -q -p twindrive-sim -p twindrive-estimation -p twindrive-mission -p twindrive-link -- --test
+echo "== the criterion benches, each benchmark once (test mode, the dev build)" >&2
+cargo test -q --benches -p twindrive-sim -p twindrive-estimation -p twindrive-mission -p twindrive-link
 echo "bench smoke: all benchmarks ran"

@@ -5,15 +5,45 @@
 # python3 with venv and pip; installs Debian's chromium and chromium-driver
 # for the console's browser tests when they are missing, and the pinned
 # Python ROS 2 peers (rosbags, mcap-ros2-support) the ROS interop tests
-# check against. Run from anywhere.
+# check against. Run from anywhere. Prints the time of each stage at the end.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
-cargo fmt --all --check
-cargo clippy --workspace --all-targets -- -D warnings
+STAGES=()
+stage() {
+    local name=$1 start=$SECONDS
+    shift
+    echo "== $name" >&2
+    "$@"
+    STAGES+=("$(printf '%6d s  %s' $((SECONDS - start)) "$name")")
+}
+report() {
+    local status=$?
+    echo "== stage times (total ${SECONDS} s)" >&2
+    printf '%s\n' "${STAGES[@]}" >&2
+    exit $status
+}
+trap report EXIT
+
+# The test peers (Debian's chromium, the Python ROS 2 packages) install in
+# the background while the workspace builds.
+DEPS_LOG=$(mktemp)
+(bash scripts/browser-deps.sh && bash scripts/ros-deps.sh >/dev/null) >"$DEPS_LOG" 2>&1 &
+DEPS_PID=$!
+wait_for_deps() {
+    if ! wait "$DEPS_PID"; then
+        cat "$DEPS_LOG" >&2
+        echo "installing the test peers failed" >&2
+        return 1
+    fi
+    cat "$DEPS_LOG" >&2
+}
+
+stage "cargo fmt --check" cargo fmt --all --check
+stage "cargo clippy" cargo clippy --workspace --all-targets -- -D warnings
+stage "build the tests" cargo test --workspace --no-run
+stage "test peers (chromium, Python ROS 2 packages)" wait_for_deps
 # Every benchmark in smoke mode, twindrive's side (the Python peers stay out
-# of CI): a change that breaks a benchmark fails here.
-PEERS=0 bash bench/smoke.sh
-bash scripts/browser-deps.sh
-bash scripts/ros-deps.sh >/dev/null
-cargo test --workspace
+# of CI), on the dev build: a change that breaks a benchmark fails here.
+stage "benchmarks, smoke mode" env PEERS=0 bash bench/smoke.sh
+stage "cargo test" cargo test --workspace

@@ -7,6 +7,7 @@
 //! - [`robot`]: the robot agent (uploads, plan gate, execution, online EKF,
 //!   journal, telemetry, hand-back, log back-fill);
 //! - [`master`]: the master's end (upload, supervision, telemetry, hand-backs, robot logs);
+//! - [`narrate`]: what the master says while it works, for people;
 //! - [`twin`]: updating the twin from a hand-back, and the continuation plan;
 //! - [`direct`]: direct tele-operation over the same link, the baseline
 //!   decoupled operation is measured against.
@@ -15,6 +16,7 @@ pub mod backend;
 pub mod direct;
 pub mod executive;
 pub mod master;
+pub mod narrate;
 pub mod operator;
 pub mod robot;
 pub mod ros;

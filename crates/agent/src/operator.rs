@@ -307,6 +307,18 @@ impl<S: ChunkStore> Operator<S> {
         logs_in || self.now_ns >= at + (self.config.log_wait_s * 1e9) as u64
     }
 
+    /// Once the mission is decided: the robot's logs still pending by its
+    /// latest status since (unknown before one arrives), the seconds waited
+    /// and the seconds the operator waits at most.
+    pub fn waiting_for_logs(&self, now_ns: u64) -> Option<(Option<u32>, f64, f64)> {
+        let at = self.decided_at_ns?;
+        Some((
+            self.status_after_decision,
+            now_ns.saturating_sub(at) as f64 * 1e-9,
+            self.config.log_wait_s,
+        ))
+    }
+
     /// Gives up: the mission failed for `why` (the link never came back, say).
     pub fn fail(&mut self, why: String, now_ns: u64) {
         self.now_ns = now_ns;
@@ -552,7 +564,11 @@ impl<S: ChunkStore> Operator<S> {
     /// Rehearses, signs and uploads a continuation of `duration_s`.
     fn continue_from(&mut self, duration_s: f64) -> anyhow::Result<()> {
         let twin = self.twin.as_ref().expect("replanning needs the twin");
-        let plan = twin.continuation(duration_s, &self.config.pipeline)?;
+        let plan = twin.continuation(
+            duration_s,
+            &self.config.pipeline,
+            &self.config.tolerances.criteria(),
+        )?;
         let learnt = serde_json::to_string(&twin.learnt)?;
         let plan_json = serde_json::to_vec_pretty(&plan)?;
         let counter = self

@@ -144,6 +144,9 @@ struct Backfill {
     sender: Sender,
 }
 
+/// A plan is driven only by a robot facing its first heading within this (rad).
+pub const START_HEADING_RAD: f64 = 0.35;
+
 /// Sent this many times a second at most while a hand-back is unacknowledged.
 const HANDBACK_RESEND_S: f64 = 5.0;
 /// Ticks in the hand-back's sensor window, and one kept in this many.
@@ -511,7 +514,11 @@ impl<B: RobotBackend> RobotAgent<B> {
             .gate
             .check(&file, self.last_counter, now_unix)
             .map_err(|r| r.to_string())
-            .and_then(|accepted| self.fits(&accepted.plan).map(|()| accepted));
+            .and_then(|accepted| {
+                self.fits(&accepted.plan)?;
+                self.at_start(&accepted.plan, &accepted.envelope.tolerances)?;
+                Ok(accepted)
+            });
         match checked {
             Err(reason) => {
                 self.record(
@@ -587,6 +594,46 @@ impl<B: RobotBackend> RobotAgent<B> {
             ));
         }
         Ok(())
+    }
+
+    /// Where the robot believes it is: its estimate at the end of the last
+    /// plan it drove, or (before any) what its backend says (a simulated
+    /// site's start, a ROS robot's pose or odometry).
+    pub fn believed_pose(&self) -> [f64; 3] {
+        if self.pose.iter().all(|v| v.is_finite()) {
+            self.pose
+        } else {
+            pose3(&self.backend.log_header().start)
+        }
+    }
+
+    /// Whether the robot stands where the plan starts: within the plan's
+    /// deviation tolerance, and facing its way within [`START_HEADING_RAD`].
+    /// A plan that starts elsewhere would be driven from the wrong place,
+    /// every step off by the same offset: it is refused before anything
+    /// moves, with what to do.
+    fn at_start(
+        &self,
+        plan: &MissionPlan,
+        tolerances: &crate::executive::Tolerances,
+    ) -> Result<(), String> {
+        let [x, y, heading] = self.believed_pose();
+        let s = plan.header.start;
+        let away_m = (x - s.x_m).hypot(y - s.y_m);
+        let turn_rad = twindrive_kinematics::wrap_angle(heading - s.heading_rad).abs();
+        if away_m <= tolerances.max_deviation_m && turn_rad <= START_HEADING_RAD {
+            return Ok(());
+        }
+        Err(format!(
+            "not at the plan's start: the robot is at ({x:.2}, {y:.2}) m heading {:.0} deg, the plan starts at ({:.2}, {:.2}) m heading {:.0} deg, {away_m:.2} m and {:.0} deg away (at most {:.2} m and {:.0} deg). Nothing moved. Bring the robot to the plan's start, or plan from where it stands (rehearse on the twin from this pose)",
+            heading.to_degrees(),
+            s.x_m,
+            s.y_m,
+            s.heading_rad.to_degrees(),
+            turn_rad.to_degrees(),
+            tolerances.max_deviation_m,
+            START_HEADING_RAD.to_degrees(),
+        ))
     }
 
     fn start(
@@ -890,7 +937,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             plan: self.current.clone(),
             progress,
             plan_t_s,
-            pose: self.pose,
+            pose: self.believed_pose(),
             params: self.params,
             params_std: self.params_std,
             deviation_m,

@@ -18,7 +18,7 @@ use twindrive_link::wire::Handback;
 use twindrive_mission::PipelineError;
 use twindrive_mission::pipeline::{PipelineSettings, plan_from_log};
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
-use twindrive_mission::verify::{self, TrackerSettings};
+use twindrive_mission::verify::{self, Criteria};
 use twindrive_sim::{Scenario, SensorModel, Simulator};
 
 /// The master's twin: its scenario (world and simulated robot) and the
@@ -159,14 +159,18 @@ impl Twin {
 
     /// The operator's continuation: the mission's controller re-run on the
     /// updated twin from the hand-back pose for `duration_s`, through the
-    /// pipeline, and replayed closed loop on the twin (no collision
-    /// allowed) before it is returned.
+    /// pipeline, and verified on the twin (open and closed loop: no
+    /// contact, within `criteria`'s deviation of its own path) before it
+    /// is returned. The twin's robot moves with the parameters the plan is
+    /// made with: one robot model for the rehearsal and the plan.
     pub fn continuation(
         &self,
         duration_s: f64,
         settings: &PipelineSettings,
+        criteria: &Criteria,
     ) -> Result<MissionPlan, PipelineError> {
         let mut scenario = self.scenario.clone();
+        scenario.robot.true_params = self.calibrated;
         scenario
             .set_duration_s(duration_s)
             .map_err(|e| PipelineError::Infeasible(format!("continuation duration: {e}")))?;
@@ -174,16 +178,11 @@ impl Twin {
         let log_sha = sha256_hex(format!("continuation:{:?}", log.header.start).as_bytes());
         let (plan, _) =
             plan_from_log(&log, &log_sha, &self.calibrated, &scenario, settings, false)?;
-        let replay = verify::closed_loop(
-            &plan.samples,
-            scenario,
-            &self.calibrated,
-            &TrackerSettings::default(),
-        )?;
-        if replay.report.collisions > 0 {
+        let checked = verify::verify(&plan.samples, &scenario, &self.calibrated, criteria)?;
+        if !checked.verdict.passed {
             return Err(PipelineError::Infeasible(format!(
-                "the continuation collides {} time(s) when replayed on the twin",
-                replay.report.collisions
+                "the continuation fails verification on the twin: {}",
+                checked.verdict.reasons.join("; ")
             )));
         }
         Ok(plan)

@@ -34,7 +34,8 @@ pub enum Job {
 }
 
 pub enum JobResult {
-    Plan(Result<PlanResult, String>),
+    /// A plan, verified on the twin as soon as it is made.
+    Plan(Result<(PlanResult, (Verification, Value)), String>),
     Verify(Result<(Verification, Value), String>),
 }
 
@@ -46,7 +47,12 @@ impl Job {
                 scenario,
                 params,
                 redundancy,
-            } => JobResult::Plan(planning::make_plan(&log, &scenario, &params, redundancy)),
+            } => JobResult::Plan(
+                planning::make_plan(&log, &scenario, &params, redundancy).and_then(|p| {
+                    let v = planning::verify(&p.plan, &scenario)?;
+                    Ok((p, v))
+                }),
+            ),
             Job::Verify { plan, scenario } => JobResult::Verify(planning::verify(&plan, &scenario)),
         }
     }
@@ -69,6 +75,9 @@ pub struct Frame {
     pub verify: Option<(u64, Arc<str>)>,
     pub rehearsal: Option<(u64, Arc<str>)>,
 }
+
+/// Why the console will not plan without a robot model.
+pub const NO_MODEL: &str = "plan: no robot model. Plans are made with the robot's calibrated wheel diameters and wheelbase, and the twin rehearses with the same ones; without them the plan's path is dead reckoning with parameters the robot does not have, and it fails on the robot. Calibrate the robot (`twindrive calibrate`) and start the console with --calibration calib.json";
 
 /// What the console was started with.
 pub struct Settings {
@@ -245,6 +254,9 @@ impl Core {
                 if let Some(job) = self.job {
                     return Err(format!("busy {job}; wait for it"));
                 }
+                if !self.settings.calibrated {
+                    return Err(NO_MODEL.into());
+                }
                 let log = self
                     .ws
                     .rehearsal()
@@ -277,13 +289,43 @@ impl Core {
                     scenario: Box::new(self.ws.scenario().clone()),
                 }))
             }
-            Command::Upload { robot } => {
-                let key = self
-                    .settings
-                    .key
-                    .as_ref()
-                    .ok_or("upload: this console has no signing key (start it with --key)")?;
+            Command::Upload { robot, force } => {
+                if self.settings.key.is_none() {
+                    return Err(
+                        "upload: this console has no signing key (start it with --key)".into(),
+                    );
+                }
                 let p = self.plan.as_ref().ok_or("upload: make a plan first")?;
+                let short = p.plan.sha256[..12].to_owned();
+                let verdict = self
+                    .verification
+                    .as_ref()
+                    .filter(|(v, _)| v.plan_sha256 == p.plan.sha256)
+                    .map(|(v, _)| v.verdict.clone());
+                match verdict {
+                    Some(v) if v.passed => {}
+                    Some(v) if force => {
+                        let reasons = v.reasons.join("; ");
+                        tracing::warn!(plan = %p.plan.sha256, reasons, "operator override: sending a plan that failed verification");
+                        self.event(
+                            "error",
+                            format!("upload: plan {short} FAILED verification ({reasons}); sent anyway at the operator's insistence"),
+                        );
+                    }
+                    Some(v) => {
+                        return Err(format!(
+                            "upload: plan {short} failed verification on the twin ({}); it is not sent. Fix the rehearsal or the calibration, or tick \"send even if verification failed\"",
+                            v.reasons.join("; ")
+                        ));
+                    }
+                    None => {
+                        return Err(format!(
+                            "upload: plan {short} is not verified yet; verify it first"
+                        ));
+                    }
+                }
+                let p = self.plan.as_ref().expect("checked above");
+                let key = self.settings.key.as_ref().expect("checked above");
                 let unix_now_s = self.settings.unix_at_zero_s + now_ns as f64 * 1e-9;
                 let signing = Signing {
                     key,
@@ -324,7 +366,7 @@ impl Core {
     pub fn finish(&mut self, result: JobResult) -> Result<String, String> {
         self.job = None;
         match result {
-            JobResult::Plan(Ok(p)) => {
+            JobResult::Plan(Ok((p, verified))) => {
                 let dir = self.settings.out.join("plans");
                 let stem = p.plan.sha256[..12].to_owned();
                 let files = [
@@ -340,30 +382,26 @@ impl Core {
                 }
                 let s = &p.view["summary"];
                 let line = format!(
-                    "plan {stem}: {:.2} m in {:.1} s from {:.2} m rehearsed, {:.2} % covered; {}",
+                    "plan {stem}: {:.2} m in {:.1} s from {:.2} m rehearsed, {:.2} % covered; {}; verification {}",
                     s["plan_length_m"].as_f64().unwrap_or(0.0),
                     s["plan_duration_s"].as_f64().unwrap_or(0.0),
                     s["executed_length_m"].as_f64().unwrap_or(0.0),
                     s["coverage_percent"].as_f64().unwrap_or(0.0),
                     dir.join(format!("{stem}.json")).display(),
+                    verified.0.verdict.summary(),
                 );
                 self.plan = Some(p);
                 self.plan_rev += 1;
-                self.verification = None;
+                self.verification = Some(verified);
                 self.verify_rev += 1;
                 Ok(line)
             }
             JobResult::Plan(Err(e)) => Err(e),
             JobResult::Verify(Ok(v)) => {
                 let line = format!(
-                    "verification of {}: {} (open loop {} collisions, {} bumps, {:.3} m max deviation; closed loop {} collisions, {} bumps)",
+                    "verification of {}: {}",
                     &v.0.plan_sha256[..12],
-                    if v.0.passed { "passed" } else { "FAILED" },
-                    v.0.open_loop.collisions,
-                    v.0.open_loop.bumps,
-                    v.0.open_loop.max_deviation_m,
-                    v.0.closed_loop.collisions,
-                    v.0.closed_loop.bumps,
+                    v.0.verdict.summary()
                 );
                 self.verification = Some(v);
                 self.verify_rev += 1;
@@ -409,6 +447,8 @@ impl Core {
         let verdict = self.verification.as_ref().map(|(v, _)| {
             json!({
                 "passed": v.passed,
+                "reasons": v.verdict.reasons,
+                "max_deviation_tolerance_m": v.verdict.max_deviation_m,
                 "open_loop": { "collisions": v.open_loop.collisions, "bumps": v.open_loop.bumps, "max_deviation_m": v.open_loop.max_deviation_m },
                 "closed_loop": { "collisions": v.closed_loop.collisions, "bumps": v.closed_loop.bumps, "max_deviation_m": v.closed_loop.max_deviation_m },
             })
@@ -509,6 +549,12 @@ mod tests {
     use crate::protocol::parse;
 
     fn core(key: bool) -> Core {
+        core_with(key, true)
+    }
+
+    /// A console on the case study's twin; `calibrated`: started with a
+    /// calibration (the twin's nominal parameters stand in for it).
+    fn core_with(key: bool, calibrated: bool) -> Core {
         let scenario = twindrive_sim::builtin::load("wall_following")
             .unwrap()
             .unwrap();
@@ -516,12 +562,12 @@ mod tests {
             std::env::temp_dir().join(format!("twindrive-console-core-{}", std::process::id()));
         let params = scenario.robot.nominal_params;
         Core::new(
-            Workspace::new(scenario),
+            Workspace::new(crate::twin_model(scenario, calibrated.then_some(params))),
             Vec::new(),
             Settings {
                 key: key.then(|| twindrive_link::envelope::generate_key().unwrap()),
                 params,
-                calibrated: false,
+                calibrated,
                 world_sha256: "00".repeat(32),
                 unix_at_zero_s: 1.8e9,
                 supervision: Supervision {
@@ -605,5 +651,82 @@ mod tests {
         );
         assert!(c.frame(s).verify.is_some());
         assert!(c.frame(s).rehearsal.is_some());
+    }
+
+    /// Records a 32x wall-following rehearsal of `secs` console seconds.
+    fn rehearse(c: &mut Core, secs: u64) -> u64 {
+        let s = secs * 1_000_000_000;
+        for cmd in [
+            r#"{"cmd":"wall_follow"}"#,
+            r#"{"cmd":"speed","factor":32}"#,
+            r#"{"cmd":"record_start"}"#,
+        ] {
+            assert!(apply(c, cmd, 0).is_ok());
+        }
+        c.tick(s);
+        assert!(apply(c, r#"{"cmd":"record_stop"}"#, s).is_ok());
+        s
+    }
+
+    #[test]
+    fn without_a_robot_model_the_console_refuses_to_plan() {
+        let mut c = core_with(true, false);
+        let s = rehearse(&mut c, 1);
+        let e = apply(&mut c, r#"{"cmd":"plan"}"#, s)
+            .err()
+            .expect("refused");
+        assert!(e.contains("--calibration"), "{e}");
+        assert_eq!(state(&mut c, s)["job"], Value::Null);
+    }
+
+    #[test]
+    fn a_plan_is_verified_when_made_and_a_failed_one_is_not_uploaded_unless_forced() {
+        let mut c = core(true);
+        let s = rehearse(&mut c, 1);
+        let Ok(Applied::Job(job)) = apply(&mut c, r#"{"cmd":"plan"}"#, s) else {
+            panic!("a planning job")
+        };
+        let line = c.finish(job.run()).unwrap();
+        assert!(line.contains("verification passed"), "{line}");
+        assert_eq!(state(&mut c, s)["verdict"]["passed"], true);
+        // A passed plan gets past the gate (to the missing robot).
+        let e = apply(&mut c, r#"{"cmd":"upload","robot":"r1"}"#, s)
+            .err()
+            .unwrap();
+        assert!(e.contains("no robot `r1`"), "{e}");
+        // The same plan verified on a twin whose wheels differ by 3 %
+        // fails: the upload is refused with the reasons.
+        let plan = c.plan.as_ref().unwrap().plan.clone();
+        let mut other = c.ws.scenario().clone();
+        other.robot.true_params.left_diameter_m *= 1.03;
+        c.finish(JobResult::Verify(planning::verify(&plan, &other)))
+            .unwrap();
+        let st = state(&mut c, s);
+        assert_eq!(st["verdict"]["passed"], false);
+        assert!(
+            !st["verdict"]["reasons"].as_array().unwrap().is_empty(),
+            "{st}"
+        );
+        let e = apply(&mut c, r#"{"cmd":"upload","robot":"r1"}"#, s)
+            .err()
+            .unwrap();
+        assert!(
+            e.contains("failed verification") && e.contains("departs"),
+            "{e}"
+        );
+        // Forced: logged as an error event, and on to the (missing) robot.
+        let e = apply(&mut c, r#"{"cmd":"upload","robot":"r1","force":true}"#, s)
+            .err()
+            .unwrap();
+        assert!(e.contains("no robot `r1`"), "{e}");
+        let st = state(&mut c, s);
+        let events = st["events"].as_array().unwrap();
+        assert!(
+            events
+                .iter()
+                .any(|e| e["level"] == "error"
+                    && e["text"].as_str().unwrap().contains("sent anyway")),
+            "{st}"
+        );
     }
 }

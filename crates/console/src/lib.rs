@@ -71,6 +71,20 @@ pub struct ConsoleConfig {
     pub foxglove: Option<SocketAddr>,
 }
 
+/// The twin the operator rehearses on: the site's scenario with its robot
+/// moving as the calibrated `params` say, the same parameters plans are
+/// made with (one robot model per rehearsal). Without a calibration the
+/// console does not plan ([`core::NO_MODEL`]).
+pub fn twin_model(
+    mut scenario: Scenario,
+    params: Option<twindrive_kinematics::DiffDriveParams>,
+) -> Scenario {
+    if let Some(p) = params {
+        scenario.robot.true_params = p;
+    }
+    scenario
+}
+
 /// Runs the console until interrupted (Ctrl-C or SIGTERM).
 pub fn run(config: ConsoleConfig) -> anyhow::Result<()> {
     std::fs::create_dir_all(&config.out)
@@ -110,7 +124,7 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
             ))))
         })
         .collect();
-    let mut ws = workspace::Workspace::new(config.scenario.clone());
+    let mut ws = workspace::Workspace::new(twin_model(config.scenario.clone(), config.params));
     if let Some(log) = config.rehearsal {
         ws.set_rehearsal(log);
     }

@@ -5,12 +5,13 @@ use std::sync::Arc;
 
 use serde::Serialize;
 use serde_json::{Value, json};
+use twindrive_link::envelope::Tolerances;
 use twindrive_log::MissionLog;
 use twindrive_mission::path::PathSample;
 use twindrive_mission::pipeline::{PipelineSettings, plan_from_log};
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
 use twindrive_mission::redundancy::RedundancyConfig;
-use twindrive_mission::verify::{Replay, TrackerSettings, closed_loop, open_loop};
+use twindrive_mission::verify::{Replay, Verdict};
 use twindrive_sim::Scenario;
 
 /// A plan made on the console.
@@ -155,14 +156,16 @@ pub fn make_plan(
     })
 }
 
-/// Both replays of a plan on the twin.
+/// Both replays of a plan on the twin, and the verdict.
 #[derive(Debug, Clone, Serialize)]
 pub struct Verification {
     pub plan_sha256: String,
     pub open_loop: twindrive_mission::verify::ReplayReport,
     pub closed_loop: twindrive_mission::verify::ReplayReport,
-    /// Passed: no collision and no bump in either replay.
+    /// Passed: neither replay touches anything or departs from the plan's
+    /// path by more than the robot's deviation tolerance.
     pub passed: bool,
+    pub verdict: Verdict,
 }
 
 fn track(replay: &Replay) -> Value {
@@ -177,33 +180,28 @@ fn track(replay: &Replay) -> Value {
     )
 }
 
-/// Replays `plan` open and closed loop on the twin's true robot from the
-/// plan's start; returns the verdict and what the page draws.
+/// Replays `plan` open and closed loop on the twin from the plan's start
+/// and judges it against the deviation tolerance robots hand back on;
+/// returns the verdict and what the page draws.
 pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> Result<(Verification, Value), String> {
-    let mut twin = scenario.clone();
-    twin.robot.start = plan.header.start;
-    let open = open_loop(&plan.samples, twin.clone(), None)
-        .map_err(|e| format!("the open-loop replay: {e}"))?;
-    let closed = closed_loop(
+    let checked = twindrive_mission::verify::verify(
         &plan.samples,
-        twin,
+        scenario,
         &plan.header.calibrated,
-        &TrackerSettings::default(),
+        &Tolerances::default().criteria(),
     )
-    .map_err(|e| format!("the closed-loop replay: {e}"))?;
-    let passed = [&open.report, &closed.report]
-        .iter()
-        .all(|r| r.collisions == 0 && r.bumps == 0);
+    .map_err(|e| format!("the replays: {e}"))?;
     let verdict = Verification {
         plan_sha256: plan.sha256.clone(),
-        open_loop: open.report.clone(),
-        closed_loop: closed.report.clone(),
-        passed,
+        open_loop: checked.open_loop.report.clone(),
+        closed_loop: checked.closed_loop.report.clone(),
+        passed: checked.verdict.passed,
+        verdict: checked.verdict,
     };
     let view = json!({
         "verdict": verdict,
-        "open_loop": track(&open),
-        "closed_loop": track(&closed),
+        "open_loop": track(&checked.open_loop),
+        "closed_loop": track(&checked.closed_loop),
     });
     Ok((verdict, view))
 }
@@ -215,9 +213,11 @@ mod tests {
 
     #[test]
     fn a_wall_following_rehearsal_becomes_a_verified_plan() {
-        let scenario = twindrive_sim::builtin::load("wall_following")
+        let mut scenario = twindrive_sim::builtin::load("wall_following")
             .unwrap()
             .unwrap();
+        // One robot model: the twin moves as the plan's parameters say.
+        scenario.robot.true_params = scenario.robot.nominal_params;
         let mut w = Workspace::new(scenario.clone());
         w.wall_follow(0);
         w.set_speed(32.0, 0).unwrap();
@@ -245,6 +245,17 @@ mod tests {
         assert_eq!(back.sha256, plan.sha256);
         let (verdict, view) = verify(plan, w.scenario()).unwrap();
         assert!(verdict.passed, "{verdict:?}");
+        assert!(verdict.verdict.reasons.is_empty());
+        // The same plan on a robot whose wheels differ by 3 % departs from
+        // its path: it fails, with the numbers.
+        let mut other = w.scenario().clone();
+        other.robot.true_params.left_diameter_m *= 1.03;
+        let (failed, _) = verify(plan, &other).unwrap();
+        assert!(!failed.passed, "{failed:?}");
+        assert!(
+            failed.verdict.reasons.iter().any(|r| r.contains("departs")),
+            "{failed:?}"
+        );
         assert!(view["closed_loop"]["x"].as_array().unwrap().len() > 10);
     }
 }

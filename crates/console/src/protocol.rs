@@ -40,9 +40,12 @@ pub enum Command {
     },
     /// Replay the plan open and closed loop on the twin.
     Verify,
-    /// Sign the plan for `robot` and upload it.
+    /// Sign the plan for `robot` and upload it; only a plan that passed
+    /// verification, unless `force` (the operator insists; logged).
     Upload {
         robot: String,
+        #[serde(default)]
+        force: bool,
     },
     /// After a hand-back: continue with a plan rehearsed on the updated
     /// twin.
@@ -109,7 +112,10 @@ mod tests {
         assert_eq!(r.keep_regions.len(), 1);
         assert_eq!(
             parse(r#"{"cmd":"upload","robot":"r1"}"#),
-            Ok(Command::Upload { robot: "r1".into() })
+            Ok(Command::Upload {
+                robot: "r1".into(),
+                force: false
+            })
         );
     }
 

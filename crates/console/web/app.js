@@ -107,7 +107,12 @@ function onState(m) {
   if (document.activeElement !== $('speed')) $('speed').value = String(t.speed);
   const p = m.params;
   const params = `plans use wheels ${fmt(p.left_diameter_m, 4)}/${fmt(p.right_diameter_m, 4)} m, wheelbase ${fmt(p.wheelbase_m, 4)} m ` +
-    (p.calibrated ? '(calibration)' : '(the twin\'s nominal parameters: start the console with --calibration; the plan\'s path is dead reckoning with these)');
+    (p.calibrated ? '(calibration; the twin rehearses with them too)' : '');
+  const noModel = 'No robot model: plans need the robot\'s calibration. Calibrate it (twindrive calibrate) and start the console with --calibration calib.json.';
+  $('btn-plan').disabled = !p.calibrated;
+  $('btn-plan').title = p.calibrated ? '' : noModel;
+  $('no-model').hidden = p.calibrated;
+  $('no-model').textContent = noModel;
   if ($('params').textContent !== params) $('params').textContent = params;
   $('btn-upload').disabled = !(m.can_sign && m.plan && S.focus);
   $('btn-upload').title = m.can_sign ? '' : 'start the console with --key to sign plans';
@@ -309,9 +314,14 @@ function onVerify(v) {
 }
 
 function renderVerdict(v) {
+  const esc = (t) => String(t).replace(/[&<>]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;' }[c]));
+  const reasons = (v.reasons || []).map((r) => `<li>${esc(r)}</li>`).join('');
   $('verdict').innerHTML = `verification: <span class="pill ${v.passed ? 'ok' : 'bad'}">${v.passed ? 'passed' : 'FAILED'}</span> ` +
     `open loop ${v.open_loop.collisions} collisions, ${v.open_loop.bumps} bumps, ${fmt(v.open_loop.max_deviation_m, 3)} m max deviation; ` +
-    `closed loop ${v.closed_loop.collisions} collisions, ${v.closed_loop.bumps} bumps`;
+    `closed loop ${v.closed_loop.collisions} collisions, ${v.closed_loop.bumps} bumps, ${fmt(v.closed_loop.max_deviation_m, 3)} m max deviation ` +
+    `(tolerance ${fmt(v.max_deviation_tolerance_m, 3)} m)` +
+    (v.passed ? '' : `<ul class="reasons">${reasons}</ul><b>This plan is not sent</b> unless you tick “send even if verification failed”.`);
+  $('verdict').classList.toggle('failed', !v.passed);
 }
 
 function onRehearsal(r) {
@@ -363,7 +373,9 @@ $('speed').onchange = () => send({ cmd: 'speed', factor: parseFloat($('speed').v
 $('btn-record').onclick = () => send({ cmd: S.state?.twin.recording_s !== null && S.state ? 'record_stop' : 'record_start' });
 $('btn-plan').onclick = () => send({ cmd: 'plan', redundancy: redundancySettings() });
 $('btn-verify').onclick = () => send({ cmd: 'verify' });
-$('btn-upload').onclick = () => { if (S.focus) send({ cmd: 'upload', robot: S.focus }); };
+$('btn-upload').onclick = () => {
+  if (S.focus) send({ cmd: 'upload', robot: S.focus, force: $('force-upload').checked });
+};
 function setMode(mode) {
   map.mode = map.mode === mode ? null : mode;
   $('btn-place').classList.toggle('on', map.mode === 'place');

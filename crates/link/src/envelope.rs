@@ -87,6 +87,16 @@ impl Default for Tolerances {
     }
 }
 
+impl Tolerances {
+    /// What a plan must meet on the twin before it is sent to a robot that
+    /// hands back on these tolerances.
+    pub fn criteria(&self) -> twindrive_mission::verify::Criteria {
+        twindrive_mission::verify::Criteria {
+            max_deviation_m: self.max_deviation_m,
+        }
+    }
+}
+
 impl Envelope {
     /// An envelope to sign for `robot_id`: valid from a minute before
     /// `now_unix_s` (slack for the robot's clock) for `valid_for_s`. The

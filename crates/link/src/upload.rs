@@ -70,6 +70,9 @@ pub struct SenderStats {
     pub naks_received: u64,
     /// Reed-Solomon repair shards sent for the tail block.
     pub repairs_sent: u64,
+    /// Offers sent again because an end-of-file went unanswered (a
+    /// receiver that restarted, or a link that was down).
+    pub reoffers: u64,
 }
 
 /// The master's side of one upload.
@@ -89,6 +92,15 @@ pub struct Sender {
     offer_sent_at: Option<u64>,
     answered: bool,
     eof_sent_at: Option<u64>,
+    /// When the receiver last answered (a NAK), if ever.
+    heard_at: Option<u64>,
+    /// The offer went again in place of an end-of-file: the end-of-file
+    /// follows at once.
+    eof_now: bool,
+    /// The offer went again, unanswered so far: the next NAK answers it
+    /// and is the receiver's whole truth (one that restarted holds less
+    /// than an earlier NAK confirmed).
+    reoffered: bool,
     next_send_ns: u64,
     rtt_ns: u64,
     finished: bool,
@@ -187,6 +199,9 @@ impl Sender {
             offer_sent_at: None,
             answered: false,
             eof_sent_at: None,
+            heard_at: None,
+            eof_now: false,
+            reoffered: false,
             next_send_ns: 0,
             rtt_ns: config.rtt_hint_ns.max(1),
             finished: false,
@@ -238,6 +253,16 @@ impl Sender {
                 missing,
             } if *transfer == self.offer.transfer => {
                 self.stats.naks_received += 1;
+                self.heard_at = Some(now_ns);
+                if std::mem::take(&mut self.reoffered) {
+                    // What this receiver lists as missing is missing, even
+                    // if an earlier receiver held it.
+                    for &(a, b) in missing {
+                        for k in a..=b.min(self.stats.chunks.saturating_sub(1)) {
+                            self.confirmed[k as usize] = false;
+                        }
+                    }
+                }
                 let first = !self.answered;
                 if first {
                     self.answered = true;
@@ -378,10 +403,26 @@ impl Sender {
             return Some(message);
         }
         // Everything sent: say so, and again each round trip until done.
-        let eof_due = self
-            .eof_sent_at
-            .is_none_or(|t| now_ns >= t + self.rtt_ns + self.rtt_ns / 4);
+        let eof_due = self.eof_now
+            || self
+                .eof_sent_at
+                .is_none_or(|t| now_ns >= t + self.rtt_ns + self.rtt_ns / 4);
         if eof_due {
+            // No answer since the last end-of-file: the receiver may have
+            // restarted and forgotten this transfer (its chunks and
+            // end-of-files then go unheard). The offer goes again first; a
+            // receiver answers it with where it stands, so the transfer
+            // resumes with whoever listens now instead of stalling.
+            let unanswered = self
+                .eof_sent_at
+                .is_some_and(|t| self.heard_at.is_none_or(|h| h < t));
+            if unanswered && !self.eof_now {
+                self.eof_now = true;
+                self.reoffered = true;
+                self.stats.reoffers += 1;
+                return Some(self.stamper.stamp(Body::Offer(self.offer), now_ns));
+            }
+            self.eof_now = false;
             self.eof_sent_at = Some(now_ns);
             let message = self.stamper.stamp(
                 Body::EndOfFile {
@@ -465,6 +506,9 @@ impl Sender {
     }
 
     fn eof_due_at(&self) -> u64 {
+        if self.eof_now {
+            return 0;
+        }
         self.eof_sent_at
             .map_or(0, |t| t + self.rtt_ns + self.rtt_ns / 4)
     }

@@ -129,6 +129,39 @@ fn restarts_of_either_side_resume_without_losing_or_repeating() {
 }
 
 #[test]
+fn a_receiver_that_forgot_the_transfer_still_gets_the_whole_file() {
+    // The sender has been answered and streams chunks when its receiver is
+    // replaced by one that never heard the offer (a master started again
+    // with another output directory while a robot back-fills its log):
+    // chunks and end-of-files alone would go unheard forever. The sender
+    // offers again when an end-of-file goes unanswered.
+    for (profile, seed) in [("lan", 1), ("satellite-lossy,loss=0.2", 2), ("lunar", 3)] {
+        let profile: LinkProfile = profile.parse().unwrap();
+        let data = file(120_000, seed);
+        let mut net = link(&profile, seed);
+        let mut sender = Sender::resume("rover", data.clone(), sender_config(&profile));
+        let mut first = Receiver::new("rover", MemoryStore::default(), ReceiverConfig::default());
+        // A quarter of the way.
+        assert!(net.run(&mut sender, &mut first, 600 * S, |s, _| {
+            s.stats.chunks_confirmed > s.stats.chunks / 4
+        }));
+        assert!(!sender.is_finished(), "{profile:?}: {:?}", sender.stats);
+        drop(first);
+        net.drop_in_flight();
+        let mut second = Receiver::new("rover", MemoryStore::default(), ReceiverConfig::default());
+        let mut got = None;
+        assert!(
+            net.run(&mut sender, &mut second, 600 * S, |s, _| s.is_finished()),
+            "{profile:?}: {:?}",
+            sender.stats
+        );
+        completed(&mut second, &mut got);
+        assert_eq!(got.as_deref(), Some(&data[..]), "{profile:?}");
+        assert!(sender.stats.reoffers > 0, "{profile:?}: {:?}", sender.stats);
+    }
+}
+
+#[test]
 fn corrupted_chunks_are_dropped_and_asked_for_again() {
     let profile: LinkProfile = "wifi".parse().unwrap();
     let data = file(80_000, 5);

@@ -401,3 +401,115 @@ pub fn closed_loop(
         move |s| tracker.command(samples, s.t_ns as f64 * 1e-9, s.encoder_ticks),
     )
 }
+
+/// What a plan must meet, replayed on the twin, before it may be sent.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct Criteria {
+    /// The robot's own deviation tolerance, the one it hands back on (m):
+    /// a replay further than this from the plan's path would be a hand-back
+    /// on the real robot.
+    pub max_deviation_m: f64,
+}
+
+/// The verdict on a plan: passed, or the reasons it failed.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Verdict {
+    pub passed: bool,
+    /// The tolerance the replays were held to (m).
+    pub max_deviation_m: f64,
+    /// Why the plan failed, one sentence each (empty when it passed).
+    pub reasons: Vec<String>,
+}
+
+impl Verdict {
+    /// Judges the open- and closed-loop replays of one plan: each must
+    /// touch nothing (no collision, no bump) and stay within the
+    /// deviation tolerance of the plan's path, and the closed loop must
+    /// end within it of the plan's end.
+    pub fn judge(open: &ReplayReport, closed: &ReplayReport, criteria: &Criteria) -> Self {
+        let tol = criteria.max_deviation_m;
+        // A NaN distance is beyond any tolerance.
+        let beyond = |d: f64| d.is_nan() || d > tol;
+        let mut reasons = Vec::new();
+        for (name, r) in [("open loop", open), ("closed loop", closed)] {
+            if r.collisions > 0 {
+                reasons.push(format!(
+                    "{name}: {} collision(s) with the twin's walls",
+                    r.collisions
+                ));
+            }
+            if r.bumps > 0 {
+                reasons.push(format!("{name}: the bumper closed {} time(s)", r.bumps));
+            }
+            if beyond(r.max_deviation_m) {
+                reasons.push(format!(
+                    "{name}: departs {:.3} m from the plan's path (tolerance {tol:.3} m)",
+                    r.max_deviation_m
+                ));
+            }
+        }
+        if beyond(closed.final_error_m) {
+            reasons.push(format!(
+                "closed loop: ends {:.3} m from the plan's end (tolerance {tol:.3} m)",
+                closed.final_error_m
+            ));
+        }
+        Self {
+            passed: reasons.is_empty(),
+            max_deviation_m: tol,
+            reasons,
+        }
+    }
+
+    /// One line for people: `passed (...)` or `FAILED: reason; reason`.
+    pub fn summary(&self) -> String {
+        if self.passed {
+            format!(
+                "passed: no contact, within {:.3} m of the plan's path open and closed loop",
+                self.max_deviation_m
+            )
+        } else {
+            format!("FAILED: {}", self.reasons.join("; "))
+        }
+    }
+}
+
+/// A plan's verification: both replays on the twin and the verdict.
+#[derive(Debug, Clone)]
+pub struct PlanVerification {
+    pub open_loop: Replay,
+    pub closed_loop: Replay,
+    pub verdict: Verdict,
+}
+
+/// Replays `samples` on the twin `scenario` open loop (the plan's wheel
+/// speeds) and closed loop (tracked on odometry through `calibrated`, the
+/// plan's parameters), side by side, and judges both by `criteria`.
+pub fn verify(
+    samples: &[PlanSample],
+    scenario: &Scenario,
+    calibrated: &DiffDriveParams,
+    criteria: &Criteria,
+) -> Result<PlanVerification, PipelineError> {
+    let (open, closed) = std::thread::scope(|s| {
+        let closed = s.spawn(|| {
+            closed_loop(
+                samples,
+                scenario.clone(),
+                calibrated,
+                &TrackerSettings::default(),
+            )
+        });
+        let open = open_loop(samples, scenario.clone(), None);
+        (open, closed.join())
+    });
+    let closed = closed
+        .map_err(|_| PipelineError::Infeasible("the closed-loop replay panicked".into()))??;
+    let open = open?;
+    let verdict = Verdict::judge(&open.report, &closed.report, criteria);
+    Ok(PlanVerification {
+        open_loop: open,
+        closed_loop: closed,
+        verdict,
+    })
+}

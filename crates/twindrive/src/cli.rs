@@ -430,6 +430,17 @@ pub struct MasterArgs {
     /// Wait this long for the robot's logs once the mission is decided, seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 120.0)]
     pub log_wait: f64,
+    /// Send the plan even if it fails verification on the twin (its open-
+    /// or closed-loop replay touches something or departs from the plan's
+    /// path by more than the robot's deviation tolerance). Said and logged.
+    #[arg(long)]
+    pub allow_failed_verification: bool,
+    /// Say only the outcome (and errors): no event lines, no status line.
+    #[arg(short, long, conflicts_with = "verbose")]
+    pub quiet: bool,
+    /// Also say every status summary the robot sends.
+    #[arg(short, long)]
+    pub verbose: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -449,8 +460,9 @@ pub struct ConsoleArgs {
     /// console plans but does not sign or upload.
     #[arg(long, value_name = "master.key")]
     pub key: Option<PathBuf>,
-    /// The robot's calibrated parameters (`twindrive calibrate`'s JSON),
-    /// which plans are made with (default: the twin's nominal ones).
+    /// The robot's calibrated parameters (`twindrive calibrate`'s JSON):
+    /// plans are made with them and the twin rehearses with them. Without
+    /// it the console does not plan.
     #[arg(long, value_name = "calib.json")]
     pub calibration: Option<PathBuf>,
     /// A robot this console supervises; repeatable (a fleet).
@@ -531,6 +543,11 @@ pub struct SignArgs {
     /// (default: the built-in scenario the plan names).
     #[arg(long, value_name = "S.toml")]
     pub scenario: Option<PathBuf>,
+    /// Send the plan even if it fails verification on the twin (its open-
+    /// or closed-loop replay touches something or departs from the plan's
+    /// path by more than the robot's deviation tolerance). Said and logged.
+    #[arg(long)]
+    pub allow_failed_verification: bool,
     /// Output file.
     #[arg(long, value_name = "PLAN.signed")]
     pub out: PathBuf,

@@ -9,6 +9,7 @@ mod inputs;
 mod output;
 mod progress;
 mod report;
+mod verification;
 
 use std::process::ExitCode;
 
@@ -35,6 +36,10 @@ fn main() -> ExitCode {
                 return ExitCode::SUCCESS;
             }
             eprintln!("error: {err:#}");
+            // A plan that failed verification is an answer, not a fault.
+            if err.is::<commands::verify_plan::PlanFailed>() {
+                return ExitCode::from(3);
+            }
             ExitCode::FAILURE
         }
     }

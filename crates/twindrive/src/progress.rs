@@ -1,19 +1,89 @@
-//! Progress bars on a terminal, nothing when stderr is piped.
+//! Progress of long work: a bar on a terminal; on a pipe (a log, CI), one
+//! plain line at most every [`PIPED_EVERY`], so that no long run is silent
+//! for more than a few seconds and a log is not flooded.
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle, TermLike};
+
+/// A progress line on a pipe at most this often.
+pub const PIPED_EVERY: Duration = Duration::from_secs(3);
 
 pub fn bar(total: u64, message: &str) -> ProgressBar {
-    if !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
     let bar = ProgressBar::new(total);
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:40}] {percent:>3}% {elapsed_precise} ETA {eta}")
+    if std::io::stderr().is_terminal() {
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{msg} [{bar:40}] {percent:>3}% {elapsed_precise} ETA {eta}",
+            )
             .expect("static template")
             .progress_chars("=> "),
-    );
+        );
+    } else {
+        bar.set_draw_target(ProgressDrawTarget::term_like(Box::new(Lines::default())));
+        bar.set_style(
+            ProgressStyle::with_template("{msg}: {pos}/{len} ({percent} %), {elapsed} so far")
+                .expect("static template"),
+        );
+        // Redrawn every second even when no work completes; `Lines` keeps
+        // one line in three.
+        bar.enable_steady_tick(Duration::from_secs(1));
+    }
     bar.set_message(message.to_string());
     bar
+}
+
+/// A stand-in terminal that writes each drawn line to stderr as a plain
+/// line, at most one per [`PIPED_EVERY`].
+#[derive(Debug, Default)]
+pub struct Lines {
+    last: Mutex<Option<Instant>>,
+}
+
+impl Lines {
+    fn line(&self, s: &str) -> std::io::Result<()> {
+        let s = s.trim();
+        if s.is_empty() {
+            return Ok(());
+        }
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let now = Instant::now();
+        if last.is_some_and(|t| now.duration_since(t) < PIPED_EVERY) {
+            return Ok(());
+        }
+        *last = Some(now);
+        writeln!(std::io::stderr().lock(), "{s}")
+    }
+}
+
+impl TermLike for Lines {
+    fn width(&self) -> u16 {
+        200
+    }
+    fn move_cursor_up(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_down(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_right(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_left(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn write_line(&self, s: &str) -> std::io::Result<()> {
+        self.line(s)
+    }
+    fn write_str(&self, s: &str) -> std::io::Result<()> {
+        self.line(s)
+    }
+    fn clear_line(&self) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn flush(&self) -> std::io::Result<()> {
+        std::io::stderr().flush()
+    }
 }

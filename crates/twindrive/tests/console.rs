@@ -38,6 +38,14 @@ struct Console {
 }
 
 fn console(http_port: u16, out: &Path, args: &[&str]) -> Console {
+    // Plans need a robot model: the case study's calibration, as README's
+    // recipe gives it.
+    let calibration = fixture().path("calib.json");
+    let model: &[&str] = if args.contains(&"--calibration") {
+        &[]
+    } else {
+        &["--calibration", s(&calibration)]
+    };
     let mut child = Command::new(env!("CARGO_BIN_EXE_twindrive"))
         .args([
             "console",
@@ -46,6 +54,7 @@ fn console(http_port: u16, out: &Path, args: &[&str]) -> Console {
             "--out",
             s(out),
         ])
+        .args(model)
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())

@@ -76,20 +76,26 @@ impl Mission {
     }
 
     fn master(&self, extra: &[&str]) -> Proc {
+        self.master_in(&self.out(), extra)
+    }
+
+    /// A master writing to `out`.
+    fn master_in(&self, out: &Path, extra: &[&str]) -> Proc {
         let f = fixture();
         let mut args = vec![
             "master".to_string(),
             "--robot".into(),
             "rover".into(),
             "--out".into(),
-            s(&self.out()).into(),
+            s(out).into(),
             "--connect".into(),
             format!("tcp/127.0.0.1:{}", self.port),
             "--timeout".into(),
             "240".into(),
-            "--log-wait".into(),
-            "60".into(),
         ];
+        if !extra.contains(&"--log-wait") {
+            args.extend(["--log-wait".into(), "60".into()]);
+        }
         if !extra.contains(&"--signed") {
             args.extend([
                 "--plan".into(),
@@ -562,4 +568,66 @@ fn robot_and_master_meet_through_a_zenoh_router() {
     assert_eq!(code, Some(0), "{err}");
     assert_plan_identical(&m);
     assert_eq!(m.report()["outcome"], "completed");
+}
+
+/// Files (chunks) a master holds of robot logs still arriving.
+fn log_chunks_held(out: &Path) -> usize {
+    let Ok(dirs) = std::fs::read_dir(out.join("state/log_chunks")) else {
+        return 0;
+    };
+    dirs.filter_map(Result::ok)
+        .filter_map(|d| std::fs::read_dir(d.path()).ok())
+        .map(|files| files.count())
+        .sum()
+}
+
+#[test]
+fn every_robot_log_comes_home_through_a_dead_master_a_dead_link_and_a_robot_restart() {
+    let m = Mission::new("site_box.toml", "keys", 10.0);
+    let robot = m.robot();
+    // Master A: the robot hands back at the box; A waits two seconds for
+    // the log and exits while the robot back-fills it.
+    let (code, err) = finish(m.master(&["--log-wait", "2"]), 120.0);
+    assert_eq!(code, Some(3), "{err}");
+    assert!(err.contains("HAND-BACK"), "{err}");
+    assert!(!m.events("log_written").is_empty());
+    assert!(
+        m.events("log_acknowledged").is_empty(),
+        "A took the log whole"
+    );
+    // Master B, another output directory, the link dead for its first
+    // four seconds. The robot stays where it handed back: the plan is
+    // refused before anything moves, and B says why.
+    let b = m.tmp.path().join("master_b");
+    let master_b = m.master_in(&b, &["--link", "lan,outage=0..4", "--log-wait", "120"]);
+    // The robot is killed mid back-fill and started again.
+    let start = Instant::now();
+    while log_chunks_held(&b) < 5 {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "B holds no chunk of the log after 60 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    drop(robot);
+    let _robot = m.robot();
+    let (code, err) = finish(master_b, 180.0);
+    assert_eq!(code, Some(4), "{err}");
+    assert!(err.contains("not at the plan's start"), "{err}");
+    assert!(err.contains("robot log received"), "{err}");
+    // Every log the robot wrote is home, byte for byte, and acknowledged.
+    let written = m.events("log_written");
+    assert_eq!(written.len(), 1);
+    assert_eq!(m.events("log_acknowledged").len(), 1);
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(b.join("report.json")).unwrap()).unwrap();
+    let logs = r["robot_logs"].as_array().unwrap();
+    assert_eq!(logs.len(), 1, "{r}");
+    let sha = written[0]["plan_sha256"].as_str().unwrap();
+    assert_eq!(
+        std::fs::read(Path::new(logs[0].as_str().unwrap()).join("log.mcap")).unwrap(),
+        std::fs::read(m.robot_dir().join("logs").join(sha).join("log.mcap")).unwrap()
+    );
+    // Nothing moved for B's plan.
+    assert_eq!(m.events("execution_started").len(), 1);
 }

@@ -200,6 +200,10 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
     let verify_dir = out.join("verification");
     verify_plan::write_outputs(&the_plan, &verification, &plan_job.scenario, &verify_dir)?;
     verify_plan::print_report(&verification.report, &verify_dir)?;
+    if !verification.report.verdict.passed {
+        // Nothing that fails verification goes to the robot.
+        return Err(verify_plan::PlanFailed(verification.report.verdict.clone()).into());
+    }
 
     // 6. The report.
     // Decoupled operation: the plan over the lunar link to a robot whose
@@ -522,6 +526,11 @@ fn case_study_report(c: &CaseStudy) -> Report {
         })
         .collect(),
     );
+    r.paragraph(format!(
+        "Verdict: **{}**. A plan fails when either replay touches anything or departs from the plan's          path by more than the robot's own deviation tolerance ({:.2} m, the one it hands back on); a plan          that fails is not sent.",
+        v.verdict.summary(),
+        v.verdict.max_deviation_m
+    ));
     r.figure("verification/replays.svg", "The plan replayed on the twin");
     let d = c.decoupled;
     let rep = &d.report;

@@ -117,6 +117,9 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
         bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
     }
     let world = world_bytes(&plan_json, &args.plan, args.scenario.as_deref())?;
+    let plan = super::verify_plan::read_plan(&args.plan)?;
+    let twin = crate::verification::twin_of(&plan, args.scenario.as_deref())?;
+    crate::verification::check_before_sending(&plan, &twin, args.allow_failed_verification)?;
     let now = since_epoch()?;
     let envelope = Envelope::new(
         &args.robot,

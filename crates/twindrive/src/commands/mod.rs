@@ -13,7 +13,7 @@ mod prune;
 mod rosbag;
 mod simulate;
 mod site_sim;
-mod verify_plan;
+pub mod verify_plan;
 
 use crate::cli::{Args, Command};
 

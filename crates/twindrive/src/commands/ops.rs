@@ -3,7 +3,7 @@
 //! fleet. The protocol is twindrive-agent's state machines; this file reads
 //! inputs, opens the session, drives them and writes what they produce.
 
-use std::io::Write;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
@@ -11,6 +11,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use twindrive_agent::backend::SimBackend;
 use twindrive_agent::master::{Master, MasterConfig};
+use twindrive_agent::narrate::{Narrator, Verbosity};
 use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
 use twindrive_agent::twin::Twin;
@@ -376,6 +377,13 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     }
     let profile = link_profile(args.link.as_deref())?;
     let key = signing_key(args.key.as_deref())?;
+    let verbosity = if args.quiet {
+        Verbosity::Quiet
+    } else if args.verbose {
+        Verbosity::Verbose
+    } else {
+        Verbosity::Normal
+    };
     if args.on_handback == OnHandbackArg::Replan && key.is_none() {
         bail!("--on-handback replan signs continuations: it needs --key");
     }
@@ -391,17 +399,32 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             .with_context(|| format!("creating {}", out.display()))?;
         let first = first_plan(args, robot, &out, key.as_ref())?;
         // The twin: the scenario the plan was rehearsed in.
-        let twin_scenario = match &args.scenario {
-            Some(p) => Some(Scenario::load(p).map_err(|e| anyhow::anyhow!("--scenario: {e}"))?),
-            None => {
-                twindrive_sim::builtin::load(&first.plan.header.robot.scenario).and_then(Result::ok)
+        let twin_scenario = match crate::verification::twin_of(
+            &first.plan,
+            args.scenario.as_deref(),
+        ) {
+            Ok(twin) => Some(twin),
+            Err(e)
+                if args.allow_failed_verification && args.on_handback != OnHandbackArg::Replan =>
+            {
+                eprintln!(
+                    "warning: the plan cannot be verified ({e:#}); sending it unverified because of --allow-failed-verification"
+                );
+                None
+            }
+            Err(e) => {
+                return Err(e.context(
+                    "the master verifies every plan on its twin before sending it (and replans on it)",
+                ));
             }
         };
-        if twin_scenario.is_none() && args.on_handback == OnHandbackArg::Replan {
-            bail!(
-                "the plan's scenario `{}` is not built in; pass --scenario (the twin) to replan",
-                first.plan.header.robot.scenario
-            );
+        // Nothing that fails on the twin goes to the robot.
+        if let Some(twin) = &twin_scenario {
+            crate::verification::check_before_sending(
+                &first.plan,
+                twin,
+                args.allow_failed_verification,
+            )?;
         }
         // Keep what is being uploaded, so a restarted master resumes it.
         write_durably(&out.join("state").join("uploading.signed"), &first.signed)
@@ -444,11 +467,13 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             first.resume,
             0,
         );
-        eprintln!(
-            "master: uploading plan {} ({} bytes) to robot {robot}",
-            &first.plan.sha256[..12],
-            first.signed.len(),
-        );
+        if !args.quiet {
+            eprintln!(
+                "master: uploading plan {} ({} bytes) to robot {robot}",
+                &first.plan.sha256[..12],
+                first.signed.len(),
+            );
+        }
         members.push(Supervised {
             robot: robot.clone(),
             out,
@@ -478,7 +503,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
                 outgoing: LinkEmulator::new(p.clone(), args.seed, 2 * k as u64),
                 incoming: LinkEmulator::new(p, args.seed, 2 * k as u64 + 1),
             });
-            supervise(m, &session, emulation, deadline, zero, !fleet)
+            supervise(m, &session, emulation, deadline, zero, !fleet, verbosity)
         });
         let results = futures::future::join_all(runs).await;
         let _ = session.close().await;
@@ -623,6 +648,67 @@ pub(crate) fn process_usage() -> Option<(f64, u64)> {
     Some((ticks / 100.0, hwm_kb * 1024))
 }
 
+/// What the master says about one robot: event lines on stderr (above a
+/// live status line on a terminal), as `-q`/`-v` ask.
+struct Speaker {
+    narrator: Narrator,
+    /// The live status line (a terminal, one robot).
+    live: Option<indicatif::ProgressBar>,
+}
+
+impl Speaker {
+    fn new(robot: &str, verbosity: Verbosity, live: bool) -> Self {
+        let live =
+            (live && verbosity != Verbosity::Quiet && std::io::stderr().is_terminal()).then(|| {
+                let bar = indicatif::ProgressBar::new_spinner();
+                bar.enable_steady_tick(Duration::from_millis(250));
+                bar
+            });
+        Self {
+            narrator: Narrator::new(robot, verbosity),
+            live,
+        }
+    }
+
+    fn say(&self, line: &str) {
+        if self.narrator_quiet() {
+            return;
+        }
+        match &self.live {
+            Some(bar) => bar.println(line),
+            None => eprintln!("{line}"),
+        }
+    }
+
+    fn narrator_quiet(&self) -> bool {
+        self.narrator.verbosity() == Verbosity::Quiet
+    }
+
+    fn tell(&mut self, op: &Operator<DirStore>, now_ns: u64) {
+        let lines = self.narrator.lines(op, now_ns);
+        match &self.live {
+            Some(bar) => {
+                for l in lines.iter().filter(|l| !l.contains("  waiting")) {
+                    bar.println(l);
+                }
+                bar.set_message(self.narrator.waiting(op, now_ns));
+            }
+            None => {
+                let mut err = std::io::stderr().lock();
+                for l in lines {
+                    let _ = writeln!(err, "{l}");
+                }
+            }
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = &self.live {
+            bar.finish_and_clear();
+        }
+    }
+}
+
 /// Drives one robot's operator over the session until its mission is
 /// decided and its logs are in; writes its plans and logs as they come.
 async fn supervise(
@@ -632,12 +718,12 @@ async fn supervise(
     deadline: Duration,
     zero: std::time::Instant,
     show_progress: bool,
+    verbosity: Verbosity,
 ) -> anyhow::Result<()> {
     let out = m.out.clone();
     let robot = m.robot.clone();
     let mut logs_written = 0usize;
-    let mut bar = indicatif::ProgressBar::hidden();
-    let mut bar_for = None;
+    let mut speaker = Speaker::new(&robot, verbosity, show_progress);
     let mut write_error: Option<anyhow::Error> = None;
     let r = twindrive_net::drive_counting(
         &mut m.op,
@@ -650,19 +736,7 @@ async fn supervise(
         zero,
         &mut m.stats,
         |op| {
-            // Upload progress on a terminal (one bar per plan sent).
-            if show_progress && let Some((confirmed, chunks)) = op.master.upload_progress() {
-                let transfer = op.master.uploading();
-                if bar_for != transfer {
-                    bar.finish_and_clear();
-                    bar = crate::progress::bar(u64::from(chunks), "upload");
-                    bar_for = transfer;
-                }
-                bar.set_position(u64::from(confirmed));
-                if op.master.upload_finished() {
-                    bar.finish_and_clear();
-                }
-            }
+            let now_ns = zero.elapsed().as_nanos() as u64;
             if op.master.upload_finished() {
                 let _ = std::fs::remove_file(out.join("state").join("uploading.signed"));
             }
@@ -674,17 +748,21 @@ async fn supervise(
             while let Some((plan, mcap)) = op.new_logs.pop_front() {
                 logs_written += 1;
                 match write_robot_log(&out, logs_written, plan.as_deref(), &mcap) {
-                    Ok(dir) => op.report.robot_logs.push(dir.display().to_string()),
+                    Ok(dir) => {
+                        speaker.say(&format!("{robot}: robot log written to {}", dir.display()));
+                        op.report.robot_logs.push(dir.display().to_string());
+                    }
                     Err(e) => {
                         write_error.get_or_insert(e);
                     }
                 }
             }
+            speaker.tell(op, now_ns);
             op.is_done()
         },
     )
     .await;
-    bar.finish_and_clear();
+    speaker.finish();
     if let Some(e) = write_error {
         return Err(WriteError(e).into());
     }

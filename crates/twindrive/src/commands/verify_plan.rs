@@ -7,8 +7,9 @@ use std::path::Path;
 use anyhow::Context;
 use serde::Serialize;
 use twindrive_kinematics::{DiffDriveParams, Pose};
+use twindrive_link::envelope::Tolerances;
 use twindrive_mission::plan::MissionPlan;
-use twindrive_mission::verify::{self, Replay, ReplayReport, TrackerSettings};
+use twindrive_mission::verify::{self, Replay, ReplayReport, Verdict};
 use twindrive_plot::{Series, WorldFigure, palette};
 use twindrive_sim::Scenario;
 
@@ -37,6 +38,9 @@ pub struct VerifyReport {
     pub open_loop_nominal: ReplayReport,
     pub nominal_params: DiffDriveParams,
     pub calibrated_params: DiffDriveParams,
+    /// Passed, or why not: the open- and closed-loop replays touch nothing
+    /// and stay within the robot's deviation tolerance of the plan's path.
+    pub verdict: Verdict,
 }
 
 /// Reads and checks a plan file (format, hash, contents).
@@ -58,29 +62,26 @@ pub struct Verification {
     pub open_loop_nominal: Replay,
 }
 
+/// Verifies `plan` on the twin `scenario` against the robot's deviation
+/// tolerance (the default one signed plans carry), and replays the same
+/// path through the nominal parameters for comparison.
 pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> anyhow::Result<Verification> {
     let samples = &plan.samples;
     let calibrated = plan.header.calibrated;
     let nominal = scenario.robot.nominal_params;
-    let (open_loop, closed_loop, open_loop_nominal) = std::thread::scope(|s| {
-        let closed = s.spawn(|| {
-            verify::closed_loop(
-                samples,
-                scenario.clone(),
-                &calibrated,
-                &TrackerSettings::default(),
-            )
-        });
+    let criteria = Tolerances::default().criteria();
+    let (checked, open_loop_nominal) = std::thread::scope(|s| {
         let nominal_run = s.spawn(|| verify::open_loop(samples, scenario.clone(), Some(&nominal)));
-        let open = verify::open_loop(samples, scenario.clone(), None);
-        (open, closed.join(), nominal_run.join())
+        let checked = verify::verify(samples, scenario, &calibrated, &criteria);
+        (checked, nominal_run.join())
     });
-    let panicked = |_| anyhow::anyhow!("a replay panicked");
-    let (open_loop, closed_loop, open_loop_nominal) = (
-        open_loop?,
-        closed_loop.map_err(panicked)??,
-        open_loop_nominal.map_err(panicked)??,
-    );
+    let verify::PlanVerification {
+        open_loop,
+        closed_loop,
+        verdict,
+    } = checked?;
+    let open_loop_nominal =
+        open_loop_nominal.map_err(|_| anyhow::anyhow!("a replay panicked"))??;
     let (o, c) = (&open_loop.report, &closed_loop.report);
     let path_length_m = samples
         .windows(2)
@@ -100,6 +101,7 @@ pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> anyhow::Result<Verific
         open_loop_nominal: open_loop_nominal.report.clone(),
         nominal_params: nominal,
         calibrated_params: calibrated,
+        verdict,
     };
     Ok(Verification {
         report,
@@ -191,23 +193,35 @@ pub fn print_report(r: &VerifyReport, out: &Path) -> anyhow::Result<()> {
             x.path_length_m
         )?;
     }
+    writeln!(o, "verification: {}", r.verdict.summary())?;
     writeln!(o, "report in {}/report.json", out.display())?;
     Ok(())
 }
 
 pub fn run(plan_path: &Path, scenario: Option<&Path>, out: &Path) -> anyhow::Result<()> {
     let plan = read_plan(plan_path)?;
-    let scenario = match scenario {
-        Some(p) => Scenario::load(p)?,
-        None => match twindrive_sim::builtin::load(&plan.header.robot.scenario) {
-            Some(s) => s?,
-            None => anyhow::bail!(
-                "the plan's scenario `{}` is not built in; pass --scenario",
-                plan.header.robot.scenario
-            ),
-        },
-    };
+    let scenario = crate::verification::twin_of(&plan, scenario)?;
     let v = verify(&plan, &scenario)?;
     write_outputs(&plan, &v, &scenario, out)?;
-    print_report(&v.report, out)
+    print_report(&v.report, out)?;
+    if !v.report.verdict.passed {
+        return Err(PlanFailed(v.report.verdict.clone()).into());
+    }
+    Ok(())
 }
+
+/// A plan that failed verification (`verify-plan` exits 3).
+#[derive(Debug)]
+pub struct PlanFailed(pub Verdict);
+
+impl std::fmt::Display for PlanFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "the plan failed verification: {}",
+            self.0.reasons.join("; ")
+        )
+    }
+}
+
+impl std::error::Error for PlanFailed {}

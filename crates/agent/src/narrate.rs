@@ -1,0 +1,263 @@
+//! What the master says while it works, for people: one line per event of
+//! the mission (upload done, execution started, progress every tenth of the
+//! plan, a hand-back with its reason and where, the twin's update, a
+//! continuation verified and sent, completion, each robot log) and, when
+//! nothing happened for a while, what it is waiting for and for how long.
+//! No I/O and time as an argument: the process prints the lines (on a pipe
+//! one per line, on a terminal above a live status line).
+
+use twindrive_link::upload::ChunkStore;
+use twindrive_link::wire::{PlanPhase, TransferId};
+
+use crate::operator::Operator;
+
+/// How much the master says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verbosity {
+    /// The outcome only (and errors).
+    Quiet,
+    /// Every event, progress every 10 %, and what it waits for when
+    /// nothing happened for [`Narrator::quiet_after_s`].
+    Normal,
+    /// Also every status summary the robot sends.
+    Verbose,
+}
+
+/// Turns an operator's record into lines for people.
+#[derive(Debug, Clone)]
+pub struct Narrator {
+    robot_id: String,
+    verbosity: Verbosity,
+    /// Says what it waits for after this long without a line (s).
+    pub quiet_after_s: f64,
+    timeline_said: usize,
+    statuses_said: u64,
+    upload_tenth: Option<(TransferId, u32)>,
+    plan_tenth: Option<(TransferId, u32)>,
+    last_line_ns: u64,
+}
+
+impl Narrator {
+    pub fn new(robot_id: &str, verbosity: Verbosity) -> Self {
+        Self {
+            robot_id: robot_id.into(),
+            verbosity,
+            quiet_after_s: 4.0,
+            timeline_said: 0,
+            statuses_said: 0,
+            upload_tenth: None,
+            plan_tenth: None,
+            last_line_ns: 0,
+        }
+    }
+
+    pub fn verbosity(&self) -> Verbosity {
+        self.verbosity
+    }
+
+    /// The lines to print at `now_ns` (the operator's clock).
+    pub fn lines<S: ChunkStore>(&mut self, op: &Operator<S>, now_ns: u64) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.verbosity == Verbosity::Quiet {
+            return out;
+        }
+        let at = |t_s: f64| format!("{t_s:7.1} s  {}", self.robot_id);
+        // The mission's events, as the operator recorded them.
+        for e in &op.report.timeline[self.timeline_said..] {
+            out.push(format!(
+                "{}  {}",
+                at(e.t_s),
+                event_text(&e.event, &e.detail)
+            ));
+        }
+        self.timeline_said = op.report.timeline.len();
+        let now_s = now_ns as f64 * 1e-9;
+        // The upload, every tenth of the way.
+        if let (Some(transfer), Some((confirmed, chunks))) =
+            (op.master.uploading(), op.master.upload_progress())
+            && chunks > 0
+            && !op.master.upload_finished()
+        {
+            let tenth = 10 * confirmed / chunks;
+            if crossed(&mut self.upload_tenth, transfer, tenth) && tenth > 0 {
+                out.push(format!(
+                    "{}  upload {} %: {confirmed} of {chunks} chunks confirmed",
+                    at(now_s),
+                    10 * tenth
+                ));
+            }
+        }
+        // The plan's execution, every tenth of the way.
+        if let Some(s) = op.master.latest_status()
+            && let Some((transfer, PlanPhase::Executing)) = &s.plan
+            && s.progress.1 > 0
+        {
+            let tenth = 10 * s.progress.0 / s.progress.1;
+            if crossed(&mut self.plan_tenth, *transfer, tenth) && tenth > 0 {
+                out.push(format!("{}  executing: {}", at(now_s), execution(s)));
+            }
+        }
+        if self.verbosity == Verbosity::Verbose {
+            while self.statuses_said < op.report.status_messages {
+                self.statuses_said += 1;
+                if let Some(s) = op.master.latest_status() {
+                    out.push(format!("{}  status: {}", at(now_s), status_text(s)));
+                }
+            }
+        }
+        if !out.is_empty() {
+            self.last_line_ns = now_ns;
+        } else if now_ns.saturating_sub(self.last_line_ns) as f64 * 1e-9 >= self.quiet_after_s {
+            out.push(format!("{}  {}", at(now_s), self.waiting(op, now_ns)));
+            self.last_line_ns = now_ns;
+        }
+        out
+    }
+
+    /// What the mission waits for now, with how long: the live status line
+    /// on a terminal, and the line said on a pipe after a quiet while.
+    pub fn waiting<S: ChunkStore>(&self, op: &Operator<S>, now_ns: u64) -> String {
+        let now_s = now_ns as f64 * 1e-9;
+        let heard = op
+            .master
+            .last_heard_ns
+            .map(|t| now_ns.saturating_sub(t) as f64 * 1e-9);
+        let silent = match heard {
+            None => format!(", nothing heard from the robot in {now_s:.0} s"),
+            Some(s) if s > 3.0 => format!(", nothing heard from the robot for {s:.0} s"),
+            Some(_) => String::new(),
+        };
+        if let Some((pending, waited_s, limit_s)) = op.waiting_for_logs(now_ns) {
+            let pending = pending.map_or("the robot has not said how many".into(), |n| {
+                format!("{n} pending on the robot")
+            });
+            return format!(
+                "waiting for the robot's logs ({pending}): {waited_s:.0} s of at most {limit_s:.0} s{silent}"
+            );
+        }
+        if op.awaiting_decision().is_some() {
+            return format!("waiting for the operator's decision on the hand-back{silent}");
+        }
+        if let Some((confirmed, chunks)) = op.master.upload_progress()
+            && !op.master.upload_finished()
+        {
+            let started = op
+                .master
+                .upload_stats()
+                .map_or(0.0, |(_, _, t)| now_ns.saturating_sub(t) as f64 * 1e-9);
+            return format!(
+                "uploading: {confirmed} of {chunks} chunks confirmed, {started:.0} s so far{silent}"
+            );
+        }
+        match op.master.latest_status() {
+            Some(s) => match &s.plan {
+                Some((_, PlanPhase::Executing)) => {
+                    format!("executing: {}{silent}", execution(s))
+                }
+                _ => format!("waiting for the robot to start the plan (it holds it whole){silent}"),
+            },
+            None => format!("waiting for the robot's first status{silent}"),
+        }
+    }
+}
+
+/// Whether `tenth` is a new tenth of `transfer` (and remembers it).
+fn crossed(seen: &mut Option<(TransferId, u32)>, transfer: TransferId, tenth: u32) -> bool {
+    match seen {
+        Some((t, k)) if *t == transfer && *k >= tenth => false,
+        _ => {
+            *seen = Some((transfer, tenth));
+            true
+        }
+    }
+}
+
+fn execution(s: &twindrive_link::wire::Status) -> String {
+    let pct = 100.0 * f64::from(s.progress.0) / f64::from(s.progress.1.max(1));
+    format!(
+        "{pct:.0} % of the plan, {:.1} s in, deviation {:.3} m, range residual {}",
+        s.plan_t_s,
+        s.deviation_m,
+        if s.range_residual_m.is_finite() {
+            format!("{:.3} m", s.range_residual_m)
+        } else {
+            "-".into()
+        }
+    )
+}
+
+fn status_text(s: &twindrive_link::wire::Status) -> String {
+    let phase = match &s.plan {
+        None => "no plan".to_string(),
+        Some((_, PlanPhase::Receiving { received, chunks })) => {
+            format!("receiving {received}/{chunks}")
+        }
+        Some((_, PlanPhase::Rejected { reason })) => format!("rejected ({reason})"),
+        Some((_, PlanPhase::Executing)) => format!("executing, {}", execution(s)),
+        Some((_, PlanPhase::Finished)) => "finished".into(),
+        Some((_, PlanPhase::Stopped { reason })) => format!("stopped ({reason})"),
+    };
+    format!(
+        "{phase}; pose ({:.2}, {:.2}, {:.0} deg); {} log(s) pending; {} bump(s), {} collision(s)",
+        s.pose[0],
+        s.pose[1],
+        s.pose[2].to_degrees(),
+        s.logs_pending,
+        s.bumps,
+        s.collisions
+    )
+}
+
+/// One of the operator's timeline events in words.
+fn event_text(event: &str, detail: &str) -> String {
+    let what = match event {
+        "upload_started" => "uploading",
+        "upload_finished" => "upload done:",
+        "upload_refused" => "the robot REFUSED the upload:",
+        "plan_rejected" => "the robot REJECTED the plan:",
+        "execution_started" => "the robot started plan",
+        "execution_finished" => "the robot finished plan",
+        "stopped" => "the robot stopped:",
+        "handback" => "HAND-BACK:",
+        "twin_updated" => "the twin learnt from it:",
+        "awaiting_operator" => "waiting for the operator:",
+        "continuation_planned" => "continuation verified on the twin and signed:",
+        "robot_log" => "robot log received:",
+        "operator_ended" => "the operator ended the mission:",
+        "outcome" => "OUTCOME:",
+        other => return format!("{}: {detail}", other.replace('_', " ")),
+    };
+    format!("{what} {detail}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tenth_is_said_once_per_transfer() {
+        let mut seen = None;
+        let (a, b) = ([1u8; 32], [2u8; 32]);
+        assert!(crossed(&mut seen, a, 0));
+        assert!(!crossed(&mut seen, a, 0));
+        assert!(crossed(&mut seen, a, 3));
+        assert!(!crossed(&mut seen, a, 2));
+        assert!(crossed(&mut seen, b, 1));
+    }
+
+    #[test]
+    fn every_timeline_event_has_words() {
+        for e in [
+            "upload_started",
+            "handback",
+            "continuation_planned",
+            "robot_log",
+            "outcome",
+        ] {
+            let t = event_text(e, "x");
+            assert!(!t.contains('_'), "{t}");
+            assert!(t.ends_with('x'), "{t}");
+        }
+        assert_eq!(event_text("new_thing", "d"), "new thing: d");
+    }
+}
