@@ -1,10 +1,19 @@
-//! Figures as SVG and PNG from plain data: a top-down world view with paths
-//! and markers, and time-series plots. Text is rendered with an embedded
-//! DejaVu Sans, so PNGs need no system fonts.
+//! Figures as SVG and PNG from plain data: a top-down world view with paths,
+//! markers and outlines, time-series plots, and lanes of spans and events
+//! over time. Text is rendered with an embedded DejaVu Sans, so PNGs need no
+//! system fonts.
+//!
+//! Time plots look after their reader: the y range ignores a few outliers
+//! (see [`robust_range`]) and says so, a series that would hide exactly
+//! under another is drawn dashed with marked points and says so, and a
+//! series of one point is drawn as a point.
 
 use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
+use plotters::coord::ranged1d::SegmentValue;
+use plotters::coord::types::RangedCoordf64;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
@@ -20,6 +29,17 @@ pub mod palette {
     pub const BAD: RGBColor = RGBColor(214, 39, 40);
     pub const MUTED: RGBColor = RGBColor(127, 127, 127);
     pub const PURPLE: RGBColor = RGBColor(148, 103, 189);
+    pub const BROWN: RGBColor = RGBColor(140, 86, 75);
+    pub const PINK: RGBColor = RGBColor(227, 119, 194);
+    pub const OLIVE: RGBColor = RGBColor(188, 189, 34);
+    pub const CYAN: RGBColor = RGBColor(23, 190, 207);
+
+    /// Colours for a run of like things (continuations, say) that are
+    /// none of TRUTH, ALT and BAD; the `k`-th, cycling.
+    pub fn cycle(k: usize) -> RGBColor {
+        const CYCLE: [RGBColor; 6] = [PURPLE, BROWN, PINK, OLIVE, CYAN, GOOD];
+        CYCLE[k % CYCLE.len()]
+    }
 }
 
 /// A figure could not be drawn or written.
@@ -57,16 +77,31 @@ pub struct Band<'a> {
     pub color: RGBColor,
 }
 
-/// A top-down view of walls, paths and markers, axes equal.
+/// A closed outline (a box, say), drawn above everything else as a thick
+/// dashed line with its own legend entry, so nothing hides it.
+#[derive(Debug, Clone, Copy)]
+pub struct Outline<'a> {
+    pub label: &'a str,
+    /// The corners in order; the last joins the first.
+    pub corners: &'a [(f64, f64)],
+    pub color: RGBColor,
+}
+
+/// A top-down view of walls, paths, markers and outlines, axes equal.
 #[derive(Debug, Clone, Copy)]
 pub struct WorldFigure<'a> {
     pub title: &'a str,
     pub walls: &'a [[(f64, f64); 2]],
     pub paths: &'a [Series<'a>],
     pub markers: &'a [Markers<'a>],
+    pub outlines: &'a [Outline<'a>],
 }
 
-/// Lines over a shared x axis.
+/// Lines over a shared x axis. The y range is [`robust_range`] of
+/// everything drawn: points beyond it are drawn as triangles at the axis'
+/// edge, and the legend says how many and how far they went. A series
+/// whose points are another's, or among another's, is drawn dashed with
+/// marked points, and the legend says whose.
 #[derive(Debug, Clone, Copy)]
 pub struct TimeFigure<'a> {
     pub title: &'a str,
@@ -75,6 +110,25 @@ pub struct TimeFigure<'a> {
     pub series: &'a [Series<'a>],
     pub markers: &'a [Markers<'a>],
     pub bands: &'a [Band<'a>],
+}
+
+/// One named row of a [`LaneFigure`]: spans (from, to) drawn as bars and
+/// instants drawn as ticks across the row.
+#[derive(Debug, Clone, Copy)]
+pub struct Lane<'a> {
+    pub name: &'a str,
+    pub spans: &'a [(f64, f64)],
+    pub events: &'a [f64],
+    pub color: RGBColor,
+}
+
+/// Named rows over a shared x axis (a timeline): the rows are categories,
+/// labelled with their names, top to bottom in order.
+#[derive(Debug, Clone, Copy)]
+pub struct LaneFigure<'a> {
+    pub title: &'a str,
+    pub x_label: &'a str,
+    pub lanes: &'a [Lane<'a>],
 }
 
 fn register_fonts() {
@@ -152,6 +206,205 @@ pub fn decimate(points: &[(f64, f64)], min_step: f64) -> Vec<(f64, f64)> {
     out
 }
 
+/// An axis range for values of which a few may be wild (one control spike
+/// among thousands of wheel speeds), and what it leaves out.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobustRange {
+    pub lo: f64,
+    pub hi: f64,
+    /// How many values lie below `lo` and above `hi`.
+    pub below: usize,
+    pub above: usize,
+    /// The values' own extremes.
+    pub min: f64,
+    pub max: f64,
+}
+
+impl RobustRange {
+    /// Whether some values lie outside the range.
+    pub fn clips(&self) -> bool {
+        self.below + self.above > 0
+    }
+}
+
+/// The bulk of the values: from this fraction to one minus it.
+const BULK_TAIL: f64 = 0.01;
+/// The bulk is padded by this fraction of its span each side.
+const BULK_PAD: f64 = 0.25;
+/// Outliers flatten a plot when they need more than this many times the
+/// padded bulk's span; below it the range is the values' own.
+const FLATTEN: f64 = 3.0;
+
+/// The range of the finite `values`: their own [min, max], unless a few
+/// outliers (beyond the 1st..99th percentile) would squeeze the rest into
+/// less than a third of it. Then it is the 1st..99th percentile padded by a
+/// quarter of its span each side, and `below`/`above` count what it leaves
+/// out. `None` when no value is finite.
+pub fn robust_range(values: &[f64]) -> Option<RobustRange> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    let (min, max) = (v[0], v[n - 1]);
+    let own = RobustRange {
+        lo: min,
+        hi: max,
+        below: 0,
+        above: 0,
+        min,
+        max,
+    };
+    let k = (n as f64 * BULK_TAIL).floor() as usize;
+    let (q0, q1) = (v[k], v[n - 1 - k]);
+    let body = q1 - q0;
+    // A constant bulk has no scale to judge outliers by.
+    if body <= 0.0 || max - min <= FLATTEN * (1.0 + 2.0 * BULK_PAD) * body {
+        return Some(own);
+    }
+    let lo = (q0 - BULK_PAD * body).max(min);
+    let hi = (q1 + BULK_PAD * body).min(max);
+    Some(RobustRange {
+        lo,
+        hi,
+        below: v.iter().take_while(|&&x| x < lo).count(),
+        above: v.iter().rev().take_while(|&&x| x > hi).count(),
+        min,
+        max,
+    })
+}
+
+/// The parts of a polyline within `lo <= y <= hi`, cut where it crosses
+/// the bounds; non-finite points break it.
+fn clip_y(points: &[(f64, f64)], lo: f64, hi: f64) -> Vec<Vec<(f64, f64)>> {
+    let inside = |p: (f64, f64)| p.0.is_finite() && p.1 >= lo && p.1 <= hi;
+    let mut pieces: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut piece: Vec<(f64, f64)> = Vec::new();
+    let push = |piece: &mut Vec<(f64, f64)>, p: (f64, f64)| {
+        if piece.last() != Some(&p) {
+            piece.push(p);
+        }
+    };
+    for (k, &p) in points.iter().enumerate() {
+        let prev = k.checked_sub(1).map(|j| points[j]);
+        match prev {
+            Some(q) if q.0.is_finite() && q.1.is_finite() && p.0.is_finite() && p.1.is_finite() => {
+                // The part of q -> p within the bounds, as t in [0, 1].
+                let at = |y: f64| (y - q.1) / (p.1 - q.1);
+                let (t0, t1) = if p.1 == q.1 {
+                    if inside(p) { (0.0, 1.0) } else { (1.0, 0.0) }
+                } else {
+                    let (a, b) = (at(lo), at(hi));
+                    (a.min(b).max(0.0), a.max(b).min(1.0))
+                };
+                if t0 > t1 {
+                    continue;
+                }
+                let lerp = |t: f64| (q.0 + t * (p.0 - q.0), q.1 + t * (p.1 - q.1));
+                if t0 > 0.0 && !piece.is_empty() {
+                    pieces.push(std::mem::take(&mut piece));
+                }
+                push(&mut piece, lerp(t0));
+                push(&mut piece, if t1 >= 1.0 { p } else { lerp(t1) });
+                if t1 < 1.0 {
+                    pieces.push(std::mem::take(&mut piece));
+                }
+            }
+            _ => {
+                if !piece.is_empty() {
+                    pieces.push(std::mem::take(&mut piece));
+                }
+                if inside(p) && p.1.is_finite() {
+                    piece.push(p);
+                }
+            }
+        }
+    }
+    if !piece.is_empty() {
+        pieces.push(piece);
+    }
+    pieces
+}
+
+/// How series `b` relates to series `a` drawn before it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Overlap {
+    /// The same points.
+    Same,
+    /// Every point of one is a point of the other.
+    Within,
+}
+
+/// Whether two series would hide one another (exactly, not by chance
+/// crossings): the same points, or every point of one among the other's.
+fn overlap(a: &[(f64, f64)], b: &[(f64, f64)], tol: f64) -> Option<Overlap> {
+    let close =
+        |p: &(f64, f64), q: &(f64, f64)| (p.0 - q.0).abs() <= tol && (p.1 - q.1).abs() <= tol;
+    if a.is_empty() || b.is_empty() {
+        return None;
+    }
+    if a.len() == b.len() && a.iter().zip(b).all(|(p, q)| close(p, q)) {
+        return Some(Overlap::Same);
+    }
+    // Pairwise search only for short series (points of an experiment).
+    if a.len().saturating_mul(b.len()) > 1_000_000 {
+        return None;
+    }
+    let among =
+        |x: &[(f64, f64)], y: &[(f64, f64)]| x.iter().all(|p| y.iter().any(|q| close(p, q)));
+    (among(a, b) || among(b, a)).then_some(Overlap::Within)
+}
+
+/// Shapes of marked points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Shape {
+    Circle,
+    Triangle,
+    Square,
+    Cross,
+}
+
+/// A line as drawn: its pieces within the range and how it looks.
+struct Line {
+    label: String,
+    color: RGBColor,
+    pieces: Vec<Vec<(f64, f64)>>,
+    dashed: bool,
+    vertices: Option<Shape>,
+}
+
+/// Points as drawn.
+struct Dots {
+    label: String,
+    color: RGBColor,
+    points: Vec<(f64, f64)>,
+}
+
+/// A band as drawn.
+struct Shade {
+    label: String,
+    color: RGBColor,
+    outline: Vec<(f64, f64)>,
+}
+
+/// Points beyond the y range, drawn as triangles at its edge.
+struct Beyond {
+    label: String,
+    up: Vec<((f64, f64), RGBColor)>,
+    down: Vec<((f64, f64), RGBColor)>,
+}
+
+/// A number with about four significant digits.
+fn short(v: f64) -> String {
+    let digits = if v == 0.0 {
+        0
+    } else {
+        (3 - v.abs().log10().floor() as i32).clamp(0, 6) as usize
+    };
+    format!("{v:.digits$}")
+}
+
 impl WorldFigure<'_> {
     /// Writes `<base>.svg` and `<base>.png`. Paths are thinned to about four
     /// pixels between points.
@@ -161,7 +414,8 @@ impl WorldFigure<'_> {
             .iter()
             .flat_map(|w| w.iter())
             .chain(self.paths.iter().flat_map(|s| s.points.iter()))
-            .chain(self.markers.iter().flat_map(|m| m.points.iter()));
+            .chain(self.markers.iter().flat_map(|m| m.points.iter()))
+            .chain(self.outlines.iter().flat_map(|o| o.corners.iter()));
         let ((x0, x1), (y0, y1)) = bounds(all).ok_or_else(|| PlotError::Data {
             what: self.title.into(),
             message: "nothing to draw".into(),
@@ -174,16 +428,16 @@ impl WorldFigure<'_> {
         let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(200.0, 1400.0);
         let size = (width, plot_h as u32 + 130);
         let step = (x1 - x0).max(y1 - y0) / 250.0;
-        let thinned: Vec<Vec<(f64, f64)>> = self
+        let lines = self
             .paths
             .iter()
-            .map(|s| decimate(s.points, step))
-            .collect();
-        let paths: Vec<Series> = self
-            .paths
-            .iter()
-            .zip(&thinned)
-            .map(|(s, pts)| Series { points: pts, ..*s })
+            .map(|s| Line {
+                label: s.label.to_string(),
+                color: s.color,
+                pieces: vec![decimate(s.points, step)],
+                dashed: false,
+                vertices: (s.points.len() == 1).then_some(Shape::Circle),
+            })
             .collect();
         let spec = ChartSpec {
             title: self.title,
@@ -191,9 +445,11 @@ impl WorldFigure<'_> {
             y_label: "y [m]",
             range: (x0, x1, y0, y1),
             walls: self.walls,
-            series: &paths,
-            markers: self.markers,
-            bands: &[],
+            lines,
+            dots: self.markers.iter().map(Dots::from).collect(),
+            shades: Vec::new(),
+            outlines: self.outlines,
+            beyond: None,
             marker_radius: 5,
         };
         write_both(
@@ -202,6 +458,16 @@ impl WorldFigure<'_> {
             |r| draw_chart(&r, &spec),
             |r| draw_chart(&r, &spec),
         )
+    }
+}
+
+impl From<&Markers<'_>> for Dots {
+    fn from(m: &Markers) -> Self {
+        Dots {
+            label: m.label.to_string(),
+            color: m.color,
+            points: m.points.to_vec(),
+        }
     }
 }
 
@@ -243,30 +509,138 @@ fn draw_panels<DB: DrawingBackend>(
 
 impl<'a> TimeFigure<'a> {
     fn spec(&self) -> Result<ChartSpec<'a>, PlotError> {
-        let all = self
-            .series
-            .iter()
-            .flat_map(|s| s.points.iter())
-            .chain(self.markers.iter().flat_map(|m| m.points.iter()))
-            .chain(
-                self.bands
-                    .iter()
-                    .flat_map(|b| b.lower.iter().chain(b.upper.iter())),
-            );
-        let ((x0, x1), (y0, y1)) = bounds(all).ok_or_else(|| PlotError::Data {
+        let all = || {
+            self.series
+                .iter()
+                .flat_map(|s| s.points.iter())
+                .chain(self.markers.iter().flat_map(|m| m.points.iter()))
+                .chain(
+                    self.bands
+                        .iter()
+                        .flat_map(|b| b.lower.iter().chain(b.upper.iter())),
+                )
+        };
+        let nothing = || PlotError::Data {
             what: self.title.into(),
             message: "nothing to draw".into(),
-        })?;
-        let ypad = 0.05 * (y1 - y0).max(1e-6);
+        };
+        let ((x0, x1), (y0, y1)) = bounds(all()).ok_or_else(nothing)?;
+        let ys: Vec<f64> = all().filter(|p| p.0.is_finite()).map(|p| p.1).collect();
+        let r = robust_range(&ys).ok_or_else(nothing)?;
+        let (lo, hi) = (r.lo, r.hi);
+        let tol = 1e-9 * ((x1 - x0) + (y1 - y0)).max(1e-12);
+
+        let mut beyond = Beyond {
+            label: String::new(),
+            up: Vec::new(),
+            down: Vec::new(),
+        };
+        let mut off_axis = |points: &[(f64, f64)], color: RGBColor| {
+            for &(x, y) in points.iter().filter(|p| p.0.is_finite()) {
+                if y > hi {
+                    beyond.up.push(((x, hi), color));
+                } else if y < lo {
+                    beyond.down.push(((x, lo), color));
+                }
+            }
+        };
+        let mut lines: Vec<Line> = Vec::new();
+        let mut rank = 0;
+        for (j, s) in self.series.iter().enumerate() {
+            off_axis(s.points, s.color);
+            let hidden = self.series[..j]
+                .iter()
+                .find_map(|a| overlap(a.points, s.points, tol).map(|o| (a.label, o)));
+            let (label, dashed, vertices) = match hidden {
+                Some((under, o)) => {
+                    let shape = [Shape::Triangle, Shape::Square, Shape::Cross][rank % 3];
+                    rank += 1;
+                    let how = match o {
+                        Overlap::Same => "same points as",
+                        Overlap::Within => "shares its points with",
+                    };
+                    let label = if s.label.is_empty() {
+                        String::new()
+                    } else {
+                        format!("{} (dashed: {how} {under})", s.label)
+                    };
+                    (label, true, Some(shape))
+                }
+                None => (
+                    s.label.to_string(),
+                    false,
+                    (s.points.len() == 1).then_some(Shape::Circle),
+                ),
+            };
+            lines.push(Line {
+                label,
+                color: s.color,
+                pieces: clip_y(s.points, lo, hi),
+                dashed,
+                vertices,
+            });
+        }
+        let mut dots = Vec::new();
+        for m in self.markers {
+            off_axis(m.points, m.color);
+            dots.push(Dots {
+                points: m
+                    .points
+                    .iter()
+                    .copied()
+                    .filter(|p| p.1 >= lo && p.1 <= hi)
+                    .collect(),
+                ..Dots::from(m)
+            });
+        }
+        let shades = self
+            .bands
+            .iter()
+            .map(|b| Shade {
+                label: b.label.to_string(),
+                color: b.color,
+                outline: b
+                    .upper
+                    .iter()
+                    .chain(b.lower.iter().rev())
+                    .map(|&(x, y)| (x, y.clamp(lo, hi)))
+                    .collect(),
+            })
+            .collect();
+        let beyond = r.clips().then(|| {
+            let mut parts = Vec::new();
+            if r.above > 0 {
+                parts.push(format!("up to {}", short(r.max)));
+            }
+            if r.below > 0 {
+                parts.push(format!("down to {}", short(r.min)));
+            }
+            beyond.label = format!(
+                "{} point(s) off the axis, at its edge ({})",
+                r.above + r.below,
+                parts.join(", ")
+            );
+            beyond
+        });
+        let ypad = 0.05 * (hi - lo).max(1e-6);
+        // Markers at the x extremes (a row of "not completed", say) would
+        // be cut in half by the frame.
+        let xpad = if self.markers.is_empty() {
+            0.0
+        } else {
+            0.02 * (x1 - x0)
+        };
         Ok(ChartSpec {
             title: self.title,
             x_label: self.x_label,
             y_label: self.y_label,
-            range: (x0, x1.max(x0 + 1e-9), y0 - ypad, y1 + ypad),
+            range: (x0 - xpad, (x1 + xpad).max(x0 + 1e-9), lo - ypad, hi + ypad),
             walls: &[],
-            series: self.series,
-            markers: self.markers,
-            bands: self.bands,
+            lines,
+            dots,
+            shades,
+            outlines: &[],
+            beyond,
             marker_radius: 3,
         })
     }
@@ -285,17 +659,51 @@ impl TimeFigure<'_> {
     }
 }
 
-/// What one chart shows; both figure kinds draw through [`draw_chart`].
+/// What one chart shows; world and time figures draw through [`draw_chart`].
 struct ChartSpec<'a> {
     title: &'a str,
     x_label: &'a str,
     y_label: &'a str,
     range: (f64, f64, f64, f64),
     walls: &'a [[(f64, f64); 2]],
-    series: &'a [Series<'a>],
-    markers: &'a [Markers<'a>],
-    bands: &'a [Band<'a>],
+    lines: Vec<Line>,
+    dots: Vec<Dots>,
+    shades: Vec<Shade>,
+    outlines: &'a [Outline<'a>],
+    beyond: Option<Beyond>,
     marker_radius: i32,
+}
+
+type Chart<'c, DB> = ChartContext<'c, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Draws `shape` at each point; returns nothing to label.
+fn draw_shapes<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    points: &[(f64, f64)],
+    shape: Shape,
+    color: RGBColor,
+    size: i32,
+) -> Result<(), String> {
+    let style = color.stroke_width(2);
+    let p = points.iter().copied();
+    match shape {
+        Shape::Circle => chart
+            .draw_series(p.map(|c| Circle::new(c, size, color.filled())))
+            .map(|_| ()),
+        Shape::Triangle => chart
+            .draw_series(p.map(|c| TriangleMarker::new(c, size + 2, style)))
+            .map(|_| ()),
+        Shape::Square => chart
+            .draw_series(p.map(|c| {
+                EmptyElement::at(c)
+                    + Rectangle::new([(-size - 1, -size - 1), (size + 1, size + 1)], style)
+            }))
+            .map(|_| ()),
+        Shape::Cross => chart
+            .draw_series(p.map(|c| Cross::new(c, size + 1, style)))
+            .map(|_| ()),
+    }
+    .map_err(|e| e.to_string())
 }
 
 fn draw_chart<DB: DrawingBackend>(
@@ -325,21 +733,15 @@ fn draw_chart<DB: DrawingBackend>(
                 .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
         )
         .map_err(|e| e.to_string())?;
-    for b in spec.bands {
+    for b in &spec.shades {
         let color = b.color;
-        let outline: Vec<(f64, f64)> = b
-            .upper
-            .iter()
-            .chain(b.lower.iter().rev())
-            .copied()
-            .collect();
         chart
             .draw_series(std::iter::once(Polygon::new(
-                outline,
+                b.outline.clone(),
                 color.mix(0.25).filled(),
             )))
             .map_err(|e| e.to_string())?
-            .label(b.label)
+            .label(b.label.as_str())
             .legend(move |(x, y)| {
                 Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(0.25).filled())
             });
@@ -347,22 +749,42 @@ fn draw_chart<DB: DrawingBackend>(
     // Width 1: plotters' bitmap backend leaves gaps in thicker polylines.
     // A series with an empty label draws without a legend entry (several
     // pieces of one thing).
-    for s in spec.series {
+    let radius = spec.marker_radius;
+    for s in &spec.lines {
         let color = s.color;
-        let drawn = chart
-            .draw_series(LineSeries::new(
-                s.points.iter().copied(),
-                color.stroke_width(1),
-            ))
-            .map_err(|e| e.to_string())?;
+        let drawn = if s.dashed {
+            chart.draw_series(s.pieces.iter().map(|piece| {
+                DashedPathElement::new(piece.iter().copied(), 8, 5, color.stroke_width(2))
+            }))
+        } else {
+            chart.draw_series(
+                s.pieces
+                    .iter()
+                    .map(|piece| PathElement::new(piece.clone(), color.stroke_width(1))),
+            )
+        }
+        .map_err(|e| e.to_string())?;
         if !s.label.is_empty() {
-            drawn.label(s.label).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            let dash = if s.dashed { 5 } else { 100 };
+            let mark: Vec<(i32, i32)> = match s.vertices {
+                None => vec![],
+                Some(Shape::Circle) => vec![(8, -2), (12, -2), (12, 2), (8, 2), (8, -2)],
+                Some(Shape::Triangle) => vec![(10, -5), (14, 3), (6, 3), (10, -5)],
+                Some(Shape::Square) => vec![(6, -4), (14, -4), (14, 4), (6, 4), (6, -4)],
+                Some(Shape::Cross) => vec![(6, -4), (14, 4), (10, 0), (14, -4), (6, 4)],
+            };
+            drawn.label(s.label.as_str()).legend(move |(x, y)| {
+                EmptyElement::at((x, y))
+                    + DashedPathElement::new(vec![(0, 0), (20, 0)], dash, 3, color.stroke_width(2))
+                    + PathElement::new(mark.clone(), color.stroke_width(2))
             });
         }
+        if let Some(shape) = s.vertices {
+            let points: Vec<(f64, f64)> = s.pieces.concat();
+            draw_shapes(&mut chart, &points, shape, color, radius)?;
+        }
     }
-    let radius = spec.marker_radius;
-    for m in spec.markers {
+    for m in &spec.dots {
         let color = m.color;
         chart
             .draw_series(
@@ -371,16 +793,219 @@ fn draw_chart<DB: DrawingBackend>(
                     .map(|&p| Circle::new(p, radius, color.filled())),
             )
             .map_err(|e| e.to_string())?
-            .label(m.label)
+            .label(m.label.as_str())
             .legend(move |(x, y)| Circle::new((x + 10, y), radius, color.filled()));
+    }
+    if let Some(b) = &spec.beyond {
+        let size = radius + 3;
+        let up = move |c: (f64, f64), color: RGBColor| {
+            EmptyElement::at(c)
+                + Polygon::new(vec![(-size, 0), (size, 0), (0, -2 * size)], color.filled())
+        };
+        let down = move |c: (f64, f64), color: RGBColor| {
+            EmptyElement::at(c)
+                + Polygon::new(vec![(-size, 0), (size, 0), (0, 2 * size)], color.filled())
+        };
+        chart
+            .draw_series(b.down.iter().map(|&(c, color)| down(c, color)))
+            .map_err(|e| e.to_string())?;
+        chart
+            .draw_series(b.up.iter().map(|&(c, color)| up(c, color)))
+            .map_err(|e| e.to_string())?
+            .label(b.label.as_str())
+            .legend(move |(x, y)| {
+                EmptyElement::at((x + 10, y))
+                    + Polygon::new(vec![(-5, 4), (5, 4), (0, -6)], BLACK.filled())
+            });
+    }
+    // Outlines last: nothing may hide them.
+    for o in spec.outlines {
+        let color = o.color;
+        let mut ring = o.corners.to_vec();
+        if let Some(&first) = o.corners.first() {
+            ring.push(first);
+        }
+        chart
+            .draw_series(
+                ring.windows(2)
+                    .map(|w| DashedPathElement::new(w.to_vec(), 6, 4, color.stroke_width(3))),
+            )
+            .map_err(|e| e.to_string())?
+            .label(o.label)
+            .legend(move |(x, y)| {
+                Rectangle::new([(x + 2, y - 5), (x + 18, y + 5)], color.stroke_width(2))
+            });
     }
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
+        .position(emptiest_corner(spec))
         .draw()
         .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())
+}
+
+/// The corner of the chart with the least drawn in it, for the legend
+/// (segments sampled along their length).
+fn emptiest_corner(spec: &ChartSpec) -> SeriesLabelPosition {
+    let (x0, x1, y0, y1) = spec.range;
+    let mut drawn: Vec<(f64, f64)> = Vec::new();
+    let mut path = |points: &[(f64, f64)]| {
+        for w in points.windows(2) {
+            drawn.extend((0..8).map(|i| {
+                let t = i as f64 / 8.0;
+                (
+                    w[0].0 + t * (w[1].0 - w[0].0),
+                    w[0].1 + t * (w[1].1 - w[0].1),
+                )
+            }));
+        }
+        drawn.extend(points.last().copied());
+    };
+    for w in spec.walls {
+        path(w);
+    }
+    for l in &spec.lines {
+        l.pieces.iter().for_each(|p| path(p));
+    }
+    for b in &spec.shades {
+        path(&b.outline);
+    }
+    for m in &spec.dots {
+        m.points.iter().for_each(|&p| path(&[p]));
+    }
+    if let Some(b) = &spec.beyond {
+        b.up.iter().chain(&b.down).for_each(|(c, _)| path(&[*c]));
+    }
+    let (wx, wy) = (0.45 * (x1 - x0), 0.4 * (y1 - y0));
+    // Upper right, upper left, lower right, lower left.
+    let mut count = [0usize; 4];
+    for (x, y) in drawn {
+        let (right, left) = (x >= x1 - wx, x <= x0 + wx);
+        let (up, low) = (y >= y1 - wy, y <= y0 + wy);
+        for (k, inside) in [up && right, up && left, low && right, low && left]
+            .into_iter()
+            .enumerate()
+        {
+            count[k] += usize::from(inside);
+        }
+    }
+    match (0..4).min_by_key(|&k| count[k]) {
+        Some(1) => SeriesLabelPosition::UpperLeft,
+        Some(2) => SeriesLabelPosition::LowerRight,
+        Some(3) => SeriesLabelPosition::LowerLeft,
+        _ => SeriesLabelPosition::UpperRight,
+    }
+}
+
+/// Height of one lane in pixels.
+const LANE_PX: u32 = 60;
+
+impl LaneFigure<'_> {
+    /// Writes `<base>.svg` and `<base>.png`.
+    pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+        let xs = self.lanes.iter().flat_map(|l| {
+            l.spans
+                .iter()
+                .flat_map(|&(a, b)| [a, b])
+                .chain(l.events.iter().copied())
+        });
+        let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
+        for x in xs.filter(|x| x.is_finite()) {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+        }
+        if x0 > x1 {
+            return Err(PlotError::Data {
+                what: self.title.into(),
+                message: "nothing to draw".into(),
+            });
+        }
+        let pad = 0.02 * (x1 - x0).max(1e-6);
+        let range = (x0 - pad, x1 + pad);
+        let height = LANE_PX * self.lanes.len() as u32 + 140;
+        write_both(
+            base,
+            (1100, height),
+            |r| draw_lanes(&r, self, range),
+            |r| draw_lanes(&r, self, range),
+        )
+    }
+}
+
+fn draw_lanes<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &LaneFigure,
+    (x0, x1): (f64, f64),
+) -> Result<(), String> {
+    let n = fig.lanes.len();
+    // Lane k (from the top) is centred on y = n - 1 - k.
+    let lane_y = |k: usize| (n - 1 - k) as f64;
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let names: Vec<&str> = fig.lanes.iter().map(|l| l.name).collect();
+    let label_px = names.iter().map(|s| s.chars().count()).max().unwrap_or(1) as u32 * 8 + 20;
+    let mut chart = ChartBuilder::on(root)
+        .caption(fig.title, ("sans-serif", 22))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(label_px)
+        .build_cartesian_2d(x0..x1, (0..n as i32 - 1).into_segmented())
+        .map_err(|e| e.to_string())?;
+    let label = |v: &SegmentValue<i32>| match v {
+        SegmentValue::CenterOf(i) if (*i as usize) < n => names[n - 1 - *i as usize].to_string(),
+        _ => String::new(),
+    };
+    chart
+        .configure_mesh()
+        .x_desc(fig.x_label)
+        .y_labels(n)
+        .y_label_formatter(&label)
+        .disable_y_mesh()
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    // Pixels: a bar over the middle 60 % of its row, an instant a tick
+    // across the whole row; both at least three pixels wide, so short
+    // spans and instants show.
+    let px = |x: f64, row: i32| chart.backend_coord(&(x, SegmentValue::Exact(row)));
+    for (k, lane) in fig.lanes.iter().enumerate() {
+        let row = lane_y(k) as i32;
+        // Row k spans Exact(k)..Exact(k + 1); the top row ends at Last.
+        let top = if row + 1 == n as i32 {
+            chart.backend_coord(&(x0, SegmentValue::Last)).1
+        } else {
+            px(x0, row + 1).1
+        };
+        let bottom = px(x0, row).1;
+        let inset = (bottom - top) / 5;
+        let color = lane.color;
+        let bar = |a: f64, b: f64, y0: i32, y1: i32, style: ShapeStyle| {
+            let (a, b) = (px(a.min(b), row).0, px(a.max(b), row).0);
+            let b = b.max(a + 3);
+            Rectangle::new([(a, y0), (b, y1)], style)
+        };
+        for &(a, b) in lane.spans {
+            root.draw(&bar(
+                a,
+                b,
+                top + inset,
+                bottom - inset,
+                color.mix(0.85).filled(),
+            ))
+            .map_err(|e| e.to_string())?;
+        }
+        for &t in lane.events {
+            let c = px(t, row).0;
+            root.draw(&Rectangle::new(
+                [(c - 1, top + 2), (c + 2, bottom - 2)],
+                color.filled(),
+            ))
+            .map_err(|e| e.to_string())?;
+            root.draw(&Circle::new((c, (top + bottom) / 2), 6, color.filled()))
+                .map_err(|e| e.to_string())?;
+        }
+    }
     root.present().map_err(|e| e.to_string())
 }
 
@@ -408,6 +1033,7 @@ mod tests {
                 points: &[(2.0, 0.5)],
                 color: palette::BAD,
             }],
+            outlines: &[],
         }
         .write(&dir.path().join("world"))
         .unwrap();
@@ -454,5 +1080,191 @@ mod tests {
         .write(&dir.path().join("e"))
         .unwrap_err();
         assert!(err.to_string().contains("nothing to draw"));
+    }
+
+    /// Wheel speeds of about ±10 rad/s, irregular, with one +140 and one
+    /// -139.5 rad/s spike.
+    fn speeds_with_spikes() -> Vec<(f64, f64)> {
+        let mut v: Vec<(f64, f64)> = (0..3000)
+            .map(|i| {
+                let t = i as f64 * 0.01;
+                (t, 9.0 * (0.7 * t).sin() + 1.5 * (3.1 * t).cos())
+            })
+            .collect();
+        v[1234].1 = 140.0;
+        v[2001].1 = -139.5;
+        v
+    }
+
+    #[test]
+    fn robust_range_ignores_a_spike_but_reports_it() {
+        let ys: Vec<f64> = speeds_with_spikes().iter().map(|p| p.1).collect();
+        let r = robust_range(&ys).unwrap();
+        assert!(r.clips());
+        assert_eq!((r.above, r.below), (1, 1));
+        assert_eq!((r.min, r.max), (-139.5, 140.0));
+        // The bulk (±10.5) fills the range, with a margin.
+        assert!(r.hi > 10.0 && r.hi < 20.0, "{r:?}");
+        assert!(r.lo < -10.0 && r.lo > -20.0, "{r:?}");
+        // Every value left out is counted.
+        let out = ys.iter().filter(|&&y| y < r.lo || y > r.hi).count();
+        assert_eq!(out, r.above + r.below);
+    }
+
+    #[test]
+    fn robust_range_keeps_data_without_outliers() {
+        // A steep but regular series (move-and-wait's completion times).
+        let ys: Vec<f64> = (0..12).map(|i| 60.0 + 230.0 * i as f64).collect();
+        let r = robust_range(&ys).unwrap();
+        assert!(!r.clips());
+        assert_eq!((r.lo, r.hi), (60.0, 60.0 + 230.0 * 11.0));
+        // Outliers that are 5 % of the data are data.
+        let ys: Vec<f64> = (0..1000)
+            .map(|i| if i % 20 == 0 { 500.0 } else { (i % 7) as f64 })
+            .collect();
+        assert!(!robust_range(&ys).unwrap().clips());
+        // A constant bulk has no scale: keep everything.
+        let mut ys = vec![2.0; 500];
+        ys[3] = 1e6;
+        assert!(!robust_range(&ys).unwrap().clips());
+        assert!(robust_range(&[f64::NAN]).is_none());
+    }
+
+    #[test]
+    fn clipping_cuts_lines_where_they_leave_the_range() {
+        let pieces = clip_y(
+            &[(0.0, 0.0), (1.0, 10.0), (2.0, 0.0), (3.0, 1.0)],
+            -1.0,
+            5.0,
+        );
+        assert_eq!(
+            pieces,
+            vec![
+                vec![(0.0, 0.0), (0.5, 5.0)],
+                vec![(1.5, 5.0), (2.0, 0.0), (3.0, 1.0)]
+            ]
+        );
+        // A line passing through the range from below to above.
+        let pieces = clip_y(&[(0.0, -10.0), (2.0, 10.0)], -5.0, 5.0);
+        assert_eq!(pieces, vec![vec![(0.5, -5.0), (1.5, 5.0)]]);
+        assert_eq!(clip_y(&[(0.0, 3.0)], 0.0, 5.0), vec![vec![(0.0, 3.0)]]);
+        assert!(clip_y(&[(0.0, 30.0), (1.0, 40.0)], 0.0, 5.0).is_empty());
+    }
+
+    #[test]
+    fn overlap_finds_series_that_hide_one_another() {
+        let a = [(0.0, 57.0), (0.25, 55.0)];
+        let b = [(0.0, 57.0), (0.25, 55.0), (0.5, 126.0)];
+        assert_eq!(overlap(&a, &a, 1e-9), Some(Overlap::Same));
+        assert_eq!(overlap(&a, &b, 1e-9), Some(Overlap::Within));
+        assert_eq!(overlap(&b, &a, 1e-9), Some(Overlap::Within));
+        assert_eq!(overlap(&a, &[(0.0, 57.0), (0.25, 56.0)], 1e-9), None);
+        assert_eq!(overlap(&a, &[], 1e-9), None);
+    }
+
+    #[test]
+    fn time_figures_say_what_they_clip_and_what_coincides() {
+        let dir = tempfile::tempdir().unwrap();
+        let speeds = speeds_with_spikes();
+        let same = [(0.0, 57.0), (0.5, 126.0)];
+        let one = [(2.0, 90.0)];
+        TimeFigure {
+            title: "spikes",
+            x_label: "t",
+            y_label: "v",
+            series: &[Series {
+                label: "left",
+                points: &speeds,
+                color: palette::TRUTH,
+            }],
+            markers: &[],
+            bands: &[],
+        }
+        .write(&dir.path().join("spikes"))
+        .unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("spikes.svg")).unwrap();
+        assert!(
+            svg.contains("2 point(s) off the axis, at its edge (up to 140.0, down to -139.5)"),
+            "{svg}"
+        );
+        // The axis is the bulk's: no tick label near the spike (the x axis
+        // runs to 30).
+        let ticks: Vec<f64> = svg.lines().filter_map(|l| l.trim().parse().ok()).collect();
+        assert!(
+            ticks.len() > 5 && ticks.iter().all(|v: &f64| v.abs() <= 30.0),
+            "{ticks:?}"
+        );
+
+        TimeFigure {
+            title: "methods",
+            x_label: "latency",
+            y_label: "s",
+            series: &[
+                Series {
+                    label: "hold-last",
+                    points: &same,
+                    color: palette::BAD,
+                },
+                Series {
+                    label: "watchdog",
+                    points: &same,
+                    color: palette::ALT,
+                },
+                Series {
+                    label: "decoupled",
+                    points: &one,
+                    color: palette::GOOD,
+                },
+            ],
+            markers: &[],
+            bands: &[],
+        }
+        .write(&dir.path().join("methods"))
+        .unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("methods.svg")).unwrap();
+        assert!(
+            svg.contains("watchdog (dashed: same points as hold-last)"),
+            "{svg}"
+        );
+        assert!(!svg.contains("off the axis"));
+        // The single point is drawn (a circle in its colour).
+        assert!(svg.contains("<circle") && svg.contains("#2CA02C"), "{svg}");
+    }
+
+    #[test]
+    fn lanes_are_named_rows_with_visible_instants() {
+        let dir = tempfile::tempdir().unwrap();
+        let files = LaneFigure {
+            title: "timeline",
+            x_label: "t [s]",
+            lanes: &[
+                Lane {
+                    name: "upload",
+                    spans: &[(0.0, 5.0), (60.0, 60.1)],
+                    events: &[],
+                    color: palette::ALT,
+                },
+                Lane {
+                    name: "hand-back",
+                    spans: &[],
+                    events: &[40.0],
+                    color: palette::BAD,
+                },
+            ],
+        }
+        .write(&dir.path().join("lanes"))
+        .unwrap();
+        let svg = std::fs::read_to_string(&files[0]).unwrap();
+        let texts: Vec<&str> = svg.lines().map(str::trim).collect();
+        assert!(
+            texts.contains(&"upload") && texts.contains(&"hand-back"),
+            "{svg}"
+        );
+        // Rows, not numbers: no fractional tick labels on the lane axis.
+        assert!(!texts.contains(&"0.5") && !texts.contains(&"1.5"), "{svg}");
+        let png = image::open(&files[1]).unwrap().to_rgb8();
+        let count = |c: RGBColor| png.pixels().filter(|p| p.0 == [c.0, c.1, c.2]).count();
+        // The instant is a tick across its row and a dot, not a speck.
+        assert!(count(palette::BAD) > 150, "{}", count(palette::BAD));
     }
 }

@@ -133,6 +133,7 @@ pub fn table1(
             },
         ],
         markers: &[],
+        outlines: &[],
     }
     .write(&dir.join("table1_circle"))?;
     Ok(Table1 {
@@ -252,6 +253,7 @@ pub fn section6(log: &MissionLog, calibrated: [f64; 3], dir: &Path) -> anyhow::R
             },
         ],
         markers: &[],
+        outlines: &[],
     }
     .write(&dir.join("section6_wheelbase"))?;
 

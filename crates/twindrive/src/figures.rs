@@ -58,6 +58,7 @@ pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::R
                 color: palette::BAD,
             },
         ],
+        outlines: &[],
     }
     .write(&dir.join("path"))?;
 
@@ -374,6 +375,7 @@ pub fn plan_figures(
         walls,
         paths: &paths,
         markers: &markers,
+        outlines: &[],
     }
     .write(&dir.join(format!("{stem}_executed")))?;
 
@@ -397,6 +399,7 @@ pub fn plan_figures(
             points: &spikes,
             color: palette::BAD,
         }],
+        outlines: &[],
     }
     .write(&dir.join(format!("{stem}_cleaned")))?;
 
@@ -417,6 +420,7 @@ pub fn plan_figures(
             },
         ],
         markers: &[],
+        outlines: &[],
     }
     .write(&dir.join(format!("{stem}_filtered")))?;
 

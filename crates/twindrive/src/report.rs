@@ -1,5 +1,6 @@
 //! A small document model for the demo's report, rendered twice: Markdown
-//! (figures linked) and one self-contained HTML page (SVG figures inlined).
+//! (figures linked, the PNG where there is one) and one self-contained HTML
+//! page (SVG figures inlined).
 
 use std::path::{Path, PathBuf};
 
@@ -11,7 +12,9 @@ pub enum Block {
     Paragraph(String),
     /// Header cells, then rows.
     Table(Vec<String>, Vec<Vec<String>>),
-    /// An SVG file relative to the report's directory, and its caption.
+    /// A figure's path relative to the report's directory without its
+    /// extension (`<base>.png` and `<base>.svg`, as twindrive-plot writes
+    /// them), and its caption.
     Figure(PathBuf, String),
 }
 
@@ -40,11 +43,15 @@ impl Report {
         ));
     }
 
-    pub fn figure(&mut self, svg: impl Into<PathBuf>, caption: impl Into<String>) {
-        self.blocks.push(Block::Figure(svg.into(), caption.into()));
+    /// A figure: `base` without extension, relative to the report.
+    pub fn figure(&mut self, base: impl Into<PathBuf>, caption: impl Into<String>) {
+        self.blocks.push(Block::Figure(base.into(), caption.into()));
     }
 
-    pub fn markdown(&self) -> String {
+    /// The Markdown of the report written into `dir`: each figure links its
+    /// PNG, or its SVG where there is no PNG; a figure with neither is an
+    /// error.
+    pub fn markdown(&self, dir: &Path) -> anyhow::Result<String> {
         let mut md = String::new();
         for b in &self.blocks {
             match b {
@@ -60,15 +67,26 @@ impl Report {
                     }
                     md.push('\n');
                 }
-                Block::Figure(path, caption) => {
+                Block::Figure(base, caption) => {
+                    let link = ["png", "svg"]
+                        .iter()
+                        .map(|ext| base.with_extension(ext))
+                        .find(|f| dir.join(f).is_file())
+                        .with_context(|| {
+                            format!(
+                                "the report's figure {}: neither .png nor .svg in {}",
+                                base.display(),
+                                dir.display()
+                            )
+                        })?;
                     md.push_str(&format!(
                         "![{caption}]({})\n\n*{caption}*\n\n",
-                        path.display()
+                        link.display()
                     ));
                 }
             }
         }
-        md
+        Ok(md)
     }
 
     /// One HTML page; figures are read from `dir` and inlined.
@@ -99,8 +117,8 @@ impl Report {
                     }
                     h.push_str("</table>\n");
                 }
-                Block::Figure(path, caption) => {
-                    let file = dir.join(path);
+                Block::Figure(base, caption) => {
+                    let file = dir.join(base.with_extension("svg"));
                     let svg = std::fs::read_to_string(&file)
                         .with_context(|| format!("reading figure {}", file.display()))?;
                     // Drop an XML declaration; the SVG element itself is valid HTML.
@@ -164,16 +182,41 @@ mod tests {
         r.heading(1, "Case <study>");
         r.paragraph("Run   `twindrive demo`.\n   Then read.");
         r.table(&["a", "b"], vec![vec!["1".into(), "2 & 3".into()]]);
-        r.figure("f.svg", "A figure");
-        let md = r.markdown();
+        r.figure("f", "A figure");
+        let md = r.markdown(dir.path()).unwrap();
         assert!(md.contains("# Case <study>"));
         assert!(md.contains("| a | b |\n|---|---|\n| 1 | 2 & 3 |"));
-        assert!(md.contains("![A figure](f.svg)"));
+        // No PNG beside it: the SVG.
+        assert!(md.contains("![A figure](f.svg)"), "{md}");
         let html = r.html("t", dir.path()).unwrap();
         assert!(html.contains("<h1>Case &lt;study&gt;</h1>"));
         assert!(html.contains("Run <code>twindrive demo</code>. Then read."));
         assert!(html.contains("<td>2 &amp; 3</td>"));
         assert!(html.contains("<svg xmlns") && !html.contains("<?xml"));
         assert!(r.html("t", Path::new("/nonexistent")).is_err());
+    }
+
+    #[test]
+    fn markdown_links_the_png_where_there_is_one_and_fails_without_either() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        for f in ["sub/a.svg", "sub/a.png", "b.svg"] {
+            std::fs::write(dir.path().join(f), "x").unwrap();
+        }
+        let mut r = Report::default();
+        r.figure("sub/a", "A");
+        r.figure("b", "B");
+        let md = r.markdown(dir.path()).unwrap();
+        assert!(
+            md.contains("![A](sub/a.png)") && !md.contains("a.svg"),
+            "{md}"
+        );
+        assert!(md.contains("![B](b.svg)"), "{md}");
+        r.figure("missing/c", "C");
+        let err = format!("{:#}", r.markdown(dir.path()).unwrap_err());
+        assert!(
+            err.contains("missing/c") && err.contains("neither .png nor .svg"),
+            "{err}"
+        );
     }
 }

@@ -142,6 +142,37 @@ fn demo_runs_from_any_directory() {
         assert!(d.join(l.as_str().unwrap()).join("log.csv").is_file());
     }
     assert!(stdout.contains("outcome Completed"), "{stdout}");
+
+    // The report links figures that exist, as PNGs, among them the
+    // calibration's and the experiment's collisions.
+    let out_dir = tmp.path().join("twindrive-out");
+    let md = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
+    let links: Vec<&str> = md
+        .split("](")
+        .skip(1)
+        .map(|rest| &rest[..rest.find(')').unwrap()])
+        .collect();
+    assert!(links.len() >= 18, "{links:?}");
+    for l in &links {
+        assert!(l.ends_with(".png"), "{l} is not a PNG");
+        assert!(
+            out_dir.join(l).is_file(),
+            "report.md links {l}, which is missing"
+        );
+    }
+    for f in [
+        "calibration/calib_left_diameter.png",
+        "calibration/calib_right_diameter.png",
+        "calibration/calib_wheelbase.png",
+        "calibration/calib_innovations.png",
+        "experiment/collisions.png",
+        "experiment/completion_time.png",
+        "decoupled/twin.png",
+        "decoupled/timeline.png",
+        "plan/plan_wheel_speeds.png",
+    ] {
+        assert!(links.contains(&f), "report.md leaves out {f}");
+    }
 }
 
 /// Writes a broken variant of the wall-following scenario and checks that

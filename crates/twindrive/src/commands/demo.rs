@@ -265,10 +265,9 @@ pub fn run(out: &Path) -> anyhow::Result<()> {
         decoupled: &decoupled,
         experiment: (&exp_settings, &exp_cells),
     });
+    let md = report.markdown(out)?;
     let staging = Staging::new(out, "demo-report")?;
-    staging.write_with("report.md", |w| {
-        Ok(w.write_all(report.markdown().as_bytes())?)
-    })?;
+    staging.write_with("report.md", |w| Ok(w.write_all(md.as_bytes())?))?;
     let html = report.html("twindrive: the case study", out)?;
     staging.write_with("report.html", |w| Ok(w.write_all(html.as_bytes())?))?;
     staging.commit()?;
@@ -333,6 +332,23 @@ fn case_study_report(c: &CaseStudy) -> Report {
             })
             .collect(),
     );
+    r.paragraph(
+        "The filter's estimate of each parameter over the drive with its ±3σ band, against the          reported value, and the innovations of the tracker's poses:",
+    );
+    for (file, caption) in [
+        (
+            "left_diameter",
+            "Left wheel diameter: estimate, ±3σ band, reported value",
+        ),
+        (
+            "right_diameter",
+            "Right wheel diameter: estimate, ±3σ band, reported value",
+        ),
+        ("wheelbase", "Wheelbase: estimate, ±3σ band, reported value"),
+        ("innovations", "Innovations of the fused poses"),
+    ] {
+        r.figure(format!("calibration/calib_{file}"), caption);
+    }
     r.heading(3, "Table 1: an ellipse fitted to one circle");
     r.paragraph(format!(
         "One circle of the drive (t = {:.2} .. {:.2} s) as the tracker saw it, and as dead reckoning          with the hand-measured and with the calibrated parameters reconstructs it.",
@@ -364,7 +380,7 @@ fn case_study_report(c: &CaseStudy) -> Report {
             .collect(),
     );
     r.figure(
-        "evidence/table1_circle.svg",
+        "evidence/table1_circle",
         "One circle: tracker, nominal and calibrated dead reckoning",
     );
     r.heading(3, "Section 6: what a wrong wheelbase costs");
@@ -390,11 +406,11 @@ fn case_study_report(c: &CaseStudy) -> Report {
             .collect(),
     );
     r.figure(
-        "evidence/section6_wheelbase.svg",
+        "evidence/section6_wheelbase",
         "Wheelbase ±4 %: dead-reckoned paths against the true one (Fig. 10)",
     );
     r.figure(
-        "evidence/section6_sweep.svg",
+        "evidence/section6_sweep",
         "Drift against the error of each parameter",
     );
     r.heading(2, "2. The mission on the twin (paper section 5.1)");
@@ -403,7 +419,7 @@ fn case_study_report(c: &CaseStudy) -> Report {
         c.wf_summary.duration_s, c.wf_summary.distance_m, c.wf_summary.bumps
     ));
     r.figure(
-        "wall_following/path.svg",
+        "wall_following/path",
         "The mission as driven (ground truth)",
     );
     r.heading(2, "3. The plan (paper section 5)");
@@ -477,19 +493,19 @@ fn case_study_report(c: &CaseStudy) -> Report {
         c.plan.sha256
     ));
     r.figure(
-        "plan/plan_executed.svg",
+        "plan/plan_executed",
         "Executed path: what the plan keeps, what it cuts, the pinch points of each cut, and any ground left uncovered (Fig. 7)",
     );
     r.figure(
-        "plan/plan_cleaned.svg",
+        "plan/plan_cleaned",
         "Redundancy removed: control spikes (Fig. 8a)",
     );
     r.figure(
-        "plan/plan_filtered.svg",
+        "plan/plan_filtered",
         "The filtered path: the plan (Fig. 8b)",
     );
     r.figure(
-        "plan/plan_wheel_speeds.svg",
+        "plan/plan_wheel_speeds",
         "Wheel speeds before and after filtering (Fig. 9)",
     );
     r.heading(2, "4. Verification on the twin");
@@ -531,7 +547,7 @@ fn case_study_report(c: &CaseStudy) -> Report {
         v.verdict.summary(),
         v.verdict.max_deviation_m
     ));
-    r.figure("verification/replays.svg", "The plan replayed on the twin");
+    r.figure("verification/replays", "The plan replayed on the twin");
     let d = c.decoupled;
     let rep = &d.report;
     r.heading(
@@ -575,11 +591,11 @@ fn case_study_report(c: &CaseStudy) -> Report {
             .collect(),
     );
     r.figure(
-        "decoupled/twin.svg",
+        "decoupled/twin",
         "The twin's world after the mission: the blocks it learnt from the robot, the plans, and the robot's true path",
     );
     r.figure(
-        "decoupled/timeline.svg",
+        "decoupled/timeline",
         "Timeline: link, uploads, executions, hand-backs, robot logs received",
     );
     r.heading(
@@ -633,11 +649,15 @@ fn case_study_report(c: &CaseStudy) -> Report {
             .collect(),
     );
     r.figure(
-        "experiment/completion_time.svg",
+        "experiment/completion_time",
         "Mission completion time against one-way latency, one line per method",
     );
     r.figure(
-        "experiment/paths.svg",
+        "experiment/collisions",
+        "Collision periods per run against one-way latency, one line per method",
+    );
+    r.figure(
+        "experiment/paths",
         "The robot's true paths at 0.5 s one way: the route, and each method",
     );
     r.heading(2, "Files");

@@ -19,7 +19,7 @@ use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, si
 use twindrive_link::upload::MemoryStore;
 use twindrive_link::vtime::VirtualLink;
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
-use twindrive_plot::{Markers, Series, TimeFigure, WorldFigure, palette};
+use twindrive_plot::{Lane, LaneFigure, Markers, Outline, Series, WorldFigure, palette};
 use twindrive_sim::Scenario;
 
 use crate::figures::walls;
@@ -135,38 +135,36 @@ pub fn run(
         .map(|t| t.scenario.world.clone())
         .unwrap_or_else(|| twin.world.clone());
     let (min, max) = SITE_BOX;
-    let site_box = vec![
+    let site_box = [
         (min[0], min[1]),
         (max[0], min[1]),
         (max[0], max[1]),
         (min[0], max[1]),
-        (min[0], min[1]),
     ];
-    let mut series = vec![Series {
-        label: "the site's box (the twin never saw it)",
-        points: &site_box,
-        color: palette::BAD,
-    }];
-    let labels: Vec<String> = (1..=plans.len())
+    let labels: Vec<String> = (0..plans.len())
         .map(|k| {
-            if k == 1 {
+            if k == 0 {
                 "plan".into()
             } else {
-                format!("continuation {}", k - 1)
+                format!("continuation {k}")
             }
         })
         .collect();
-    for (k, p) in plans.iter().enumerate() {
-        series.push(Series {
-            label: &labels[k],
+    // The plan orange, each continuation its own colour.
+    let mut series: Vec<Series> = plans
+        .iter()
+        .zip(&labels)
+        .enumerate()
+        .map(|(k, (p, label))| Series {
+            label,
             points: p,
             color: if k == 0 {
                 palette::ALT
             } else {
-                palette::PURPLE
+                palette::cycle(k - 1)
             },
-        });
-    }
+        })
+        .collect();
     let real: Vec<(f64, f64)> = real_paths.concat();
     series.push(Series {
         label: "robot (true path)",
@@ -186,6 +184,11 @@ pub fn run(
         markers: &[Markers {
             label: "hand-back",
             points: &handbacks,
+            color: palette::BAD,
+        }],
+        outlines: &[Outline {
+            label: "the site's box (the twin lacked it)",
+            corners: &site_box,
             color: palette::BAD,
         }],
     }
@@ -290,60 +293,54 @@ fn timeline_figure(report: &Report, base: &Path) -> anyhow::Result<()> {
             .collect()
     };
     let end = report.timeline.last().map_or(1.0, |e| e.t_s);
-    let link = vec![(0.0, 4.0), (end, 4.0)];
-    let spans = |starts: &[f64], ends: &[f64], y: f64| -> Vec<Vec<(f64, f64)>> {
+    // Each start to the first end at or after it (or the end of the mission).
+    let spans = |starts: &[f64], ends: &[f64]| -> Vec<(f64, f64)> {
         starts
             .iter()
-            .map(|&a| {
-                let b = ends.iter().copied().find(|&b| b >= a).unwrap_or(end);
-                vec![(a, y), (b, y)]
-            })
+            .map(|&a| (a, ends.iter().copied().find(|&b| b >= a).unwrap_or(end)))
             .collect()
     };
-    let uploads = spans(&at("upload_started"), &at("upload_finished"), 3.0);
+    let uploads = spans(&at("upload_started"), &at("upload_finished"));
     let mut stops = at("stopped");
     stops.extend(at("execution_finished"));
     stops.sort_by(f64::total_cmp);
-    let executions = spans(&at("execution_started"), &stops, 2.0);
-    let handbacks: Vec<(f64, f64)> = at("handback").into_iter().map(|t| (t, 1.0)).collect();
-    let logs: Vec<(f64, f64)> = at("robot_log").into_iter().map(|t| (t, 0.0)).collect();
-    let mut series = vec![Series {
-        label: "link up (4)",
-        points: &link,
-        color: palette::TRUTH,
-    }];
-    for (k, u) in uploads.iter().enumerate() {
-        series.push(Series {
-            label: if k == 0 { "upload (3)" } else { "" },
-            points: u,
-            color: palette::ALT,
-        });
-    }
-    for (k, e) in executions.iter().enumerate() {
-        series.push(Series {
-            label: if k == 0 { "execution (2)" } else { "" },
-            points: e,
-            color: palette::GOOD,
-        });
-    }
-    TimeFigure {
+    let executions = spans(&at("execution_started"), &stops);
+    let (handbacks, logs) = (at("handback"), at("robot_log"));
+    LaneFigure {
         title: "decoupled operation over the lunar link: timeline",
         x_label: "mission time (s)",
-        y_label: "lane",
-        series: &series,
-        markers: &[
-            Markers {
-                label: "hand-back (1)",
-                points: &handbacks,
-                color: palette::BAD,
-            },
-            Markers {
-                label: "robot log received (0)",
-                points: &logs,
+        lanes: &[
+            Lane {
+                name: "link up",
+                spans: &[(0.0, end)],
+                events: &[],
                 color: palette::TRUTH,
             },
+            Lane {
+                name: "upload",
+                spans: &uploads,
+                events: &[],
+                color: palette::ALT,
+            },
+            Lane {
+                name: "execution",
+                spans: &executions,
+                events: &[],
+                color: palette::GOOD,
+            },
+            Lane {
+                name: "hand-back",
+                spans: &[],
+                events: &handbacks,
+                color: palette::BAD,
+            },
+            Lane {
+                name: "robot log received",
+                spans: &[],
+                events: &logs,
+                color: palette::PURPLE,
+            },
         ],
-        bands: &[],
     }
     .write(base)?;
     Ok(())

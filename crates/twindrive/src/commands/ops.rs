@@ -880,6 +880,7 @@ fn comparison_figures(
             },
         ],
         markers: &[],
+        outlines: &[],
     }
     .write(&dir.join("comparison"))?;
     if residuals.is_empty() {

@@ -169,6 +169,7 @@ pub fn write_outputs(
             },
         ],
         markers: &[],
+        outlines: &[],
     }
     .write(&staging.dir().join("replays"))?;
     staging.commit()

@@ -35,7 +35,7 @@ use twindrive_log::LogHeader;
 use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
 use twindrive_mission::redundancy::RedundancyConfig;
-use twindrive_plot::{Series, TimeFigure, WorldFigure, palette};
+use twindrive_plot::{Markers, Series, TimeFigure, WorldFigure, palette};
 use twindrive_sim::{Contacts, Scenario, Simulator};
 
 use super::route::Route;
@@ -90,6 +90,22 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// The demo's short version: 0, 0.5 and 2 s one way at 10 % loss, one
+    /// seed.
+    fn demo() -> Self {
+        Settings {
+            latencies_s: vec![0.0, 0.5, 2.0],
+            losses: vec![0.1],
+            seeds: 1,
+            bandwidth_bit_s: 256_000.0,
+            watchdog_timeout_s: 0.5,
+            move_s: 0.5,
+            coverage_radius_m: 0.15,
+            complete_at: 0.9,
+            max_duration_s: 1_800.0,
+        }
+    }
+
     fn methods(&self) -> [Method; 4] {
         [
             Method::Direct(DirectMethod::HoldLast),
@@ -612,7 +628,9 @@ pub fn csv(rows: &[RunRow]) -> String {
 }
 
 /// Completion time and collisions against latency, one line per method,
-/// one panel per loss.
+/// one panel per loss. A method's cells that did not complete are marked in
+/// a row of their own above the completion times (never drawn as if they
+/// completed); lines that coincide are told apart by the plot.
 pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Result<()> {
     let methods = settings.methods();
     for (base, title, y_label, value) in [
@@ -634,21 +652,52 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
             .iter()
             .map(|l| format!("{title}, loss {}", pct(*l)))
             .collect();
+        let of = |m: Method, loss: f64| {
+            cells
+                .iter()
+                .filter(move |c| c.method == m && c.loss == loss)
+        };
         let lines: Vec<Vec<Vec<(f64, f64)>>> = settings
             .losses
             .iter()
-            .map(|loss| {
+            .map(|&loss| {
                 methods
                     .iter()
                     .map(|m| {
-                        cells
-                            .iter()
-                            .filter(|c| c.method == *m && c.loss == *loss)
+                        of(*m, loss)
                             .filter_map(|c| value(c).map(|v| (c.latency_s, v)))
                             .collect()
                     })
                     .collect()
             })
+            .collect();
+        // Not completed: method k's row at the top of its panel.
+        let missing: Vec<Vec<Vec<(f64, f64)>>> = settings
+            .losses
+            .iter()
+            .zip(&lines)
+            .map(|(&loss, per_method)| {
+                let top = per_method
+                    .iter()
+                    .flatten()
+                    .map(|p| p.1)
+                    .fold(0.0f64, f64::max);
+                let step = 0.06 * top.max(1.0);
+                methods
+                    .iter()
+                    .enumerate()
+                    .map(|(k, m)| {
+                        of(*m, loss)
+                            .filter(|c| value(c).is_none())
+                            .map(|c| (c.latency_s, top + step * (k + 1) as f64))
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        let missing_labels: Vec<String> = methods
+            .iter()
+            .map(|m| format!("{}: not completed (top rows)", m.name()))
             .collect();
         let series: Vec<Vec<Series>> = lines
             .iter()
@@ -664,15 +713,32 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
                     .collect()
             })
             .collect();
+        let markers: Vec<Vec<Markers>> = missing
+            .iter()
+            .map(|per_method| {
+                per_method
+                    .iter()
+                    .zip(&methods)
+                    .zip(&missing_labels)
+                    .filter(|((points, _), _)| !points.is_empty())
+                    .map(|((points, m), label)| Markers {
+                        label,
+                        points,
+                        color: m.color(),
+                    })
+                    .collect()
+            })
+            .collect();
         let panels: Vec<TimeFigure> = series
             .iter()
+            .zip(&markers)
             .zip(&titles)
-            .map(|(s, t)| TimeFigure {
+            .map(|((s, m), t)| TimeFigure {
                 title: t,
                 x_label: "one-way latency (s)",
                 y_label,
                 series: s,
-                markers: &[],
+                markers: m,
                 bands: &[],
             })
             .collect();
@@ -717,6 +783,7 @@ pub fn paths_figure(
         walls: &walls(&m.site.world),
         paths: &series,
         markers: &[],
+        outlines: &[],
     }
     .write(base)?;
     Ok(())
@@ -762,17 +829,7 @@ pub fn site_like(twin: &Scenario) -> Scenario {
 /// seed, on the demo's own plan; `results.md`, `results.csv` and the
 /// figures into `out`.
 pub fn demo_section(mission: &Mission0, out: &Path) -> anyhow::Result<(Settings, Vec<Cell>)> {
-    let settings = Settings {
-        latencies_s: vec![0.0, 0.5, 2.0],
-        losses: vec![0.1],
-        seeds: 1,
-        bandwidth_bit_s: 256_000.0,
-        watchdog_timeout_s: 0.5,
-        move_s: 0.5,
-        coverage_radius_m: 0.15,
-        complete_at: 0.9,
-        max_duration_s: 1_800.0,
-    };
+    let settings = Settings::demo();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let scratch = tempfile::Builder::new()
         .prefix(".twindrive-experiment-")
@@ -953,4 +1010,58 @@ pub fn intro(m: &Mission0, s: &Settings) -> String {
         s.seeds,
         s.max_duration_s,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cell(method: Method, latency_s: f64, completion_s: Option<f64>) -> Cell {
+        Cell {
+            method,
+            latency_s,
+            loss: 0.1,
+            runs: 1,
+            completed: usize::from(completion_s.is_some()),
+            completion_s,
+            collisions: 0.0,
+            bumps: 0.0,
+            contact_s: 0.0,
+            coverage_percent: 90.0,
+            path_error_mean_m: 0.0,
+            bytes_up: 0.0,
+            bytes_down: 0.0,
+            handbacks: 0.0,
+        }
+    }
+
+    #[test]
+    fn completion_figure_marks_runs_that_did_not_complete_and_coinciding_lines() {
+        let settings = Settings::demo();
+        let [hold, watchdog, move_wait, decoupled] = settings.methods();
+        let mut cells = Vec::new();
+        for (lat, direct, mw, dec) in [
+            (0.0, Some(57.0), 77.0, 79.0),
+            (0.5, None, 170.0, 80.0),
+            (2.0, None, 504.0, 84.0),
+        ] {
+            cells.push(cell(hold, lat, direct));
+            cells.push(cell(watchdog, lat, direct));
+            cells.push(cell(move_wait, lat, Some(mw)));
+            cells.push(cell(decoupled, lat, Some(dec)));
+        }
+        let dir = tempfile::tempdir().unwrap();
+        figures(&cells, &settings, dir.path()).unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("completion_time.svg")).unwrap();
+        for text in [
+            "direct (a) hold-last: not completed (top rows)",
+            "direct (b) watchdog: not completed (top rows)",
+            "direct (b) watchdog (dashed: same points as direct (a) hold-last)",
+        ] {
+            assert!(svg.contains(text), "no `{text}` in the figure");
+        }
+        assert!(!svg.contains("move-and-wait: not completed"));
+        assert!(dir.path().join("completion_time.png").is_file());
+        assert!(dir.path().join("collisions.png").is_file());
+    }
 }
