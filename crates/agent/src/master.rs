@@ -60,6 +60,8 @@ struct Upload {
     sender: Sender,
     bytes: u64,
     started_ns: u64,
+    /// When the robot held it whole, or refused it.
+    finished_ns: Option<u64>,
     last_confirmed: u32,
     done: bool,
 }
@@ -172,6 +174,7 @@ impl<S: ChunkStore> Master<S> {
             sender,
             bytes,
             started_ns: now_ns,
+            finished_ns: None,
             last_confirmed: 0,
             done: false,
         });
@@ -196,6 +199,14 @@ impl<S: ChunkStore> Master<S> {
         self.upload
             .as_ref()
             .map(|u| (u.sender.stats, u.bytes, u.started_ns))
+    }
+
+    /// How long the current (or last) upload took: until the robot held
+    /// it whole or refused it, or until `now_ns` while it goes on (s).
+    pub fn upload_duration_s(&self, now_ns: u64) -> Option<f64> {
+        self.upload
+            .as_ref()
+            .map(|u| u.finished_ns.unwrap_or(now_ns).saturating_sub(u.started_ns) as f64 * 1e-9)
     }
 
     /// Pings answered, and pings unanswered for longer than `late_ns` (lost
@@ -322,6 +333,7 @@ impl<S: ChunkStore> Master<S> {
         }
         if u.sender.is_finished() {
             u.done = true;
+            u.finished_ns = Some(now_ns);
             self.events.push_back(MasterEvent::Uploaded(UploadRecord {
                 transfer,
                 bytes: u.bytes,
@@ -331,6 +343,7 @@ impl<S: ChunkStore> Master<S> {
             }));
         } else if let Some(reason) = u.sender.refused() {
             u.done = true;
+            u.finished_ns = Some(now_ns);
             self.events.push_back(MasterEvent::UploadRefused {
                 transfer,
                 reason: reason.to_string(),

@@ -291,6 +291,10 @@ fn on_handback_ask_waits_for_the_operator_who_continues_or_ends() {
         }
         assert_eq!(h.op.report.outcome, None, "still waiting");
         let now = h.link.now_ns;
+        // The upload's clock stopped when the robot held it whole.
+        let took = h.op.report.uploads[0].duration_s;
+        assert!(took > 0.0);
+        assert_eq!(h.op.master.upload_duration_s(now), Some(took));
         if continue_it {
             h.op.replan(now).unwrap();
             assert!(h.op.awaiting_decision().is_none());

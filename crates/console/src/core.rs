@@ -184,7 +184,7 @@ impl Core {
     /// A line in the page's event list.
     pub fn event(&mut self, level: &str, text: String) {
         match level {
-            "error" => tracing::warn!("{text}"),
+            "error" | "warn" => tracing::warn!("{text}"),
             _ => tracing::info!("{text}"),
         }
         self.event_seq += 1;
@@ -414,8 +414,14 @@ impl Core {
     /// Time passes: the twin moves, the operators react.
     pub fn tick(&mut self, now_ns: u64) {
         self.ws.advance(now_ns);
+        let mut lines = Vec::new();
         for r in &self.robots {
-            r.lock().tick(now_ns);
+            let mut slot = r.lock();
+            slot.tick(now_ns);
+            lines.extend(slot.take_events());
+        }
+        for (level, text) in lines {
+            self.event(level, text);
         }
     }
 

@@ -15,13 +15,13 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use serde_json::{Value, json};
 use twindrive_agent::master::{Master, MasterConfig, MasterEvent};
-use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
+use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome, TimelineEntry};
 use twindrive_agent::twin::Twin;
 use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, sign_plan};
 use twindrive_link::upload::{DirStore, write_durably};
 use twindrive_link::vtime::Endpoint;
-use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Status};
-use twindrive_mission::plan::MissionPlan;
+use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Status, TransferId};
+use twindrive_mission::plan::{MissionPlan, hex};
 use twindrive_sim::Scenario;
 
 use crate::planning::columns;
@@ -71,6 +71,13 @@ pub struct RobotSlot {
     /// A hand-back that arrived while no mission of this console ran (the
     /// robot ran a plan of an earlier master).
     orphan_handback: Option<Handback>,
+    /// The latest status of a running plan: its transfer, plan time (s)
+    /// and samples passed (where it stopped, once it stops).
+    last_run: Option<(TransferId, f64, u32)>,
+    /// Entries of the mission's timeline already told to the operator.
+    timeline_told: usize,
+    /// Lines for the console's event list, not yet taken.
+    events: VecDeque<(&'static str, String)>,
     report_written: bool,
     /// Problems worth telling the operator (writing files, say).
     pub notices: VecDeque<String>,
@@ -121,6 +128,9 @@ impl RobotSlot {
             mission_rev: 0,
             logs: Vec::new(),
             orphan_handback: None,
+            last_run: None,
+            timeline_told: 0,
+            events: VecDeque::new(),
             report_written: false,
             notices: VecDeque::new(),
         }
@@ -172,6 +182,9 @@ impl RobotSlot {
         }
         if let Body::Status(s) = &message.body {
             self.last_status_ns = Some(now_ns);
+            if let Some((t, PlanPhase::Executing)) = &s.plan {
+                self.last_run = Some((*t, s.plan_t_s, s.progress.0));
+            }
             self.series.push_back([
                 now_ns as f64 * 1e-9,
                 s.plan_t_s,
@@ -193,6 +206,15 @@ impl RobotSlot {
                     }
                 }
                 if let Some(h) = orphan {
+                    self.events.push_back((
+                        "warn",
+                        format!(
+                            "robot {}: hand-back: {} at {:.1} s into a plan of an earlier master",
+                            self.id,
+                            h.reason.replace('_', " "),
+                            h.plan_t_s
+                        ),
+                    ));
                     self.orphan_handback = Some(h);
                     self.mission_rev += 1;
                 }
@@ -215,6 +237,22 @@ impl RobotSlot {
         let Some(Link::Operating(op)) = self.link.as_mut() else {
             return;
         };
+        // Plans by transfer: those uploaded, and the one uploading.
+        let mut plans: Vec<(String, &str)> = op
+            .report
+            .uploads
+            .iter()
+            .map(|u| (u.transfer.clone(), u.plan_sha256.as_str()))
+            .collect();
+        if let (Some(t), Some(p)) = (op.master.uploading(), op.current_plan()) {
+            plans.push((hex(&t), p.sha256.as_str()));
+        }
+        for entry in &op.report.timeline[self.timeline_told..] {
+            if let Some(line) = event_line(&self.id, entry, &plans) {
+                self.events.push_back(line);
+            }
+        }
+        self.timeline_told = op.report.timeline.len();
         let mut files: Vec<(PathBuf, Vec<u8>)> = Vec::new();
         let mut logs = Vec::new();
         while let Some((plan, json, signed)) = op.new_plans.pop_front() {
@@ -353,6 +391,7 @@ impl RobotSlot {
         op.start(plan, signed, counter, false, now_ns);
         self.link = Some(Link::Operating(Box::new(op)));
         self.orphan_handback = None;
+        self.timeline_told = 0;
         self.logs.clear();
         self.report_written = false;
         self.mission_rev += 1;
@@ -383,6 +422,7 @@ impl RobotSlot {
             return Ok(format!("robot {}: nothing to end", self.id));
         };
         op.end_mission(now_ns);
+        self.collect(now_ns);
         self.mission_rev += 1;
         Ok(format!("robot {}: mission ended", self.id))
     }
@@ -405,6 +445,12 @@ impl RobotSlot {
                 self.write(&path, &bytes);
             }
         }
+    }
+
+    /// Lines for the console's event list since the last call: the
+    /// mission's hand-backs, continuations, completion and end.
+    pub fn take_events(&mut self) -> Vec<(&'static str, String)> {
+        self.events.drain(..).collect()
     }
 
     pub fn mission_rev(&self) -> u64 {
@@ -435,7 +481,7 @@ impl RobotSlot {
             _ => None,
         };
         (
-            status.map(|s| s.pose),
+            status.and_then(|s| known_pose(s.pose)),
             predicted,
             op.and_then(|o| o.twin())
                 .map(|t| t.learnt.clone())
@@ -493,7 +539,7 @@ impl RobotSlot {
         let outage = rx_age.is_none_or(|a| a > STALE_S + rtt_allow);
         let rate = self.rx_times.len() as f64 / 10.0;
         let bytes_rate = self.rx_times.iter().map(|&(_, n)| n).sum::<usize>() as f64 / 10.0;
-        let upload = master.upload_stats().map(|(s, bytes, started)| {
+        let upload = master.upload_stats().map(|(s, bytes, _)| {
             json!({
                 "chunks": s.chunks,
                 "confirmed": s.chunks_confirmed,
@@ -501,7 +547,7 @@ impl RobotSlot {
                 "resent": s.chunks_resent,
                 "repairs": s.repairs_sent,
                 "bytes": bytes,
-                "elapsed_s": now_ns.saturating_sub(started) as f64 * 1e-9,
+                "elapsed_s": master.upload_duration_s(now_ns),
                 "done": master.upload_finished(),
             })
         });
@@ -534,6 +580,7 @@ impl RobotSlot {
                 "outage": outage,
             },
             "status": status,
+            "plan": self.plan_view(),
             "predicted": predicted,
             "awaiting": awaiting,
             "outcome": op.and_then(|o| o.report.outcome),
@@ -546,6 +593,51 @@ impl RobotSlot {
             "mission_rev": self.mission_rev,
             "series_rev": self.series_rev,
         })
+    }
+
+    /// The plan the robot is executing, or else the one sent to it last (or
+    /// the one its status speaks of, a plan of an earlier master), with
+    /// where the robot stands in it: from its statuses while it runs, from
+    /// its hand-back once it handed back, from its last status while
+    /// running once it stopped otherwise or finished.
+    fn plan_view(&self) -> Option<Value> {
+        let master = self.master();
+        let op = self.operator();
+        let reported = master.latest_status().and_then(|s| s.plan.as_ref());
+        let transfer = match reported {
+            Some((t, PlanPhase::Executing)) => Some(*t),
+            _ => master.uploading().or(reported.map(|(t, _)| *t)),
+        }?;
+        let plan = op.and_then(|o| o.plan_for(&transfer));
+        let phase = match master.phase(&transfer) {
+            Some(PlanPhase::Receiving { .. }) | None if master.uploading() == Some(transfer) => {
+                if master.upload_finished() {
+                    "uploaded"
+                } else {
+                    "uploading"
+                }
+            }
+            Some(p) => phase_word(p),
+            None => "unknown",
+        };
+        let handback = op
+            .and_then(|o| o.last_handback())
+            .or(self.orphan_handback.as_ref())
+            .filter(|h| h.plan == transfer);
+        let position = match (handback, self.last_run) {
+            (Some(h), _) => Some((h.plan_t_s, h.progress)),
+            (None, Some((t, plan_t_s, passed))) if t == transfer => Some((plan_t_s, passed)),
+            _ => None,
+        };
+        Some(json!({
+            "sha256": plan.map(|p| p.sha256.clone()),
+            "transfer": hex(&transfer),
+            "phase": phase,
+            "duration_s": plan.map(|p| p.duration_s()),
+            "samples": plan.map(|p| p.samples.len()),
+            "plan_t_s": position.map(|p| p.0),
+            "passed": position.map(|p| p.1),
+        }))
     }
 
     /// The heavier picture, sent when it changes: time series, the plan,
@@ -578,14 +670,85 @@ impl RobotSlot {
     }
 }
 
+/// A robot's pose estimate, unless it has none yet (NaN before its first
+/// plan runs).
+fn known_pose(pose: [f64; 3]) -> Option<[f64; 3]> {
+    pose.iter().all(|v| v.is_finite()).then_some(pose)
+}
+
+fn phase_word(phase: &PlanPhase) -> &'static str {
+    match phase {
+        PlanPhase::Receiving { .. } => "receiving",
+        PlanPhase::Rejected { .. } => "rejected",
+        PlanPhase::Executing => "executing",
+        PlanPhase::Finished => "finished",
+        PlanPhase::Stopped { .. } => "stopped",
+    }
+}
+
+/// The line in the console's event list for an entry of a mission's
+/// timeline (with its level), or none for an upload's start (the upload
+/// command reports the first, `continuation_planned` the others).
+fn event_line(
+    robot: &str,
+    entry: &TimelineEntry,
+    plans: &[(String, &str)],
+) -> Option<(&'static str, String)> {
+    let d = &entry.detail;
+    // Phases name the transfer (its first 12 hex digits); `plans` has the
+    // plan sent as each transfer (hex, plan SHA-256).
+    let plan_of = |transfer: &str| {
+        plans
+            .iter()
+            .find(|(t, _)| !transfer.is_empty() && t.starts_with(transfer))
+            .map_or_else(
+                || format!("transfer {transfer}"),
+                |(_, sha)| format!("plan {}", &sha[..sha.len().min(12)]),
+            )
+    };
+    let (level, text) = match entry.event.as_str() {
+        "upload_finished" => ("info", format!("upload finished: {d}")),
+        "upload_refused" => ("error", format!("upload refused: {d}")),
+        "plan_rejected" => ("error", format!("plan rejected: {d}")),
+        "execution_started" => ("info", format!("executing {}", plan_of(d))),
+        "execution_finished" => ("info", format!("{} finished", plan_of(d))),
+        "stopped" => ("warn", format!("stopped: {}", d.replace('_', " "))),
+        "handback" => {
+            // "<reason> at <t> s into the plan, pose (…)"
+            let (reason, rest) = d.split_once(' ').unwrap_or((d, ""));
+            (
+                "warn",
+                format!("hand-back: {} {rest}", reason.replace('_', " ")),
+            )
+        }
+        "twin_updated" => ("info", format!("the twin updated from the hand-back: {d}")),
+        "awaiting_operator" => (
+            "warn",
+            "waiting for you: continue or end the mission".into(),
+        ),
+        "continuation_planned" => ("info", format!("continuation uploading: {d}")),
+        "operator_ended" => ("info", format!("mission ended by the operator: {d}")),
+        "outcome" => {
+            let (level, word) = match d.as_str() {
+                "Completed" => ("ok", "completed"),
+                "HandedBack" => ("warn", "handed back"),
+                "Rejected" => ("error", "rejected"),
+                _ => ("error", "failed"),
+            };
+            (level, format!("mission over: {word}"))
+        }
+        "robot_log" => ("info", format!("the robot's log arrived ({d})")),
+        _ => return None,
+    };
+    Some((level, format!("robot {robot}: {text}")))
+}
+
 fn status_view(s: &Status, age_s: Option<f64>) -> Value {
     json!({
         "age_s": age_s,
         "stale": age_s.is_none_or(|a| a > STALE_S),
-        "pose": s.pose,
-        "plan_t_s": s.plan_t_s,
-        "progress": [s.progress.0, s.progress.1],
-        "phase": s.plan.as_ref().map(|(_, p)| p),
+        "pose": known_pose(s.pose),
+        "phase": s.plan.as_ref().map(|(_, p)| phase_word(p)),
         "deviation_m": s.deviation_m,
         "range_residual_m": s.range_residual_m,
         "params": s.params,
@@ -661,4 +824,146 @@ fn handback_window(op: &Operator<DirStore>) -> Option<Value> {
         "predicted": predicted,
         "tolerance_m": Tolerances::default().max_range_residual_m,
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use twindrive_link::wire::Stamper;
+
+    fn status(plan: Option<(TransferId, PlanPhase)>, plan_t_s: f64, pose: [f64; 3]) -> Body {
+        Body::Status(Box::new(Status {
+            plan,
+            progress: (40, 100),
+            plan_t_s,
+            pose,
+            params: [0.1; 3],
+            params_std: [0.01; 3],
+            deviation_m: 0.01,
+            range_residual_m: 0.02,
+            wheel_travel_rad: 0.0,
+            logs_pending: 0,
+            bumps: 0,
+            collisions: 0,
+        }))
+    }
+
+    #[test]
+    fn a_robot_without_a_pose_has_none_and_a_stopped_plan_keeps_its_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut slot = RobotSlot::new("r1", dir.path(), MasterConfig::default());
+        let mut robot = Stamper::new("r1");
+        let mut send = |slot: &mut RobotSlot, body: Body, t_s: u64| {
+            let now = t_s * 1_000_000_000;
+            let m = robot.stamp(body, now);
+            slot.handle(&m, now);
+            slot.tick(now);
+        };
+        // Before its first plan the robot's estimate is NaN: no pose.
+        send(&mut slot, status(None, 0.0, [f64::NAN; 3]), 1);
+        let v = slot.view(1_000_000_000);
+        assert_eq!(v["status"]["pose"], Value::Null, "{v}");
+        assert_eq!(v["plan"], Value::Null, "{v}");
+        assert_eq!(slot.poses().0, None);
+        // A plan (of an earlier master) runs: its pose, its time.
+        let t = [7u8; 32];
+        send(
+            &mut slot,
+            status(Some((t, PlanPhase::Executing)), 15.5, [1.0, 2.0, 0.5]),
+            2,
+        );
+        let v = slot.view(2_000_000_000);
+        assert_eq!(v["status"]["pose"], json!([1.0, 2.0, 0.5]));
+        assert_eq!(slot.poses().0, Some([1.0, 2.0, 0.5]));
+        assert_eq!(v["plan"]["phase"], "executing");
+        assert_eq!(v["plan"]["plan_t_s"], 15.5);
+        assert_eq!(v["plan"]["transfer"], hex(&t));
+        // Stopped, its statuses say 0 s: the plan stays where it stopped.
+        let stopped = PlanPhase::Stopped {
+            reason: "dead_man".into(),
+        };
+        send(
+            &mut slot,
+            status(Some((t, stopped.clone())), 0.0, [1.1, 2.0, 0.5]),
+            3,
+        );
+        let v = slot.view(3_000_000_000);
+        assert_eq!(v["plan"]["phase"], "stopped");
+        assert_eq!(v["plan"]["plan_t_s"], 15.5, "{v}");
+        // A hand-back: where it says it stopped, with a line for the events.
+        let h = Handback {
+            plan: t,
+            reason: "unexpected_bump".into(),
+            plan_t_s: 15.75,
+            progress: 41,
+            pose: [1.1, 2.0, 0.5],
+            params: [0.1; 3],
+            params_covariance: [0.0; 9],
+            window: Vec::new(),
+        };
+        send(&mut slot, Body::Handback(Box::new(h)), 4);
+        let v = slot.view(4_000_000_000);
+        assert_eq!(v["plan"]["plan_t_s"], 15.75, "{v}");
+        assert_eq!(v["awaiting"]["plan_t_s"], 15.75, "{v}");
+        assert_eq!(v["plan"]["passed"], 41);
+        let events = slot.take_events();
+        assert_eq!(events.len(), 1, "{events:?}");
+        assert!(
+            events[0].1.contains("hand-back: unexpected bump at 15.8 s"),
+            "{events:?}"
+        );
+        assert!(slot.take_events().is_empty(), "taken once");
+    }
+
+    fn entry(event: &str, detail: &str) -> TimelineEntry {
+        TimelineEntry {
+            t_s: 1.0,
+            event: event.into(),
+            detail: detail.into(),
+        }
+    }
+
+    #[test]
+    fn the_missions_timeline_becomes_event_lines() {
+        let transfer = "ab".repeat(32);
+        let sha = "cd".repeat(32);
+        let plans = [(transfer.clone(), sha.as_str())];
+        let line = |e: &str, d: &str| event_line("r1", &entry(e, d), &plans);
+        let (level, text) = line(
+            "handback",
+            "unexpected_bump at 15.5 s into the plan, pose (1.00, 2.00, 0.50)",
+        )
+        .unwrap();
+        assert_eq!(level, "warn");
+        assert_eq!(
+            text,
+            "robot r1: hand-back: unexpected bump at 15.5 s into the plan, pose (1.00, 2.00, 0.50)"
+        );
+        let (_, text) = line("execution_started", &transfer[..12]).unwrap();
+        assert_eq!(text, format!("robot r1: executing plan {}", &sha[..12]));
+        let (_, text) = line("execution_finished", "0123456789ab").unwrap();
+        assert_eq!(text, "robot r1: transfer 0123456789ab finished");
+        let (_, text) = line(
+            "continuation_planned",
+            "12.0 s rehearsed on the updated twin, plan 0123456789ab (120 samples)",
+        )
+        .unwrap();
+        assert!(text.starts_with("robot r1: continuation uploading: 12.0 s"));
+        assert_eq!(
+            line("outcome", "Completed").unwrap(),
+            ("ok", "robot r1: mission over: completed".into())
+        );
+        assert_eq!(
+            line("outcome", "HandedBack").unwrap(),
+            ("warn", "robot r1: mission over: handed back".into())
+        );
+        assert_eq!(line("outcome", "Failed").unwrap().0, "error");
+        assert!(
+            line("operator_ended", "the mission ends at the hand-back")
+                .unwrap()
+                .1
+                .contains("mission ended by the operator")
+        );
+        assert_eq!(line("upload_started", "plan x (10 bytes signed)"), None);
+    }
 }

@@ -5,15 +5,29 @@ import { MapView, LodPath, at } from './map.js';
 const $ = (id) => document.getElementById(id);
 const map = new MapView($('map'));
 
+// One colour per thing on the map: the layers, the live overlay and the
+// legend all take theirs from here.
+const COLORS = {
+  executed: '#a0aec0', deleted: '#e53e3e', uncovered: '#d53f8c', plan: '#2b6cb0',
+  openLoop: '#38a169', closedLoop: '#319795', rehearsal: '#718096',
+  twin: '#2b6cb0', bumped: '#e53e3e', robot: '#dd6b20', prediction: '#90cdf4',
+  robotPlan: '#3182ce', pinch: '#e53e3e', spike: '#d69e2e', region: '#805ad5',
+};
+const LEGEND = [['executed', 'executed'], ['deleted', 'deleted'], ['uncovered', 'uncovered'],
+  ['plan', 'plan / twin'], ['openLoop', 'open-loop replay'], ['closedLoop', 'closed-loop replay'],
+  ['rehearsal', 'rehearsal'], ['robot', 'robot (reported) / its logs'], ['prediction', 'prediction']];
+
 // Everything the page knows (tests read it through window.twindrive).
 const S = {
   ws: null, connected: false, everConnected: false, instance: null, reconnects: 0,
   world: null, state: null, plan: null, verify: null, rehearsal: null,
   focus: null, detail: null, regions: [], acked: new Set(), errors: [],
+  // What the last map frame drew of the robots: { id, pose, color }.
+  drawn: { robots: [] },
   // Bytes and milliseconds (parse and build) of the heavy messages.
   timings: {},
 };
-window.twindrive = { S, map };
+window.twindrive = { S, map, COLORS };
 
 // ---------------------------------------------------------------- link
 let backoffMs = 250;
@@ -147,9 +161,7 @@ function renderFleet(robots) {
   const rows = robots.map((r) => {
     const link = r.link.outage ? '<span class="stale">outage</span>'
       : `rtt ${r.link.rtt_s === null ? '–' : fmt(r.link.rtt_s, 2) + ' s'}`;
-    const st = r.status;
-    const prog = st && st.progress[1] ? `${st.progress[0]}/${st.progress[1]}` : (r.upload && !r.upload.done ? `upload ${pct(r.upload)} %` : '–');
-    return `<tr data-id="${esc(r.id)}" class="${r.id === S.focus ? 'focus' : ''}"><td>${esc(r.id)}</td><td>${esc(r.state)}</td><td>${link}</td><td>${prog}</td></tr>`;
+    return `<tr data-id="${esc(r.id)}" class="${r.id === S.focus ? 'focus' : ''}"><td>${esc(r.id)}</td><td>${esc(r.state)}</td><td>${link}</td><td>${planCell(r)}</td></tr>`;
   }).join('');
   if (body.dataset.html !== rows) { body.innerHTML = rows; body.dataset.html = rows; }
 }
@@ -163,6 +175,18 @@ function focus(id) {
   S.detail = null;
   $('focus-name').textContent = id;
   send({ cmd: 'focus', robot: id });
+}
+
+// The plan a robot executes or was sent last: its short hash, where the
+// robot stands in it (or how far its upload is).
+function planCell(r) {
+  const p = r.plan;
+  if (!p) return '–';
+  const name = p.sha256 ? `<code>${esc(p.sha256.slice(0, 12))}</code>` : `transfer <code>${esc(p.transfer.slice(0, 12))}</code>`;
+  let where = p.phase;
+  if (p.phase === 'uploading' && r.upload) where = `upload ${pct(r.upload)} %`;
+  else if (p.passed !== null && p.samples) where = `${p.phase} ${p.passed}/${p.samples}`;
+  return `${name} ${esc(where)}`;
 }
 
 function pct(u) { return u.chunks ? Math.floor(100 * u.confirmed / u.chunks) : 0; }
@@ -188,9 +212,13 @@ function renderRobot(r) {
   if (s) {
     const stale = s.stale ? ' <span class="stale">STALE</span>' : '';
     const pred = r.predicted ? ` · twin predicts (${fmt(r.predicted[0])}, ${fmt(r.predicted[1])})` : '';
+    const pose = s.pose ? `pose (${fmt(s.pose[0])}, ${fmt(s.pose[1])}) m, ${deg(s.pose[2])}°` : 'no pose yet';
+    const p = r.plan;
+    const when = p && p.plan_t_s !== null
+      ? ` at ${fmt(p.plan_t_s, 1)} s into plan ${esc((p.sha256 || p.transfer).slice(0, 12))} (${esc(p.phase)})` : '';
     $('robot-status').innerHTML =
       `state <b>${esc(r.state)}</b> · status ${age(s.age_s)}${stale}<br>` +
-      `pose (${fmt(s.pose[0])}, ${fmt(s.pose[1])}) m, ${deg(s.pose[2])}° at ${fmt(s.plan_t_s, 1)} s into the plan${pred}<br>` +
+      `${pose}${when}${pred}<br>` +
       `deviation ${fmt(s.deviation_m, 3)} m (tolerance ${r.tolerances.deviation_m}) · range residual ${fmt(s.range_residual_m, 3)} m (tolerance ${r.tolerances.range_residual_m})<br>` +
       `wheels ${fmt(s.params[0], 4)}/${fmt(s.params[1], 4)} m, wheelbase ${fmt(s.params[2], 4)} m · bumps ${s.bumps} · logs pending ${s.logs_pending}`;
   } else {
@@ -274,9 +302,9 @@ function onDetail(d) {
   const key = `${d.id}:${d.plan_sha256}:${d.logs.length}`;
   if (key !== S.detailLayers) {
     S.detailLayers = key;
-    map.setLayer('robot:plan', d.plan ? new LodPath(d.plan) : null, { color: '#3182ce', width: 1, dash: [6, 4], alpha: 0.8 });
+    map.setLayer('robot:plan', d.plan ? new LodPath(d.plan) : null, { color: COLORS.robotPlan, width: 1, dash: [6, 4], alpha: 0.8 });
     for (const n of [...map.layers.keys()]) if (n.startsWith('robot:log')) map.setLayer(n, null);
-    d.logs.forEach((l, i) => map.setLayer(`robot:log${i}`, new LodPath(l), { color: '#dd6b20', width: 2 }));
+    d.logs.forEach((l, i) => map.setLayer(`robot:log${i}`, new LodPath(l), { color: COLORS.robot, width: 2 }));
   }
   updateCursorRange();
 }
@@ -287,10 +315,10 @@ function onPlan(p) {
   const ex = p.executed;
   const deleted = p.deletions.map((d) => [Math.max(0, d.first - 1), d.last + 1]);
   const uncovered = p.uncovered.map((u) => [u.first, u.last]);
-  map.setLayer('executed', new LodPath(ex), { color: '#a0aec0', width: 1.5 });
-  map.setLayer('deleted', deleted.length ? new LodPath(ex, deleted) : null, { color: '#e53e3e', width: 2.5, alpha: 0.8 });
-  map.setLayer('uncovered', uncovered.length ? new LodPath(ex, uncovered) : null, { color: '#dd6b20', width: 4 });
-  map.setLayer('plan', new LodPath(p.plan), { color: '#2b6cb0', width: 2 });
+  map.setLayer('executed', new LodPath(ex), { color: COLORS.executed, width: 1.5 });
+  map.setLayer('deleted', deleted.length ? new LodPath(ex, deleted) : null, { color: COLORS.deleted, width: 2.5, alpha: 0.8 });
+  map.setLayer('uncovered', uncovered.length ? new LodPath(ex, uncovered) : null, { color: COLORS.uncovered, width: 4 });
+  map.setLayer('plan', new LodPath(p.plan), { color: COLORS.plan, width: 2 });
   for (const g of ['executed', 'deleted', 'uncovered', 'plan']) map.setVisible(g, map.isVisible(g));
   const s = p.summary;
   $('plan-summary').innerHTML =
@@ -307,8 +335,8 @@ function onPlan(p) {
 
 function onVerify(v) {
   S.verify = v;
-  map.setLayer('replays:open', new LodPath(v.open_loop), { color: '#38a169', width: 1.5, dash: [6, 3] });
-  map.setLayer('replays:closed', new LodPath(v.closed_loop), { color: '#319795', width: 1.5 });
+  map.setLayer('replays:open', new LodPath(v.open_loop), { color: COLORS.openLoop, width: 1.5, dash: [6, 3] });
+  map.setLayer('replays:closed', new LodPath(v.closed_loop), { color: COLORS.closedLoop, width: 1.5 });
   map.setVisible('replays', map.isVisible('replays'));
   renderVerdict(v.verdict);
 }
@@ -326,7 +354,7 @@ function renderVerdict(v) {
 
 function onRehearsal(r) {
   S.rehearsal = r;
-  map.setLayer('rehearsal', new LodPath(r.track), { color: '#718096', width: 1, alpha: 0.5 });
+  map.setLayer('rehearsal', new LodPath(r.track), { color: COLORS.rehearsal, width: 1, alpha: 0.5 });
   map.setVisible('rehearsal', map.isVisible('rehearsal'));
   updateCursorRange();
 }
@@ -460,11 +488,11 @@ map.overlay = (ctx, px) => {
   const st = S.state;
   // Keep regions.
   ctx.fillStyle = 'rgba(128, 90, 213, 0.15)';
-  ctx.strokeStyle = '#805ad5';
+  ctx.strokeStyle = COLORS.region;
   ctx.lineWidth = 1.5 * px;
   for (const r of S.regions) { ctx.beginPath(); ctx.arc(r.x_m, r.y_m, r.radius_m, 0, 2 * Math.PI); ctx.fill(); ctx.stroke(); }
   if (S.plan && map.isVisible('pinches')) {
-    ctx.strokeStyle = '#e53e3e';
+    ctx.strokeStyle = COLORS.pinch;
     ctx.lineWidth = 1.5 * px;
     for (const [x0, y0, x1, y1] of S.plan.pinches) {
       ctx.beginPath(); ctx.arc(x0, y0, 5 * px, 0, 2 * Math.PI); ctx.stroke();
@@ -473,7 +501,7 @@ map.overlay = (ctx, px) => {
     }
   }
   if (S.plan && map.isVisible('spikes')) {
-    ctx.strokeStyle = '#d69e2e';
+    ctx.strokeStyle = COLORS.spike;
     ctx.lineWidth = 2 * px;
     for (const [x, y] of S.plan.spikes) {
       const d = 4 * px;
@@ -495,26 +523,29 @@ map.overlay = (ctx, px) => {
   ctx.beginPath();
   for (const [x0, y0, x1, y1] of t.beams) { ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); }
   ctx.stroke();
-  robotGlyph(ctx, px, t.pose, fr, t.bump ? '#e53e3e' : '#2b6cb0', 1);
-  ctx.fillStyle = '#e53e3e';
+  robotGlyph(ctx, px, t.pose, fr, t.bump ? COLORS.bumped : COLORS.twin, 1);
+  ctx.fillStyle = COLORS.bumped;
   for (const [x, y] of t.bumps) { ctx.beginPath(); ctx.arc(x, y, 3 * px, 0, 2 * Math.PI); ctx.fill(); }
-  // Every robot: the reported pose (faded when stale) and the twin's
-  // prediction for the same plan time.
+  // Every robot that reported a pose: that pose (faded when stale), and
+  // the twin's prediction for the same plan time.
+  const drawn = [];
   for (const r of st.robots) {
-    if (r.predicted) robotGlyph(ctx, px, r.predicted, fr, '#90cdf4', 0.7, true);
-    if (r.status) {
-      robotGlyph(ctx, px, r.status.pose, fr, '#dd6b20', r.status.stale ? 0.35 : 1);
+    if (r.predicted) robotGlyph(ctx, px, r.predicted, fr, COLORS.prediction, 0.7, true);
+    if (r.status && r.status.pose) {
+      robotGlyph(ctx, px, r.status.pose, fr, COLORS.robot, r.status.stale ? 0.35 : 1);
       label(ctx, px, r.status.pose, `${r.id} · ${fmt(r.status.age_s, 1)} s${r.status.stale ? ' STALE' : ''}`);
+      drawn.push({ id: r.id, pose: r.status.pose, color: COLORS.robot });
     }
   }
+  S.drawn = { robots: drawn };
   // The time cursor: the rehearsal, the plan and the robot's log at t.
   if ($('cursor-on').checked) {
     const tc = parseFloat($('cursor').value);
     $('cursor-label').textContent = `t = ${tc.toFixed(1)} s`;
     const marks = [];
-    if (S.rehearsal) marks.push([at(S.rehearsal.track, tc), '#718096']);
-    if (S.plan) marks.push([at(rel(S.plan.plan), tc), '#2b6cb0']);
-    for (const l of S.detail?.logs || []) marks.push([at(l, tc), '#dd6b20']);
+    if (S.rehearsal) marks.push([at(S.rehearsal.track, tc), COLORS.rehearsal]);
+    if (S.plan) marks.push([at(rel(S.plan.plan), tc), COLORS.plan]);
+    for (const l of S.detail?.logs || []) marks.push([at(l, tc), COLORS.robot]);
     for (const [p, color] of marks) {
       if (!p) continue;
       ctx.strokeStyle = color; ctx.lineWidth = 2.5 * px;
@@ -545,9 +576,8 @@ function label(ctx, px, pose, text) {
   ctx.restore();
 }
 
-$('legend').innerHTML = [['#a0aec0', 'executed'], ['#e53e3e', 'deleted'], ['#dd6b20', 'uncovered / robot'],
-  ['#2b6cb0', 'plan / twin'], ['#319795', 'closed-loop replay'], ['#90cdf4', 'prediction']]
-  .map(([c, n]) => `<i style="background:${c}"></i>${n}`).join('');
+$('legend').innerHTML = LEGEND
+  .map(([k, n]) => `<span data-key="${k}"><i style="background:${COLORS[k]}"></i>${n}</span>`).join('');
 
 // The token came in the address; the cookie carries it from here on.
 if (location.search.includes('token=')) history.replaceState(null, '', location.pathname);

@@ -217,6 +217,101 @@ async fn loaded(c: &Client, url: &str) {
     .await;
 }
 
+/// The text of the element `id`.
+async fn text(c: &Client, id: &str) -> String {
+    c.find(Locator::Id(id)).await.unwrap().text().await.unwrap()
+}
+
+/// The page's state of its (first) robot.
+async fn rover(c: &Client) -> Value {
+    js(c, "return window.twindrive.S.state.robots[0]").await
+}
+
+/// The plan time in a line saying "… 12.3 s into …".
+fn plan_time(line: &str) -> f64 {
+    let head = &line[..line
+        .find(" s into")
+        .unwrap_or_else(|| panic!("no plan time in {line:?}"))];
+    head.rsplit(' ').next().unwrap().parse().unwrap()
+}
+
+/// Draws the map now; what it drew of the robots ({id, pose, color}).
+async fn drawn_robots(c: &Client) -> Vec<Value> {
+    let v = js(
+        c,
+        "window.twindrive.map.draw(); return window.twindrive.S.drawn.robots",
+    )
+    .await;
+    v.as_array().unwrap().clone()
+}
+
+/// The map's colours as the browser computes them: the legend's entries
+/// by their text, the layers by name, the robots just drawn.
+async fn map_colours(c: &Client) -> Value {
+    js(
+        c,
+        r#"const { S, map } = window.twindrive;
+        const rgb = (c) => { const e = document.createElement('i'); e.style.color = c; document.body.append(e);
+          const v = getComputedStyle(e).color; e.remove(); return v; };
+        const legend = {};
+        for (const e of document.getElementById('legend').children) {
+          legend[e.textContent.trim()] = getComputedStyle(e.querySelector('i')).backgroundColor;
+        }
+        const layers = {};
+        for (const [n, l] of map.layers) layers[n] = rgb(l.style.color);
+        map.draw();
+        return { legend, layers, robots: S.drawn.robots.map((r) => rgb(r.color)) };"#,
+    )
+    .await
+}
+
+/// The uncovered route, the robot and its logs are drawn in the colours
+/// the legend gives them, and the uncovered route's differs from the
+/// robot's.
+fn assert_colours_agree_with_the_legend(colours: &Value) {
+    let legend = &colours["legend"];
+    let uncovered = legend["uncovered"]
+        .as_str()
+        .expect("`uncovered` in the legend");
+    let robot = legend
+        .as_object()
+        .unwrap()
+        .iter()
+        .find(|(k, _)| k.starts_with("robot"))
+        .map(|(_, v)| v.as_str().unwrap())
+        .unwrap_or_else(|| panic!("the robot in the legend: {colours}"));
+    assert_ne!(uncovered, robot, "{colours}");
+    let layers = colours["layers"].as_object().unwrap();
+    for (name, c) in layers {
+        let want = match name.as_str() {
+            "uncovered" => uncovered,
+            n if n.starts_with("robot:log") => robot,
+            _ => continue,
+        };
+        assert_eq!(c, want, "layer {name}: {colours}");
+    }
+    for c in colours["robots"].as_array().unwrap() {
+        assert_eq!(c, robot, "a robot drawn: {colours}");
+    }
+}
+
+/// Page rectangles [left, top, right, bottom] by CSS selector.
+async fn rects(c: &Client, selectors: &[&str]) -> Vec<[f64; 4]> {
+    let v = c
+        .execute(
+            "return arguments[0].map((q) => { const b = document.querySelector(q).getBoundingClientRect(); \
+             return [b.left, b.top, b.right, b.bottom]; })",
+            vec![json!(selectors)],
+        )
+        .await
+        .unwrap();
+    serde_json::from_value(v).unwrap()
+}
+
+fn overlap(a: [f64; 4], b: [f64; 4]) -> bool {
+    a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3]
+}
+
 /// A raw HTTP/1.1 request to the console; the status code.
 fn http_status(port: u16, request: &str) -> u16 {
     let mut stream = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
@@ -523,6 +618,23 @@ async fn a_plan_uploaded_over_a_lossy_link_reaches_100_percent_and_runs() {
     let b = browser().await;
     let c = &b.client;
     loaded(c, &m.console.url).await;
+    // The robot reports before it has a pose (no plan ran yet): it is not
+    // drawn, and the page says so.
+    wait_js(
+        c,
+        "return !!window.twindrive.S.state.robots[0].status",
+        60.0,
+        "the robot's first status",
+    )
+    .await;
+    let r = rover(c).await;
+    assert_eq!(r["status"]["pose"], Value::Null, "{r}");
+    let status = text(c, "robot-status").await;
+    assert!(status.contains("no pose yet"), "{status}");
+    assert!(
+        drawn_robots(c).await.is_empty(),
+        "a robot without a pose drawn"
+    );
     plan_and_upload(c).await;
     // (On loopback the upload may be whole before a frame shows it midway.)
     wait_js(
@@ -546,6 +658,42 @@ async fn a_plan_uploaded_over_a_lossy_link_reaches_100_percent_and_runs() {
         up["resent"].as_u64().unwrap() + up["repairs"].as_u64().unwrap() > 0,
         "a lossy link: {up}"
     );
+    // Whole, the upload's clock stops: it shows how long it took.
+    let took = up["elapsed_s"].as_f64().unwrap();
+    assert!(took > 0.0, "{up}");
+    let shown = text(c, "upload-text").await;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let later = rover(c).await;
+    assert_eq!(later["upload"]["elapsed_s"].as_f64(), Some(took), "{later}");
+    assert_eq!(text(c, "upload-text").await, shown);
+    // Running, the robot is drawn where it reports itself, and the fleet
+    // list names its plan.
+    let sha = js(c, "return window.twindrive.S.plan.sha256").await;
+    let sha = sha.as_str().unwrap().to_owned();
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.robots[0]; return !!(r.status && r.status.pose && r.plan && r.plan.phase === 'executing')",
+        60.0,
+        "the plan executing",
+    )
+    .await;
+    let drawn = drawn_robots(c).await;
+    let reported = js(c, "return window.twindrive.S.state.robots[0].status.pose").await;
+    assert_eq!(drawn.len(), 1, "{drawn:?}");
+    assert_eq!(drawn[0]["id"], "rover");
+    assert_eq!(drawn[0]["pose"], reported, "drawn where it reports itself");
+    let fleet = c
+        .find(Locator::Css("#fleet tbody"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        fleet.contains(&sha[..12]),
+        "the plan in the fleet list: {fleet}"
+    );
+    assert_colours_agree_with_the_legend(&map_colours(c).await);
     wait_js(
         c,
         "const r = window.twindrive.S.state.robots[0]; return r.state === 'completed'",
@@ -553,10 +701,24 @@ async fn a_plan_uploaded_over_a_lossy_link_reaches_100_percent_and_runs() {
         "the mission to complete",
     )
     .await;
+    // The event list tells the upload, the run and the mission's end.
+    wait_js(
+        c,
+        "return document.getElementById('events').innerText.includes('mission over: completed')",
+        30.0,
+        "the mission's end in the events",
+    )
+    .await;
+    let events = text(c, "events").await;
+    for line in [
+        "robot rover: upload finished".to_owned(),
+        format!("robot rover: executing plan {}", &sha[..12]),
+        format!("robot rover: plan {} finished", &sha[..12]),
+    ] {
+        assert!(events.contains(&line), "{line:?} in {events}");
+    }
     shot(c, "08_completed").await;
     // The robot holds the plan byte for byte.
-    let sha = js(c, "return window.twindrive.S.plan.sha256").await;
-    let sha = sha.as_str().unwrap();
     let ours = std::fs::read(m.out.join(format!("rover/plans/{}.json", &sha[..12]))).unwrap();
     let theirs = std::fs::read(m.robot_state.join(format!("plans/{sha}.json"))).unwrap();
     assert!(ours == theirs, "the robot's copy differs");
@@ -577,16 +739,50 @@ async fn an_obstacle_the_twin_lacks_raises_the_hand_back_banner() {
         "the hand-back banner",
     )
     .await;
-    let banner = c
-        .find(Locator::Id("banner-text"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let banner = text(c, "banner-text").await;
     assert!(banner.contains("handed control back"), "{banner}");
+    // The banner covers no control: it sits inside the map's pane, clear
+    // of the side panel and the legend.
+    let [banner_box, aside, pane, legend] =
+        rects(c, &["#banner", "aside", "#map-pane", "#legend"]).await[..]
+    else {
+        unreachable!()
+    };
+    assert!(!overlap(banner_box, aside), "{banner_box:?} over {aside:?}");
+    assert!(
+        !overlap(banner_box, legend),
+        "{banner_box:?} over {legend:?}"
+    );
+    assert!(
+        banner_box[0] >= pane[0] && banner_box[2] <= pane[2] && banner_box[1] >= pane[1],
+        "{banner_box:?} outside the map {pane:?}"
+    );
     let r = js(c, "return window.twindrive.S.state.robots[0]").await;
     assert_eq!(r["state"], "awaiting_decision", "{r}");
+    // Once the robot's statuses speak of the stopped plan, the panel puts
+    // it where the hand-back does.
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.robots[0]; return !!(r.status && r.status.phase === 'stopped')",
+        30.0,
+        "a status after the stop",
+    )
+    .await;
+    let at = plan_time(&banner);
+    assert!(at > 1.0, "{banner}");
+    let status = text(c, "robot-status").await;
+    assert_eq!(plan_time(&status), at, "{status} / {banner}");
+    let first = js(c, "return window.twindrive.S.plan.sha256").await;
+    let first = first.as_str().unwrap()[..12].to_owned();
+    assert!(status.contains(&first), "{status}");
+    // The event list tells the hand-back with its reason.
+    let reason = r["awaiting"]["reason"].as_str().unwrap().replace('_', " ");
+    let events = text(c, "events").await;
+    assert!(
+        events.contains(&format!("robot rover: hand-back: {reason} at ")),
+        "{events}"
+    );
+    assert!(events.contains("waiting for you"), "{events}");
     assert!(
         !r["learnt"].as_array().unwrap().is_empty(),
         "the twin learnt the box: {r}"
@@ -608,7 +804,34 @@ async fn an_obstacle_the_twin_lacks_raises_the_hand_back_banner() {
         "the continuation's upload",
     )
     .await;
+    // The fleet list names the continuation, the event list tells it.
+    let next = rover(c).await["plan"]["sha256"].as_str().unwrap()[..12].to_owned();
+    assert_ne!(next, first);
+    let fleet = text(c, "fleet").await;
+    assert!(fleet.contains(&next), "{fleet}");
+    let events = text(c, "events").await;
+    assert!(
+        events.contains("robot rover: continuation uploading") && events.contains(&next),
+        "{events}"
+    );
     shot(c, "10_continuation").await;
+    // The mission ends (the continuation completes, or the person ends it
+    // at a further hand-back), and the event list says so.
+    let started = Instant::now();
+    while !text(c, "events")
+        .await
+        .contains("robot rover: mission over:")
+    {
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "{}",
+            text(c, "events").await
+        );
+        if js(c, "return !document.getElementById('banner').hidden").await == true {
+            click(c, "banner-end").await;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
     c.clone().close().await.unwrap();
 }
 
