@@ -196,9 +196,9 @@ fn plan_inputs_that_cannot_work_are_clear_errors_and_leave_no_files() {
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("out");
     let out = plan(&out_dir.join("plan.json"), &["--pinch-distance", "-1"]);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(2));
     assert!(
-        text(&out.stderr).contains("pinch_distance_m must be > 0"),
+        text(&out.stderr).contains("--pinch-distance <METRES>': a distance > 0 m, got -1"),
         "{}",
         text(&out.stderr)
     );
@@ -331,9 +331,9 @@ fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
         text(&out.stdout)
     );
     let out = prune(&["--coverage-radius", "-1"]);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(2));
     assert!(
-        text(&out.stderr).contains("coverage_radius_m must be > 0"),
+        text(&out.stderr).contains("--coverage-radius <METRES>': a distance > 0 m, got -1"),
         "{}",
         text(&out.stderr)
     );
@@ -346,9 +346,9 @@ fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
         "--out",
         s(&out_csv),
     ]);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(2));
     assert!(
-        text(&out.stderr).contains("pinch_distance_m must be > 0"),
+        text(&out.stderr).contains("a distance > 0 m, got 0"),
         "{}",
         text(&out.stderr)
     );
