@@ -259,6 +259,16 @@ fn assert_usage_error(args: &[&str], flag: &str, expected: &str) {
     assert!(files(tmp.path()).is_empty(), "{args:?} wrote something");
 }
 
+/// The command before the flag, the flag, a bad value, what is expected,
+/// the rest of the command.
+type FlagCase = (
+    &'static [&'static str],
+    &'static str,
+    &'static str,
+    &'static str,
+    &'static [&'static str],
+);
+
 /// `twindrive robot` with its required flags.
 const ROBOT: &[&str] = &[
     "robot",
@@ -274,8 +284,7 @@ const ROBOT: &[&str] = &[
 
 #[test]
 fn invalid_flag_values_are_usage_errors_in_both_forms() {
-    // (the command before the flag, the flag, a bad value, what is expected, the rest)
-    let cases: &[(&[&str], &str, &str, &str, &[&str])] = &[
+    let cases: &[FlagCase] = &[
         (
             &["simulate", "s.toml"],
             "--duration-s",
