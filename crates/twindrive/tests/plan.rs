@@ -320,7 +320,13 @@ fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
     let stdout = text(&out.stdout);
     assert!(stdout.contains("removed 0 loop"), "{stdout}");
     assert!(stdout.contains("kept 388 of 388"), "{stdout}");
-    assert!(stdout.contains("refused: Loop cut"), "{stdout}");
+    assert!(
+        stdout.contains("refused 1 cut(s) that would have dropped explored ground")
+            && stdout.contains(": 1 loop(s), 0 crossing loop(s)"),
+        "{stdout}"
+    );
+    let verbose = text(&prune(&["-v"]).stdout);
+    assert!(verbose.contains("refused: Loop cut"), "{verbose}");
 
     // A coverage radius as large as the loop lets it go.
     let out = prune(&["--coverage-radius", "0.7", "--keep-end"]);
