@@ -4,6 +4,8 @@
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
+
+use crate::usage;
 use serde::Serialize;
 
 /// Operate differential-drive robots over slow, lossy links through a digital twin.
@@ -33,7 +35,7 @@ pub enum Command {
         #[arg(long)]
         seed: Option<u64>,
         /// Override the scenario's duration, in seconds.
-        #[arg(long, value_name = "SECONDS")]
+        #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
         duration_s: Option<f64>,
     },
     /// Estimate wheel diameters and wheelbase from encoders and an absolute pose.
@@ -83,9 +85,11 @@ pub enum Command {
     ///
     /// PATH is a CSV with header `t,x,y,theta` or a TUM file. A cut may only
     /// delete samples within the coverage radius of the path that remains;
-    /// where two passes cover the same ground the first is kept. Prints what
-    /// was removed, the cuts refused for coverage, and the coverage of the
-    /// input by the output; --out is a CSV in the same columns.
+    /// where two passes cover the same ground the first is kept. Prints a
+    /// summary: what was removed, the cuts refused for coverage counted by
+    /// kind, and the coverage of the input by the output; -v prints, and
+    /// --details FILE writes, each cut made and refused. --out is a CSV in
+    /// the same columns.
     Prune(PruneArgs),
     /// Run the paper's case study end to end into ./twindrive-out/.
     ///
@@ -246,17 +250,17 @@ pub struct FleetExperimentArgs {
     #[arg(long, default_value = "twindrive-out/experiment-fleet")]
     pub out: PathBuf,
     /// Fleet sizes to run, comma-separated (at most 200).
-    #[arg(long, value_delimiter = ',', default_value = "1,5,20,50")]
+    #[arg(long, value_delimiter = ',', default_value = "1,5,20,50", value_parser = usage::fleet_size)]
     pub robots: Vec<usize>,
     /// Run each robot's simulated site this many times faster than real time.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = usage::time_scale)]
     pub time_scale: f64,
     /// Bytes per second each robot may send (its logs, ~1.8 MB for the
     /// case study, come back at 0.7 of it).
-    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 32000.0)]
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 32000.0, value_parser = usage::telemetry_budget)]
     pub telemetry_budget: f64,
     /// Give a run up after this many seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 600.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 600.0, value_parser = usage::seconds)]
     pub timeout: f64,
     /// Emulate this link at the master on every robot's traffic (default:
     /// none, loopback as it is).
@@ -290,25 +294,25 @@ pub struct LatencyExperimentArgs {
     #[arg(long, default_value = "0,0.1")]
     pub losses: String,
     /// Seeds per cell (the site's noise and the link's draws).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, value_parser = usage::count)]
     pub seeds: u64,
     /// The link's rate, bit/s, both ways.
-    #[arg(long, value_name = "BIT_PER_S", default_value_t = 256_000.0)]
+    #[arg(long, value_name = "BIT_PER_S", default_value_t = 256_000.0, value_parser = usage::positive)]
     pub bandwidth: f64,
     /// Direct (b): wheels zeroed after this long without a command, seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 0.5)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.5, value_parser = usage::seconds)]
     pub watchdog_timeout: f64,
     /// Direct (c): the length of one move, seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 0.5)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.5, value_parser = usage::seconds)]
     pub move_s: f64,
     /// The route counts as covered within this distance of the robot, metres.
-    #[arg(long, value_name = "METRES", default_value_t = 0.15)]
+    #[arg(long, value_name = "METRES", default_value_t = 0.15, value_parser = usage::metres)]
     pub coverage_radius: f64,
     /// A direct run is complete once this share of the route is covered.
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.9)]
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.9, value_parser = usage::fraction)]
     pub complete_at: f64,
     /// Give a run up after this long, seconds of mission time.
-    #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0, value_parser = usage::seconds)]
     pub max_duration: f64,
 }
 
@@ -318,7 +322,7 @@ pub struct UploadExperimentArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Seeds per row.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = usage::count)]
     pub seeds: u64,
     /// A quick run (one 20 kB file, loss up to 10 %) that only checks it works.
     #[arg(long)]
@@ -343,7 +347,7 @@ pub struct ZenohArgs {
 #[derive(Debug, clap::Args)]
 pub struct RobotArgs {
     /// This robot's id (the key expressions are twindrive/ID/up and /down).
-    #[arg(long, value_name = "ID")]
+    #[arg(long, value_name = "ID", value_parser = usage::robot_id)]
     pub id: String,
     /// The site: the scenario the robot's simulator backend runs (its true
     /// kinematics, noise and world, which the master never sees); with a
@@ -361,14 +365,14 @@ pub struct RobotArgs {
     #[command(flatten)]
     pub zenoh: ZenohArgs,
     /// Bytes per second the robot may send (status, hand-back, log back-fill).
-    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0)]
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0, value_parser = usage::telemetry_budget)]
     pub telemetry_budget: f64,
     /// Run the simulated site this many times faster than real time (1 for
     /// a ROS 2 robot).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = usage::time_scale)]
     pub time_scale: f64,
     /// Exit after this many seconds (default: run until stopped).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
     pub run_for: Option<f64>,
 }
 
@@ -391,7 +395,7 @@ pub struct MasterArgs {
     /// The robot to send it to; repeat for a fleet (one master, one
     /// session, each robot its own operator and twin and its files in
     /// --out/ID/, with --out/fleet.json; needs --plan and --key).
-    #[arg(long, value_name = "ID", required = true)]
+    #[arg(long, value_name = "ID", required = true, value_parser = usage::robot_id)]
     pub robot: Vec<String>,
     /// Output directory (report.json, plans, the robot's logs).
     #[arg(long)]
@@ -411,7 +415,7 @@ pub struct MasterArgs {
     pub expires_in: u64,
     /// Plans this master signs stop the robot when it has heard nothing
     /// for this long, seconds (default: unsupervised).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
     pub supervise: Option<f64>,
     /// What to do when the robot hands control back.
     #[arg(long, value_enum, default_value_t = OnHandbackArg::Stop)]
@@ -420,15 +424,15 @@ pub struct MasterArgs {
     #[arg(long, value_name = "S.toml")]
     pub scenario: Option<PathBuf>,
     /// Give up (outcome `failed`) after this many seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0, value_parser = usage::seconds)]
     pub timeout: f64,
     /// Bytes per second the robot may send this master (status, hand-back,
     /// log back-fill); the robot keeps to the lower of this and its own
     /// --telemetry-budget.
-    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0)]
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0, value_parser = usage::telemetry_budget)]
     pub telemetry_budget: f64,
     /// Wait this long for the robot's logs once the mission is decided, seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 120.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 120.0, value_parser = usage::seconds_or_zero)]
     pub log_wait: f64,
     /// Send the plan even if it fails verification on the twin (its open-
     /// or closed-loop replay touches something or departs from the plan's
@@ -466,7 +470,7 @@ pub struct ConsoleArgs {
     #[arg(long, value_name = "calib.json")]
     pub calibration: Option<PathBuf>,
     /// A robot this console supervises; repeatable (a fleet).
-    #[arg(long, value_name = "ID")]
+    #[arg(long, value_name = "ID", value_parser = usage::robot_id)]
     pub robot: Vec<String>,
     /// Connect to this zenoh endpoint (a robot, or a router); repeatable.
     #[arg(long, value_name = "ENDPOINT")]
@@ -487,11 +491,11 @@ pub struct ConsoleArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Bytes per second each robot may send this console.
-    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0)]
+    #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0, value_parser = usage::telemetry_budget)]
     pub telemetry_budget: f64,
     /// Plans signed here stop the robot when it has heard nothing for this
     /// long, seconds (default: unsupervised).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
     pub supervise: Option<f64>,
     /// Plans signed here are valid for this long, seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 86_400)]
@@ -526,7 +530,7 @@ pub struct SignArgs {
     #[arg(long, value_name = "master.key")]
     pub key: PathBuf,
     /// The robot the plan is for.
-    #[arg(long, value_name = "ID")]
+    #[arg(long, value_name = "ID", value_parser = usage::robot_id)]
     pub robot: String,
     /// Plan counter, above every earlier plan's for this robot (default:
     /// the current Unix time in milliseconds).
@@ -537,7 +541,7 @@ pub struct SignArgs {
     pub expires_in: u64,
     /// Stop the robot if it hears nothing from the master for this long,
     /// seconds (default: unsupervised).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
     pub supervise: Option<f64>,
     /// The twin's scenario the plan was rehearsed in, for the world hash
     /// (default: the built-in scenario the plan names).
@@ -559,10 +563,10 @@ pub struct SignArgs {
 pub struct RedundancyFlags {
     /// Shortest loop worth cutting, metres of path (default: 3 pinch
     /// distances).
-    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    #[arg(long, value_name = "METRES", value_parser = usage::metres_or_zero)]
     pub min_loop_length: Option<f64>,
     /// Shortest loop worth cutting, seconds (default: 0).
-    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    #[arg(long, value_name = "SECONDS", value_parser = usage::seconds_or_zero)]
     pub min_loop_duration: Option<f64>,
     /// Keep reversing stretches (bump and back up) instead of cutting them
     /// (a file's reversing_is_redundant = false stays).
@@ -570,7 +574,7 @@ pub struct RedundancyFlags {
     pub keep_reversals: bool,
     /// A cut may delete only samples within this distance (metres) of the
     /// path that remains (default: the pinch distance).
-    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    #[arg(long, value_name = "METRES", value_parser = usage::metres)]
     pub coverage_radius: Option<f64>,
     /// Let the path reach its final pose along the recorded route (default:
     /// it ends once the rest only passes ground it covers, after the last
@@ -605,13 +609,20 @@ pub struct PruneArgs {
     /// The path file (CSV `t,x,y,theta` or TUM).
     pub path: PathBuf,
     /// Samples closer than this (metres) pinch the path.
-    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    #[arg(long, value_name = "METRES", value_parser = usage::metres)]
     pub pinch_distance: f64,
     #[command(flatten)]
     pub redundancy: RedundancyFlags,
     /// Output CSV (`t,x,y,theta`).
     #[arg(long)]
     pub out: PathBuf,
+    /// Also print every cut made and every cut refused, one line each.
+    #[arg(short, long)]
+    pub verbose: bool,
+    /// Write every cut made and every cut refused, one line each, to this
+    /// file.
+    #[arg(long, value_name = "FILE")]
+    pub details: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -628,7 +639,7 @@ pub struct PlanArgs {
     pub redundancy: Option<PathBuf>,
     /// Pinch distance in metres (overrides the file; default: the robot's
     /// footprint radius from the log).
-    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    #[arg(long, value_name = "METRES", value_parser = usage::metres)]
     pub pinch_distance: Option<f64>,
     #[command(flatten)]
     pub flags: RedundancyFlags,
@@ -666,7 +677,7 @@ pub struct RosbagArgs {
     pub distro: DistroArg,
     /// Unix time (seconds) of the log's t = 0; by default the bag starts at
     /// the epoch.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = usage::unix_time)]
     pub start_time: f64,
 }
 
@@ -760,24 +771,19 @@ pub struct CalibrateArgs {
     #[arg(long, requires = "encoders")]
     pub poses: Option<PathBuf>,
     /// Encoder ticks per wheel revolution (for tick counts).
-    #[arg(long)]
+    #[arg(long, value_parser = usage::ticks_per_rev)]
     pub ticks_per_rev: Option<u32>,
     /// Initial guess DL,DR,B in metres (default for logs: their nominal values).
     #[arg(long, value_name = "DL,DR,B")]
     pub initial: Option<String>,
     /// -1 for a left counter that runs backwards when driving forward.
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1, value_parser = usage::wheel_sign)]
     pub left_sign: i8,
     /// -1 for a right counter that runs backwards when driving forward.
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1, value_parser = usage::wheel_sign)]
     pub right_sign: i8,
     /// Offset added to encoder times to put them on the pose clock: seconds, or `auto`.
-    #[arg(
-        long,
-        default_value = "0",
-        allow_negative_numbers = true,
-        value_name = "auto|SECONDS"
-    )]
+    #[arg(long, default_value = "0", value_name = "auto|SECONDS")]
     pub time_offset: String,
     /// Which estimate to report.
     #[arg(long, value_enum, default_value_t = Method::Smoother)]
@@ -786,24 +792,24 @@ pub struct CalibrateArgs {
     #[arg(long, default_value = "calib.json")]
     pub out: PathBuf,
     /// Use poses from this time on (pose clock, seconds).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = usage::time)]
     pub start_s: Option<f64>,
     /// Use poses up to this time (pose clock, seconds).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long, value_parser = usage::time)]
     pub end_s: Option<f64>,
     /// Standard deviation of the reference position.
-    #[arg(long, default_value_t = 0.002)]
+    #[arg(long, default_value_t = 0.002, value_parser = usage::positive)]
     pub position_std_m: f64,
     /// Standard deviation of the reference heading.
-    #[arg(long, default_value_t = 0.005)]
+    #[arg(long, default_value_t = 0.005, value_parser = usage::positive)]
     pub heading_std_rad: f64,
     /// Wheel rotation noise: variance per radian of rotation (rad²/rad).
-    #[arg(long, default_value_t = 1e-4)]
+    #[arg(long, default_value_t = 1e-4, value_parser = usage::positive)]
     pub wheel_noise: f64,
     /// Random walk of each parameter (m²/s); off unless given.
-    #[arg(long)]
+    #[arg(long, value_parser = usage::positive)]
     pub param_random_walk: Option<f64>,
     /// Length of the batch estimator's relative-motion windows.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = usage::seconds)]
     pub batch_window_s: f64,
 }

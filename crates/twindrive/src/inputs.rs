@@ -107,7 +107,7 @@ pub fn from_bag(
 ) -> anyhow::Result<(Vec<WheelSample>, Vec<PoseSample>, f64)> {
     use twindrive_ros::extract::{self, JointSignal, PoseSource, Stamps, WheelSource};
     let path = args.bag.as_deref().expect("called with --bag");
-    let bag = twindrive_ros::Bag::open(path)?;
+    let bag = twindrive_ros::Bag::open(path).context("--bag")?;
     let stamps = match args.stamps {
         StampsArg::Header => Stamps::Header,
         StampsArg::Log => Stamps::LogTime,

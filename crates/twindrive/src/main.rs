@@ -6,17 +6,20 @@ mod commands;
 mod evidence;
 mod figures;
 mod inputs;
+mod json;
 mod output;
 mod progress;
 mod report;
+mod usage;
 mod verification;
 
 use std::process::ExitCode;
 
-use clap::Parser;
+use clap::{CommandFactory, FromArgMatches};
 
 fn main() -> ExitCode {
-    let args = cli::Args::parse();
+    let matches = usage::negative_numbers_as_values(cli::Args::command()).get_matches();
+    let args = cli::Args::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_env_filter(
@@ -35,12 +38,66 @@ fn main() -> ExitCode {
             {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("error: {err:#}");
-            // A plan that failed verification is an answer, not a fault.
-            if err.is::<commands::verify_plan::PlanFailed>() {
-                return ExitCode::from(3);
+            eprintln!("error: {}", message(&err));
+            if usage::is_usage(&err) {
+                eprintln!("\nFor more information, try '--help'.");
+                ExitCode::from(2)
+            } else if err.is::<commands::verify_plan::PlanFailed>() {
+                // A plan that failed verification is an answer, not a fault.
+                ExitCode::from(3)
+            } else {
+                ExitCode::FAILURE
             }
-            ExitCode::FAILURE
         }
+    }
+}
+
+/// The error and its causes, outermost first, separated by `: `; a cause
+/// whose text the message already holds (an io::Error that its wrapper
+/// prints as well) is said once.
+fn message(err: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use anyhow::Context;
+
+    #[test]
+    fn a_cause_the_message_already_holds_is_said_once() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file (os error 2)");
+        #[derive(Debug)]
+        struct Wrapper {
+            source: std::io::Error,
+        }
+        impl std::fmt::Display for Wrapper {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                write!(f, "a.toml: {}", self.source)
+            }
+        }
+        impl std::error::Error for Wrapper {
+            fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+                Some(&self.source)
+            }
+        }
+        let err = anyhow::Error::new(Wrapper { source: io }).context("--site");
+        assert_eq!(
+            super::message(&err),
+            "--site: a.toml: No such file (os error 2)"
+        );
+        let plain: anyhow::Result<()> = Err(anyhow::anyhow!("inner"));
+        let err = plain.context("outer").unwrap_err();
+        assert_eq!(super::message(&err), "outer: inner");
     }
 }

@@ -226,8 +226,14 @@ fn a_single_circle_gets_the_warning() {
     assert_eq!(json.unwrap()["identifiability"]["well_determined"], false);
 }
 
-/// Runs calibrate on hand-written CSVs and checks the clean failure.
+/// Runs calibrate on hand-written CSVs and checks the clean failure (exit 1).
 fn rejected(enc: &str, pose: &str, extra: &[&str], expect: &[&str]) {
+    rejected_with(1, enc, pose, extra, expect);
+}
+
+/// Runs calibrate on hand-written CSVs and checks the clean failure with
+/// exit status `code` (2: a usage error).
+fn rejected_with(code: i32, enc: &str, pose: &str, extra: &[&str], expect: &[&str]) {
     let tmp = tempfile::tempdir().unwrap();
     let (e, p) = (tmp.path().join("enc.csv"), tmp.path().join("pose.csv"));
     std::fs::write(&e, enc).unwrap();
@@ -249,7 +255,7 @@ fn rejected(enc: &str, pose: &str, extra: &[&str], expect: &[&str]) {
     }
     let (o, json, _) = calibrate(&args);
     let stderr = text(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert_eq!(o.status.code(), Some(code), "{stderr}");
     for x in expect {
         assert!(stderr.contains(x), "expected `{x}` in {stderr}");
     }
@@ -319,22 +325,25 @@ fn bad_inputs_fail_cleanly() {
         &["--time-offset", "1000"],
         &["do not overlap in time", "--time-offset auto"],
     );
-    rejected(
+    rejected_with(
+        2,
         &enc,
         &pose,
         &["--initial", "0.066,-0.066,0.26"],
         &["--initial: the right diameter must be a finite number > 0"],
     );
-    rejected(
+    rejected_with(
+        2,
         &enc,
         &pose,
         &["--initial", "0.066,0.066"],
         &["--initial: expected three numbers DL,DR,B"],
     );
-    rejected(
+    rejected_with(
+        2,
         &enc,
         &pose,
         &["--left-sign", "2"],
-        &["--left-sign must be 1 or -1"],
+        &["--left-sign <LEFT_SIGN>': 1 or -1, got 2"],
     );
 }

@@ -240,8 +240,8 @@ fn missing_scenario_file_and_bad_flags() {
         &tmp.path().join("o"),
         &["--duration-s=-1"],
     );
-    assert_eq!(out.status.code(), Some(1));
-    assert!(text(&out.stderr).contains("--duration-s must be a finite number > 0"));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("a duration > 0 s, got -1"));
     assert!(!tmp.path().join("o").exists());
     // Usage errors are clap's (exit code 2).
     assert_eq!(twindrive(&["simulate"], tmp.path()).status.code(), Some(2));
@@ -270,4 +270,386 @@ fn draw_map_reproduces_the_shipped_map() {
             std::fs::read(repo().join("scenarios/maps").join(f)).unwrap()
         );
     }
+}
+
+/// Runs `args` and checks a usage error: exit 2, a message naming `flag`
+/// and `expected`, no panic, nothing written.
+fn assert_usage_error(args: &[&str], flag: &str, expected: &str) {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = twindrive(args, tmp.path());
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+    assert!(
+        stderr.contains(flag) && stderr.contains(expected),
+        "{args:?}: expected `{flag}` and `{expected}` in: {stderr}"
+    );
+    assert!(
+        !stderr.contains("unexpected argument") && !stderr.contains("panicked"),
+        "{args:?}: {stderr}"
+    );
+    assert!(files(tmp.path()).is_empty(), "{args:?} wrote something");
+}
+
+/// The command before the flag, the flag, a bad value, what is expected,
+/// the rest of the command.
+type FlagCase = (
+    &'static [&'static str],
+    &'static str,
+    &'static str,
+    &'static str,
+    &'static [&'static str],
+);
+
+/// `twindrive robot` with its required flags.
+const ROBOT: &[&str] = &[
+    "robot",
+    "--id",
+    "r",
+    "--site",
+    "s.toml",
+    "--trust",
+    "k",
+    "--state-dir",
+    "d",
+];
+
+#[test]
+fn invalid_flag_values_are_usage_errors_in_both_forms() {
+    let cases: &[FlagCase] = &[
+        (
+            &["simulate", "s.toml"],
+            "--duration-s",
+            "-5",
+            "a duration > 0 s, got -5",
+            &["--out", "o"],
+        ),
+        (
+            &["calibrate", "d"],
+            "--batch-window-s",
+            "-1",
+            "a duration > 0 s",
+            &[],
+        ),
+        (
+            &["calibrate", "d"],
+            "--left-sign",
+            "-2",
+            "1 or -1, got -2",
+            &[],
+        ),
+        (
+            &["calibrate", "d"],
+            "--ticks-per-rev",
+            "0",
+            "ticks per revolution",
+            &[],
+        ),
+        (
+            &["prune", "p.csv"],
+            "--pinch-distance",
+            "-0.1",
+            "a distance > 0 m",
+            &["--out", "o.csv"],
+        ),
+        (
+            &["prune", "p.csv", "--pinch-distance", "0.1"],
+            "--min-loop-duration",
+            "-3",
+            "a duration ≥ 0 s",
+            &["--out", "o.csv"],
+        ),
+        (
+            &["sign", "p.json", "--key", "k", "--robot", "r"],
+            "--supervise",
+            "-1",
+            "a duration > 0 s",
+            &["--out", "o"],
+        ),
+        (
+            &["sign", "p.json", "--key", "k", "--supervise", "5"],
+            "--robot",
+            "a/b",
+            "a robot id",
+            &["--out", "o"],
+        ),
+        (ROBOT, "--time-scale", "-2", "a time scale > 0", &[]),
+        (
+            ROBOT,
+            "--telemetry-budget",
+            "50",
+            "at least 100 bytes per second",
+            &[],
+        ),
+        (
+            &["master", "--signed", "x", "--robot", "r", "--out", "o"],
+            "--timeout",
+            "-5",
+            "a duration > 0 s",
+            &[],
+        ),
+        (
+            &["rosbag", "l", "--out", "o"],
+            "--start-time",
+            "-1",
+            "Unix seconds",
+            &[],
+        ),
+        (
+            &["experiment", "latency"],
+            "--complete-at",
+            "-0.5",
+            "a fraction in (0, 1]",
+            &[],
+        ),
+        (
+            &["experiment", "latency"],
+            "--seeds",
+            "0",
+            "a whole number ≥ 1",
+            &[],
+        ),
+        (
+            &["experiment", "fleet"],
+            "--robots",
+            "-3",
+            "a fleet size from 1 to 200",
+            &[],
+        ),
+        (
+            &["experiment", "upload"],
+            "--seeds",
+            "-1",
+            "a whole number ≥ 1",
+            &[],
+        ),
+    ];
+    for (before, flag, value, expected, after) in cases {
+        let joined = format!("{flag}={value}");
+        for form in [vec![*flag, *value], vec![joined.as_str()]] {
+            let mut args: Vec<&str> = before.to_vec();
+            args.extend(form);
+            args.extend_from_slice(after);
+            assert_usage_error(&args, flag, expected);
+        }
+    }
+    // Checks clap cannot make are usage errors too.
+    assert_usage_error(
+        &[
+            "master", "--signed", "x", "--robot", "a", "--robot", "a", "--out", "o",
+        ],
+        "--robot a",
+        "given twice",
+    );
+    assert_usage_error(
+        &["experiment", "latency", "--losses", "0,-0.1"],
+        "--losses",
+        "losses from 0 to 0.9",
+    );
+    assert_usage_error(&["calibrate", "--out", "c.json"], "--encoders", "--bag");
+    // A negative value that is valid is taken as a value.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = twindrive(&["calibrate", "nope", "--left-sign", "-1"], tmp.path());
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("nope: does not exist"));
+}
+
+#[test]
+fn a_missing_file_is_named_with_the_os_error_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let runs: &[&[&str]] = &[
+        &["simulate", "nope.toml", "--out", "o"],
+        &["verify-plan", "nope.json", "--out", "o"],
+        &[
+            "prune",
+            "nope.csv",
+            "--pinch-distance",
+            "0.1",
+            "--out",
+            "o.csv",
+        ],
+        &[
+            "calibrate",
+            "--encoders",
+            "nope.csv",
+            "--poses",
+            "nope2.csv",
+            "--initial",
+            "0.06,0.06,0.2",
+        ],
+        &["rosbag", "nope.mcap", "--out", "o"],
+    ];
+    for args in runs {
+        let out = twindrive(args, d);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains("nope"), "{args:?}: {stderr}");
+        assert_eq!(
+            stderr.matches("No such file or directory").count(),
+            1,
+            "{args:?}: {stderr}"
+        );
+    }
+    assert_eq!(files(d), Vec::<String>::new());
+}
+
+#[test]
+fn calibrate_says_what_input_it_expects() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::create_dir(tmp.path().join("photos")).unwrap();
+    std::fs::write(tmp.path().join("photos/a.jpg"), "x").unwrap();
+    let out = twindrive(&["calibrate", "photos"], tmp.path());
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    for want in [
+        "photos: is not a simulator log",
+        "log.csv + log.meta.json from `twindrive simulate`",
+        "--encoders E.csv and --poses P.csv",
+        "--bag REC.mcap|BAG_DIR",
+    ] {
+        assert!(stderr.contains(want), "expected `{want}` in: {stderr}");
+    }
+    assert!(!tmp.path().join("calib.json").exists());
+}
+
+#[test]
+fn a_plan_that_is_not_a_plan_is_named_as_such() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let keygen = twindrive(&["keygen", "--out", "keys"], d);
+    assert!(keygen.status.success(), "{}", text(&keygen.stderr));
+    std::fs::write(d.join("path.json"), "t,x,y,theta\n0,0,0,0\n").unwrap();
+    std::fs::write(
+        d.join("calib.json"),
+        r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678}"#,
+    )
+    .unwrap();
+    for (file, want) in [
+        (
+            "path.json",
+            "path.json is not a twindrive mission plan: not JSON (line 1, column 2: expected ident)",
+        ),
+        (
+            "calib.json",
+            "calib.json is not a twindrive mission plan: a JSON document, but not a twindrive mission plan (unknown field `left_diameter_m`",
+        ),
+    ] {
+        let runs: [&[&str]; 2] = [
+            &["verify-plan", file, "--out", "v"],
+            &[
+                "sign",
+                file,
+                "--key",
+                "keys/master.key",
+                "--robot",
+                "r1",
+                "--out",
+                "p.signed",
+            ],
+        ];
+        for args in runs {
+            let out = twindrive(args, d);
+            let stderr = text(&out.stderr);
+            assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+            assert!(
+                stderr.contains(want),
+                "{args:?}: expected `{want}` in: {stderr}"
+            );
+            assert!(!stderr.contains("header.robot.scenario"), "{stderr}");
+        }
+    }
+    assert!(!d.join("v").exists() && !d.join("p.signed").exists());
+}
+
+/// A long path that drives straight and, every 3 m, around a petal of
+/// random radius on a random side and back to the line: each petal is a
+/// loop whose cut would drop ground (refused), and every fourth is driven
+/// twice (its second lap is removed).
+fn petal_path_csv(path: &Path, petals: usize) {
+    let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut csv = String::from("t,x,y,theta\n");
+    let mut t = 0usize;
+    let mut emit = |x: f64, y: f64, heading: f64| {
+        csv.push_str(&format!("{},{x},{y},{heading}\n", t as f64 * 0.1));
+        t += 1;
+    };
+    let mut x = 0.0;
+    for k in 0..petals {
+        for _ in 0..60 {
+            emit(x, 0.0, 0.0);
+            x += 0.05;
+        }
+        let r = 0.3 + 0.5 * next();
+        let side = if next() < 0.5 { 1.0 } else { -1.0 };
+        let m = (std::f64::consts::TAU * r / 0.05) as usize;
+        let laps = if k % 4 == 0 { 2 } else { 1 };
+        for i in 0..m * laps {
+            let a = std::f64::consts::TAU * i as f64 / m as f64;
+            emit(x + r * a.sin(), side * r * (1.0 - a.cos()), side * a);
+        }
+    }
+    std::fs::write(path, csv).unwrap();
+}
+
+#[test]
+fn prune_prints_a_summary_and_writes_the_details() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    petal_path_csv(&d.join("walk.csv"), 200);
+    let base = [
+        "prune",
+        "walk.csv",
+        "--pinch-distance",
+        "0.1",
+        "--coverage-radius",
+        "0.1",
+        "--out",
+        "out/pruned.csv",
+    ];
+    let mut args = base.to_vec();
+    args.extend(["--details", "out/details.txt"]);
+    let out = twindrive(&args, d);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(stdout.lines().count() < 20, "{stdout}");
+    let details = std::fs::read_to_string(d.join("out/details.txt")).unwrap();
+    let refused = details
+        .lines()
+        .filter(|l| l.starts_with("refused: "))
+        .count();
+    let removed = details
+        .lines()
+        .filter(|l| l.starts_with("removed: "))
+        .count();
+    // Each petal driven once is refused; each second lap is removed (and
+    // the last samples, a trailing retrace).
+    assert_eq!(refused, 200, "{details}");
+    assert_eq!(removed, 50 + 1, "{details}");
+    assert!(stdout.contains("removed 50 loop(s)"), "{stdout}");
+    assert_eq!(refused + removed, details.lines().count());
+    assert!(
+        stdout.contains(&format!("refused {refused} cut(s)")),
+        "{stdout}"
+    );
+    assert!(stdout.contains("out/details.txt"), "{stdout}");
+    assert!(d.join("out/pruned.csv").is_file());
+    // -v prints the same lines after the summary.
+    let mut args = base.to_vec();
+    args.push("-v");
+    let verbose = text(&twindrive(&args, d).stdout);
+    assert!(verbose.ends_with(&details), "{verbose}");
+    assert_eq!(
+        verbose.lines().count(),
+        stdout.lines().count() + details.lines().count()
+    );
+    // Without either, the summary points to them.
+    let plain = text(&twindrive(&base, d).stdout);
+    assert!(plain.contains("-v or --details FILE"), "{plain}");
+    assert!(!plain.contains("refused: "), "{plain}");
 }

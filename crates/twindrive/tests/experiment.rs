@@ -130,7 +130,7 @@ fn the_latency_experiment_refuses_a_bad_grid_before_any_work() {
         .arg(dir.path().join("x"))
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--latencies") && err.contains("fast"), "{err}");
     assert!(!dir.path().join("x").exists(), "nothing written");

@@ -114,7 +114,7 @@ fn keygen_then_sign_gives_a_plan_the_robot_accepts() {
         (
             keys.join("master.key"),
             calib.clone(),
-            "not a plan document",
+            "calib.json is not a twindrive mission plan: a JSON document, but not a twindrive mission plan",
         ),
     ] {
         let out = twindrive(&[

@@ -196,9 +196,9 @@ fn plan_inputs_that_cannot_work_are_clear_errors_and_leave_no_files() {
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("out");
     let out = plan(&out_dir.join("plan.json"), &["--pinch-distance", "-1"]);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(2));
     assert!(
-        text(&out.stderr).contains("pinch_distance_m must be > 0"),
+        text(&out.stderr).contains("--pinch-distance <METRES>': a distance > 0 m, got -1"),
         "{}",
         text(&out.stderr)
     );
@@ -320,7 +320,13 @@ fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
     let stdout = text(&out.stdout);
     assert!(stdout.contains("removed 0 loop"), "{stdout}");
     assert!(stdout.contains("kept 388 of 388"), "{stdout}");
-    assert!(stdout.contains("refused: Loop cut"), "{stdout}");
+    assert!(
+        stdout.contains("refused 1 cut(s) that would have dropped explored ground")
+            && stdout.contains(": 1 loop(s), 0 crossing loop(s)"),
+        "{stdout}"
+    );
+    let verbose = text(&prune(&["-v"]).stdout);
+    assert!(verbose.contains("refused: Loop cut"), "{verbose}");
 
     // A coverage radius as large as the loop lets it go.
     let out = prune(&["--coverage-radius", "0.7", "--keep-end"]);
@@ -331,9 +337,9 @@ fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
         text(&out.stdout)
     );
     let out = prune(&["--coverage-radius", "-1"]);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(2));
     assert!(
-        text(&out.stderr).contains("coverage_radius_m must be > 0"),
+        text(&out.stderr).contains("--coverage-radius <METRES>': a distance > 0 m, got -1"),
         "{}",
         text(&out.stderr)
     );
@@ -346,9 +352,9 @@ fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
         "--out",
         s(&out_csv),
     ]);
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(2));
     assert!(
-        text(&out.stderr).contains("pinch_distance_m must be > 0"),
+        text(&out.stderr).contains("a distance > 0 m, got 0"),
         "{}",
         text(&out.stderr)
     );

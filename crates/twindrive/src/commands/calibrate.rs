@@ -17,6 +17,7 @@ use twindrive_kinematics::{DiffDriveParams, Pose};
 
 use crate::cli::{CalibrateArgs, Method};
 use crate::output::Staging;
+use crate::usage::{OrUsage, usage};
 use crate::{figures, inputs, progress};
 
 /// How the clock offset between the two logs is chosen.
@@ -390,73 +391,64 @@ pub fn calibrate(
 /// Reads the inputs named on the command line into a [`Job`].
 fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
     let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
-    for (name, s) in [
-        ("--left-sign", args.left_sign),
-        ("--right-sign", args.right_sign),
-    ] {
-        if s != 1 && s != -1 {
-            bail!("{name} must be 1 or -1, got {s}");
-        }
-    }
     let mut time_origin_s = 0.0;
-    let (wheels, poses, default_initial, ticks_per_rev, truth) = match (
-        &args.log_dir,
-        &args.encoders,
-        &args.poses,
-    ) {
-        (None, None, None) if args.bag.is_some() => {
-            let (wheels, poses, origin) = inputs::from_bag(args, signs)?;
-            time_origin_s = origin;
-            (wheels, poses, None, args.ticks_per_rev, None)
-        }
-        (Some(dir), None, None) => {
-            let log = twindrive_log::read_log_dir(dir)?;
-            let mut wheels = inputs::wheels_from_log(&log);
-            for w in &mut wheels {
-                w.left_rad *= signs[0];
-                w.right_rad *= signs[1];
+    let (wheels, poses, default_initial, ticks_per_rev, truth) =
+        match (&args.log_dir, &args.encoders, &args.poses) {
+            (None, None, None) if args.bag.is_some() => {
+                let (wheels, poses, origin) = inputs::from_bag(args, signs)?;
+                time_origin_s = origin;
+                (wheels, poses, None, args.ticks_per_rev, None)
             }
-            let n = log.header.nominal;
-            let tpr = log.header.ticks_per_rev;
-            if let Some(t) = args.ticks_per_rev
-                && t != tpr
-            {
-                bail!("--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}");
+            (Some(dir), None, None) => {
+                let log = read_log_dir(dir)?;
+                let mut wheels = inputs::wheels_from_log(&log);
+                for w in &mut wheels {
+                    w.left_rad *= signs[0];
+                    w.right_rad *= signs[1];
+                }
+                let n = log.header.nominal;
+                let tpr = log.header.ticks_per_rev;
+                if let Some(t) = args.ticks_per_rev
+                    && t != tpr
+                {
+                    return Err(usage(format!(
+                        "--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}"
+                    )));
+                }
+                let truth: Vec<(f64, Pose)> = log
+                    .steps
+                    .iter()
+                    .map(|s| (s.t_s(), s.ground_truth))
+                    .collect();
+                (
+                    wheels,
+                    inputs::poses_from_log(&log),
+                    Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
+                    Some(tpr),
+                    Some(truth),
+                )
             }
-            let truth: Vec<(f64, Pose)> = log
-                .steps
-                .iter()
-                .map(|s| (s.t_s(), s.ground_truth))
-                .collect();
-            (
-                wheels,
-                inputs::poses_from_log(&log),
-                Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
-                Some(tpr),
-                Some(truth),
-            )
-        }
-        (None, Some(enc), Some(pose)) => {
-            // The two files are read side by side.
-            let (e, p) = std::thread::scope(|scope| {
-                let e = scope.spawn(|| twindrive_log::calib_csv::read_encoder_csv(enc));
-                let p = twindrive_log::calib_csv::read_pose_csv(pose);
-                (e.join(), p)
-            });
-            let e = e.map_err(|_| anyhow::anyhow!("reading the encoder log panicked"))??;
-            let p = p?;
-            (
-                inputs::wheels_from_csv(&e, enc, args.ticks_per_rev, signs)?,
-                inputs::poses_from_csv(&p),
-                None,
-                args.ticks_per_rev,
-                None,
-            )
-        }
-        _ => bail!(
-            "give a simulator log directory, both --encoders E.csv and --poses P.csv, or --bag REC.mcap"
-        ),
-    };
+            (None, Some(enc), Some(pose)) => {
+                // The two files are read side by side.
+                let (e, p) = std::thread::scope(|scope| {
+                    let e = scope.spawn(|| twindrive_log::calib_csv::read_encoder_csv(enc));
+                    let p = twindrive_log::calib_csv::read_pose_csv(pose);
+                    (e.join(), p)
+                });
+                let e = e
+                    .map_err(|_| anyhow::anyhow!("reading the encoder log panicked"))?
+                    .context("--encoders")?;
+                let p = p.context("--poses")?;
+                (
+                    inputs::wheels_from_csv(&e, enc, args.ticks_per_rev, signs)?,
+                    inputs::poses_from_csv(&p),
+                    None,
+                    args.ticks_per_rev,
+                    None,
+                )
+            }
+            _ => return Err(usage(INPUTS)),
+        };
     if wheels.len() < 2 {
         bail!(
             "the encoder log has {} samples; need at least 2",
@@ -467,9 +459,13 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
         bail!("the pose log has no samples");
     }
     let initial = match (&args.initial, default_initial) {
-        (Some(text), _) => parse_initial(text)?,
+        (Some(text), _) => parse_initial(text).or_usage()?,
         (None, Some(i)) => i,
-        (None, None) => bail!("--initial DL,DR,B (metres) is needed for CSV and bag inputs"),
+        (None, None) => {
+            return Err(usage(
+                "--initial DL,DR,B (metres) is needed for CSV and bag inputs",
+            ));
+        }
     };
     let offset = match args.time_offset.trim() {
         "auto" => Offset::Auto,
@@ -477,17 +473,18 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
             text.parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .with_context(|| {
-                    format!("--time-offset: expected `auto` or seconds, got `{text}`")
+                .ok_or_else(|| {
+                    usage(format!(
+                        "--time-offset: expected `auto` or seconds, got `{text}`"
+                    ))
                 })?,
         ),
     };
     let mut filter = FilterConfig::default();
-    filter.noise.position_std_m = positive("--position-std-m", args.position_std_m)?;
-    filter.noise.heading_std_rad = positive("--heading-std-rad", args.heading_std_rad)?;
-    filter.noise.wheel_rad2_per_rad = positive("--wheel-noise", args.wheel_noise)?;
+    filter.noise.position_std_m = args.position_std_m;
+    filter.noise.heading_std_rad = args.heading_std_rad;
+    filter.noise.wheel_rad2_per_rad = args.wheel_noise;
     if let Some(rw) = args.param_random_walk {
-        let rw = positive("--param-random-walk", rw)?;
         filter.noise.param_random_walk_m2_per_s = Some([rw; 3]);
     }
     Ok(Job {
@@ -500,19 +497,31 @@ fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
         method: args.method,
         filter,
         param_rel_std: 0.1,
-        batch_window_s: positive("--batch-window-s", args.batch_window_s)?,
+        batch_window_s: args.batch_window_s,
         ticks_per_rev,
         truth,
         time_origin_s,
     })
 }
 
-fn positive(name: &str, v: f64) -> anyhow::Result<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        bail!("{name} must be a finite number > 0, got {v}")
+/// The three ways to give `calibrate` its data.
+const INPUTS: &str = "give a simulator output directory (log.csv + log.meta.json from `twindrive simulate`), \
+     both --encoders E.csv and --poses P.csv, or --bag REC.mcap|BAG_DIR";
+
+/// A simulator output directory; any other directory is refused with what
+/// `calibrate` expects.
+fn read_log_dir(dir: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
+    if !dir.join("log.meta.json").is_file() {
+        let what = if !dir.exists() {
+            "does not exist"
+        } else if !dir.is_dir() {
+            "is a file, not a simulator output directory"
+        } else {
+            "is not a simulator log (no log.meta.json in it)"
+        };
+        bail!("{}: {what}; {INPUTS}", dir.display());
     }
+    Ok(twindrive_log::read_log_dir(dir)?)
 }
 
 fn parse_initial(text: &str) -> anyhow::Result<[f64; 3]> {

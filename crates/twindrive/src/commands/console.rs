@@ -8,14 +8,15 @@ use twindrive_net::SessionOptions;
 use twindrive_sim::Scenario;
 
 use crate::cli::ConsoleArgs;
+use crate::usage::usage;
 
 pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
-    super::ops::check_supervisor_args(&args.robot, args.telemetry_budget, args.supervise)?;
+    super::ops::check_distinct_robots(&args.robot)?;
     for o in &args.allow_origin {
         if !(o.starts_with("http://") || o.starts_with("https://")) {
-            bail!(
+            return Err(usage(format!(
                 "--allow-origin {o}: an origin is scheme://host[:port], e.g. https://ops.example"
-            );
+            )));
         }
     }
     let (scenario, scenario_bytes) = match &args.scenario {

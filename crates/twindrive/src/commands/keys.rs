@@ -71,23 +71,21 @@ pub fn world_bytes(
     plan_path: &Path,
     scenario: Option<&Path>,
 ) -> anyhow::Result<Vec<u8>> {
-    let scenario_name = serde_json::from_slice::<serde_json::Value>(plan_json)
-        .ok()
-        .and_then(|v| v["header"]["robot"]["scenario"].as_str().map(str::to_owned));
-    Ok(match (scenario, &scenario_name) {
-        (Some(path), _) => {
-            std::fs::read(path).with_context(|| format!("reading {}", path.display()))?
-        }
-        (None, Some(name)) => match twindrive_sim::builtin::ALL.iter().find(|(n, _)| n == name) {
+    let plan: twindrive_mission::plan::MissionPlan =
+        crate::json::parse(plan_json, plan_path, crate::json::PLAN)?;
+    let scenario_name = &plan.header.robot.scenario;
+    Ok(match scenario {
+        Some(path) => std::fs::read(path)
+            .with_context(|| format!("--scenario: reading {}", path.display()))?,
+        None => match twindrive_sim::builtin::ALL
+            .iter()
+            .find(|(n, _)| n == scenario_name)
+        {
             Some((_, text)) => text.as_bytes().to_vec(),
             None => bail!(
-                "the plan's scenario `{name}` is not built in; pass --scenario with the TOML it was rehearsed in"
+                "the plan's scenario `{scenario_name}` is not built in; pass --scenario with the TOML it was rehearsed in"
             ),
         },
-        (None, None) => bail!(
-            "{}: not a plan document (no header.robot.scenario)",
-            plan_path.display()
-        ),
     })
 }
 
@@ -101,21 +99,9 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
     let plan_json =
         std::fs::read(&args.plan).with_context(|| format!("reading {}", args.plan.display()))?;
     let key_text = std::fs::read_to_string(&args.key)
-        .with_context(|| format!("reading {}", args.key.display()))?;
+        .with_context(|| format!("--key: reading {}", args.key.display()))?;
     let key = read_private_key_pem(&key_text)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.key.display()))?;
-    if args.robot.is_empty() || args.robot.len() > twindrive_link::wire::MAX_ROBOT_ID_BYTES {
-        bail!(
-            "--robot: a robot id of 1 to {} bytes, got `{}`",
-            twindrive_link::wire::MAX_ROBOT_ID_BYTES,
-            args.robot
-        );
-    }
-    if let Some(s) = args.supervise
-        && !(s.is_finite() && s > 0.0)
-    {
-        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
-    }
     let world = world_bytes(&plan_json, &args.plan, args.scenario.as_deref())?;
     let plan = super::verify_plan::read_plan(&args.plan)?;
     let twin = crate::verification::twin_of(&plan, args.scenario.as_deref())?;

@@ -26,6 +26,7 @@ use twindrive_net::{Emulation, SessionOptions, down_key, open_session, up_key};
 use twindrive_sim::Scenario;
 
 use crate::cli::{MasterArgs, OnHandbackArg, RobotArgs, ZenohArgs};
+use crate::usage::usage;
 
 fn session_options(z: &ZenohArgs, mode: Option<&str>) -> SessionOptions {
     SessionOptions {
@@ -48,33 +49,8 @@ fn unix_now_s() -> anyhow::Result<f64> {
     Ok(super::keys::since_epoch()?.as_secs_f64())
 }
 
-fn check_robot_id(id: &str, flag: &str) -> anyhow::Result<()> {
-    if id.is_empty()
-        || id.len() > twindrive_link::wire::MAX_ROBOT_ID_BYTES
-        || !id
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-    {
-        bail!(
-            "{flag}: a robot id of 1 to {} letters, digits, `-` or `_`, got `{id}`",
-            twindrive_link::wire::MAX_ROBOT_ID_BYTES
-        );
-    }
-    Ok(())
-}
-
 /// `twindrive robot`.
 pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
-    check_robot_id(&args.id, "--id")?;
-    if !(args.time_scale.is_finite() && args.time_scale > 0.0) {
-        bail!("--time-scale: a number > 0, got {}", args.time_scale);
-    }
-    if !(args.telemetry_budget.is_finite() && args.telemetry_budget >= 100.0) {
-        bail!(
-            "--telemetry-budget: at least 100 bytes per second, got {}",
-            args.telemetry_budget
-        );
-    }
     let mut trusted = Vec::new();
     for path in &args.trust {
         let text = std::fs::read_to_string(path)
@@ -103,10 +79,10 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
         }
         Some(ros) => {
             if args.time_scale != 1.0 {
-                bail!(
+                return Err(usage(format!(
                     "--time-scale: a ROS 2 robot runs in real time (1), got {}",
                     args.time_scale
-                );
+                )));
             }
             let bridge = twindrive_agent::ros::RosBridge::new(ros, &site, 0.0)
                 .map_err(|e| anyhow::anyhow!("--site {}: {e}", args.site.display()))?;
@@ -310,34 +286,21 @@ fn first_plan(
     })
 }
 
-/// The arguments a master and the console share: distinct valid robot ids,
-/// a telemetry budget of at least 100 B/s, a positive dead-man timeout.
-pub(super) fn check_supervisor_args(
-    robots: &[String],
-    telemetry_budget: f64,
-    supervise: Option<f64>,
-) -> anyhow::Result<()> {
+/// The robots a master or the console supervises are distinct (each id is
+/// checked when parsed).
+pub(super) fn check_distinct_robots(robots: &[String]) -> anyhow::Result<()> {
     let mut seen = std::collections::HashSet::new();
     for id in robots {
-        check_robot_id(id, "--robot")?;
         if !seen.insert(id) {
-            bail!("--robot {id} is given twice");
+            return Err(usage(format!("--robot {id} is given twice")));
         }
-    }
-    if !(telemetry_budget.is_finite() && telemetry_budget >= 100.0) {
-        bail!("--telemetry-budget: at least 100 bytes per second, got {telemetry_budget}");
-    }
-    if let Some(s) = supervise
-        && !(s.is_finite() && s > 0.0)
-    {
-        bail!("--supervise: a dead-man timeout > 0 seconds, got {s}");
     }
     Ok(())
 }
 
 /// `--link PROFILE`, parsed.
 pub(super) fn link_profile(arg: Option<&str>) -> anyhow::Result<Option<LinkProfile>> {
-    arg.map(|p| p.parse().map_err(|e| anyhow::anyhow!("--link {p}: {e}")))
+    arg.map(|p| p.parse().map_err(|e| usage(format!("--link {p}: {e}"))))
         .transpose()
 }
 
@@ -368,12 +331,12 @@ struct Supervised {
 /// zenoh session, each robot with its own operator, twin and output
 /// directory.
 pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
-    check_supervisor_args(&args.robot, args.telemetry_budget, args.supervise)?;
+    check_distinct_robots(&args.robot)?;
     let fleet = args.robot.len() > 1;
     if fleet && args.signed.is_some() {
-        bail!(
-            "--signed holds a plan signed for one robot; a fleet needs --plan and --key (each robot gets its own signature)"
-        );
+        return Err(usage(
+            "--signed holds a plan signed for one robot; a fleet needs --plan and --key (each robot gets its own signature)",
+        ));
     }
     let profile = link_profile(args.link.as_deref())?;
     let key = signing_key(args.key.as_deref())?;
@@ -385,7 +348,9 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         Verbosity::Normal
     };
     if args.on_handback == OnHandbackArg::Replan && key.is_none() {
-        bail!("--on-handback replan signs continuations: it needs --key");
+        return Err(usage(
+            "--on-handback replan signs continuations: it needs --key",
+        ));
     }
     let unix_at_zero = unix_now_s()?;
     let mut members = Vec::new();

@@ -29,14 +29,10 @@ struct Calibration {
 
 /// Reads the calibrated parameters from a `twindrive calibrate` output.
 pub fn read_calibration(path: &Path) -> anyhow::Result<DiffDriveParams> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let c: Calibration = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{}: expected a calib.json with left_diameter_m, right_diameter_m and wheelbase_m",
-            path.display()
-        )
-    })?;
+    let c: Calibration = crate::json::read(
+        path,
+        "a calibration (calib.json from `twindrive calibrate`, with left_diameter_m, right_diameter_m and wheelbase_m)",
+    )?;
     let params = DiffDriveParams::new(c.left_diameter_m, c.right_diameter_m, c.wheelbase_m);
     params
         .validate()
@@ -88,7 +84,7 @@ pub fn scenario_for(log: &MissionLog, given: Option<&Path>) -> anyhow::Result<Sc
 fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
     let log = twindrive_log::read_log_dir(&args.log_dir)?;
     let log_sha256 = log_dir_sha256(&args.log_dir)?;
-    let params = read_calibration(&args.calibration)?;
+    let params = read_calibration(&args.calibration).context("--calibration")?;
     let mut redundancy = match &args.redundancy {
         Some(path) => {
             let text = std::fs::read_to_string(path)

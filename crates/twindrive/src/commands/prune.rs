@@ -1,5 +1,6 @@
 //! `twindrive prune`: redundancy removal alone, on any path file.
 
+use std::fmt::Write as _;
 use std::io::Write;
 use std::path::Path;
 
@@ -7,11 +8,12 @@ use anyhow::{Context, bail};
 use twindrive_kinematics::Pose;
 use twindrive_mission::PathSample;
 use twindrive_mission::redundancy::{
-    DeletionReason, RedundancyConfig, remove_redundancy, route_coverage,
+    DeletionReason, Pruned, RedundancyConfig, remove_redundancy, route_coverage,
 };
 
 use crate::cli::PruneArgs;
 use crate::output::Staging;
+use crate::usage::OrUsage;
 
 /// Reads `t,x,y,theta` CSV or TUM; velocities from the displacement along
 /// the heading (negative when reversing).
@@ -100,16 +102,14 @@ pub fn run(args: &PruneArgs) -> anyhow::Result<()> {
     let (path, out) = (&args.path, &args.out);
     let mut cfg = RedundancyConfig::with_pinch_distance(args.pinch_distance);
     args.redundancy.apply(&mut cfg);
-    cfg.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    cfg.validate().or_usage()?;
     let samples = read_path(path)?;
     let pruned = remove_redundancy(&samples, &cfg)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let kept = pruned.apply(&samples);
     let coverage = route_coverage(&samples, &kept, pruned.coverage_radius_m)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    let (dir, _, file_name) = crate::output::split_out_path(out, "pruned")?;
-    let staging = Staging::new(&dir, "prune")?;
-    staging.write_with(&file_name, |w| {
+    write_file(out, "pruned", "prune", |w| {
         let mut buf = ryu::Buffer::new();
         writeln!(w, "t,x,y,theta")?;
         for s in &kept {
@@ -124,7 +124,11 @@ pub fn run(args: &PruneArgs) -> anyhow::Result<()> {
         }
         Ok(())
     })?;
-    staging.commit()?;
+    if let Some(file) = &args.details {
+        write_file(file, "prune_details", "prune-details", |w| {
+            Ok(w.write_all(details(&pruned).as_bytes())?)
+        })?;
+    }
     let count = |r: DeletionReason| pruned.deletions.iter().filter(|d| d.reason == r).count();
     // From +0.0: an empty float sum is -0.0, which would print as "-0.00".
     let removed_m = pruned.deletions.iter().fold(0.0, |a, d| a + d.length_m);
@@ -152,12 +156,60 @@ pub fn run(args: &PruneArgs) -> anyhow::Result<()> {
         "coverage within {} m: {:.2} % of the input's length, {:.3} m uncovered; output {:.2} m",
         coverage.radius_m, coverage.covered_percent, coverage.uncovered_m, coverage.plan_length_m
     )?;
-    for r in &pruned.refused {
+    if !pruned.refused.is_empty() {
+        let refused = |r: DeletionReason| pruned.refused.iter().filter(|c| c.reason == r).count();
+        let kept_m = pruned.refused.iter().fold(0.0, |a, c| a + c.would_drop_m);
+        let shown = match (&args.details, args.verbose) {
+            (Some(file), _) => format!("each in {}", file.display()),
+            (None, true) => "each below".to_owned(),
+            (None, false) => "each with -v or --details FILE".to_owned(),
+        };
         writeln!(
             o,
-            "refused: {:?} cut from t = {} s to t = {} s ({:.2} m) would have dropped {:.2} m of explored ground",
-            r.reason, r.t_start_s, r.t_end_s, r.length_m, r.would_drop_m
+            "refused {} cut(s) that would have dropped explored ground ({:.2} m in all): {} loop(s), {} crossing loop(s), {} reversal kink(s), {} trailing retrace(s); {shown}",
+            pruned.refused.len(),
+            kept_m,
+            refused(DeletionReason::Loop),
+            refused(DeletionReason::Crossing),
+            refused(DeletionReason::Reversal),
+            refused(DeletionReason::TrailingRetrace),
         )?;
     }
+    if args.verbose {
+        o.write_all(details(&pruned).as_bytes())?;
+    }
     Ok(())
+}
+
+/// One line per cut made and per cut refused, in input order of each.
+fn details(pruned: &Pruned) -> String {
+    let mut text = String::new();
+    for d in &pruned.deletions {
+        let _ = writeln!(
+            text,
+            "removed: {:?} from t = {} s to t = {} s ({:.2} m, samples {} to {})",
+            d.reason, d.t_start_s, d.t_end_s, d.length_m, d.first_removed, d.last_removed
+        );
+    }
+    for r in &pruned.refused {
+        let _ = writeln!(
+            text,
+            "refused: {:?} cut from t = {} s to t = {} s ({:.2} m) would have dropped {:.2} m of explored ground",
+            r.reason, r.t_start_s, r.t_end_s, r.length_m, r.would_drop_m
+        );
+    }
+    text
+}
+
+/// Writes one output file whole or not at all (staged beside it).
+fn write_file(
+    path: &Path,
+    default_stem: &str,
+    producer: &str,
+    fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let (dir, _, file_name) = crate::output::split_out_path(path, default_stem)?;
+    let staging = Staging::new(&dir, producer)?;
+    staging.write_with(&file_name, fill)?;
+    staging.commit()
 }

@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use twindrive_ros::export::{ExportOptions, write_log_bag};
 use twindrive_ros::msgs::Distro;
 
@@ -10,12 +10,6 @@ use crate::cli::{DistroArg, RosbagArgs};
 use crate::output::Staging;
 
 pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
-    if !(args.start_time.is_finite() && args.start_time >= 0.0 && args.start_time < 4.0e9) {
-        bail!(
-            "--start-time: expected Unix seconds between 0 and 4e9, got {}",
-            args.start_time
-        );
-    }
     let log = crate::inputs::read_mission_log(&args.log)?;
     let map = match &args.scenario {
         Some(p) => Some(

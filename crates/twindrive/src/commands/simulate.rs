@@ -21,7 +21,7 @@ pub fn run(
     if let Some(d) = duration_s {
         scenario
             .set_duration_s(d)
-            .map_err(|m| anyhow::anyhow!("--duration-s {m}"))?;
+            .map_err(|m| crate::usage::usage(format!("--duration-s {m}")))?;
     }
     let (summary, _) = simulate_into(scenario, out)?;
     print_summary(&summary, out)

@@ -45,10 +45,7 @@ pub struct VerifyReport {
 
 /// Reads and checks a plan file (format, hash, contents).
 pub fn read_plan(path: &Path) -> anyhow::Result<MissionPlan> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let plan: MissionPlan = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a twindrive mission plan", path.display()))?;
+    let plan: MissionPlan = crate::json::read(path, crate::json::PLAN)?;
     plan.validate()
         .with_context(|| format!("{}", path.display()))?;
     Ok(plan)

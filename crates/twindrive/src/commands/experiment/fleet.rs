@@ -102,8 +102,7 @@ pub struct FleetResult {
 }
 
 fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_slice(&bytes).with_context(|| format!("{}", path.display()))
+    crate::json::read(path, "a JSON document")
 }
 
 fn median(mut v: Vec<f64>) -> Option<f64> {
@@ -469,15 +468,9 @@ pub fn master_cost(
 }
 
 pub fn run(args: &FleetExperimentArgs) -> anyhow::Result<()> {
-    if args.robots.is_empty() || args.robots.iter().any(|&n| n == 0 || n > 200) {
-        bail!("--robots: counts from 1 to 200, comma-separated");
-    }
-    if !(args.time_scale.is_finite() && args.time_scale > 0.0) {
-        bail!("--time-scale: a number > 0, got {}", args.time_scale);
-    }
     if let Some(link) = &args.link {
         link.parse::<LinkProfile>()
-            .map_err(|e| anyhow::anyhow!("--link {link}: {e}"))?;
+            .map_err(|e| crate::usage::usage(format!("--link {link}: {e}")))?;
     }
     let twin = twindrive_sim::builtin::load("wall_following")
         .expect("built in")

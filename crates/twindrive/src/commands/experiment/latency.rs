@@ -43,6 +43,7 @@ use crate::cli::LatencyExperimentArgs;
 use crate::commands::demo_decoupled::Mission;
 use crate::figures::walls;
 use crate::output::Staging;
+use crate::usage::usage;
 
 /// The default site: the twin's true wheel diameters and wheelbase scaled
 /// by these (tyres worn unevenly, a heavier payload).
@@ -799,16 +800,16 @@ fn parse_list(
     for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         let v: f64 = part
             .parse()
-            .with_context(|| format!("{flag}: `{part}` is not a number"))?;
+            .map_err(|_| usage(format!("{flag}: {what}, got `{part}`")))?;
         if !check(v) {
-            bail!("{flag}: {what}, got {v}");
+            return Err(usage(format!("{flag}: {what}, got {v}")));
         }
         if !out.contains(&v) {
             out.push(v);
         }
     }
     if out.is_empty() {
-        bail!("{flag}: at least one value");
+        return Err(usage(format!("{flag}: {what}, at least one")));
     }
     Ok(out)
 }
@@ -890,9 +891,10 @@ pub fn inputs(
     Ok((twin, world_toml, site, calibrated))
 }
 
+/// The settings the flags give (each scalar is checked when parsed; the
+/// lists here, as usage errors).
 pub fn settings(args: &LatencyExperimentArgs) -> anyhow::Result<Settings> {
-    let positive = |v: f64| v.is_finite() && v > 0.0;
-    let settings = Settings {
+    Ok(Settings {
         latencies_s: parse_list(
             &args.latencies,
             "--latencies",
@@ -912,28 +914,7 @@ pub fn settings(args: &LatencyExperimentArgs) -> anyhow::Result<Settings> {
         coverage_radius_m: args.coverage_radius,
         complete_at: args.complete_at,
         max_duration_s: args.max_duration,
-    };
-    if settings.seeds == 0 {
-        bail!("--seeds: at least 1");
-    }
-    for (flag, v) in [
-        ("--bandwidth", settings.bandwidth_bit_s),
-        ("--watchdog-timeout", settings.watchdog_timeout_s),
-        ("--move-s", settings.move_s),
-        ("--coverage-radius", settings.coverage_radius_m),
-        ("--max-duration", settings.max_duration_s),
-    ] {
-        if !positive(v) {
-            bail!("{flag}: a number > 0, got {v}");
-        }
-    }
-    if !(settings.complete_at > 0.0 && settings.complete_at <= 1.0) {
-        bail!(
-            "--complete-at: a fraction in (0, 1], got {}",
-            settings.complete_at
-        );
-    }
-    Ok(settings)
+    })
 }
 
 pub fn run(args: &LatencyExperimentArgs) -> anyhow::Result<()> {

@@ -35,9 +35,6 @@ impl Row {
 }
 
 pub fn run(args: &UploadExperimentArgs) -> anyhow::Result<()> {
-    if args.seeds == 0 {
-        bail!("--seeds: at least 1");
-    }
     let sizes: Vec<(usize, &'static str)> = if args.smoke {
         vec![(20_000, "20 kB")]
     } else {
