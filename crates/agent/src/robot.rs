@@ -190,7 +190,12 @@ pub struct RobotAgent<B: RobotBackend> {
     pub journal_errors: u64,
     /// The telemetry budget in force (the master may lower it).
     budget_bytes_s: f64,
+    /// Journal lines not yet taken by [`RobotAgent::take_said`].
+    said: VecDeque<String>,
 }
+
+/// At most this many journal lines wait for [`RobotAgent::take_said`].
+const MAX_SAID: usize = 1_000;
 
 fn pose3(p: &twindrive_kinematics::Pose) -> [f64; 3] {
     [p.x_m, p.y_m, p.heading_rad]
@@ -257,6 +262,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             last_bump: false,
             journal_errors: 0,
             budget_bytes_s: config.telemetry_budget_bytes_s,
+            said: VecDeque::new(),
             config,
             backend,
         };
@@ -388,6 +394,56 @@ impl<B: RobotBackend> RobotAgent<B> {
             tracing::error!(error = %e, event, "writing the journal");
         }
         tracing::info!(target: "twindrive::robot", "{line}");
+        // For people: the event and its details, without the clock fields.
+        let mut details = line.clone();
+        if let Some(map) = details.as_object_mut() {
+            for k in ["t", "unix_s", "event", "wheel_travel_rad"] {
+                map.remove(k);
+            }
+        }
+        if self.said.len() == MAX_SAID {
+            self.said.pop_front();
+        }
+        self.said.push_back(format!(
+            "{:7.1} s  {}  {}: {}",
+            now_ns as f64 * 1e-9,
+            self.config.robot_id,
+            event.replace('_', " "),
+            details
+        ));
+    }
+
+    /// The journal's lines since the last call, for people (the process
+    /// prints them).
+    pub fn take_said(&mut self) -> Vec<String> {
+        self.said.drain(..).collect()
+    }
+
+    /// What the robot is doing now, in one line.
+    pub fn doing(&self) -> String {
+        let [x, y, h] = self.believed_pose();
+        let what = match (&self.running, &self.current) {
+            (Some(r), _) => format!(
+                "executing {} % of the plan, {:.1} s in",
+                100 * r.exec.progress() / r.exec.plan().samples.len().max(1),
+                r.window.back().map_or(0.0, |w| w.plan_t_s)
+            ),
+            (None, Some((_, PlanPhase::Receiving { received, chunks }))) => {
+                format!("receiving a plan, {received} of {chunks} chunks")
+            }
+            (None, _) => "idle, waiting for a plan".into(),
+        };
+        format!(
+            "robot {}: {what}; at ({x:.2}, {y:.2}) m, {:.0} deg; {} log(s) to send{}",
+            self.config.robot_id,
+            h.to_degrees(),
+            self.logs_pending(),
+            if self.handback.is_some() {
+                "; hand-back not yet acknowledged"
+            } else {
+                ""
+            }
+        )
     }
 
     fn set_phase(&mut self, transfer: TransferId, phase: PlanPhase) {

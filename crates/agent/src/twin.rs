@@ -18,7 +18,7 @@ use twindrive_link::wire::Handback;
 use twindrive_mission::PipelineError;
 use twindrive_mission::pipeline::{PipelineSettings, plan_from_log};
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
-use twindrive_mission::verify::{self, Criteria};
+use twindrive_mission::verify::{self, Criteria, TrackerSettings, Verdict};
 use twindrive_sim::{Scenario, SensorModel, Simulator};
 
 /// The master's twin: its scenario (world and simulated robot) and the
@@ -159,10 +159,14 @@ impl Twin {
 
     /// The operator's continuation: the mission's controller re-run on the
     /// updated twin from the hand-back pose for `duration_s`, through the
-    /// pipeline, and verified on the twin (open and closed loop: no
-    /// contact, within `criteria`'s deviation of its own path) before it
+    /// pipeline, and verified on the twin the way the robot drives it,
+    /// closed loop (no contact, within `criteria`'s deviation of its own
+    /// path, ending within it of its end) before it
     /// is returned. The twin's robot moves with the parameters the plan is
-    /// made with: one robot model for the rehearsal and the plan.
+    /// made with (one robot model for the rehearsal and the plan) and
+    /// without the wheel slip the simulated site adds: slip belongs to the
+    /// real ground, which the twin does not know; the robot's closed-loop
+    /// tracking and its hand-back tolerances absorb it.
     pub fn continuation(
         &self,
         duration_s: f64,
@@ -171,6 +175,7 @@ impl Twin {
     ) -> Result<MissionPlan, PipelineError> {
         let mut scenario = self.scenario.clone();
         scenario.robot.true_params = self.calibrated;
+        scenario.robot.slip_std = 0.0;
         scenario
             .set_duration_s(duration_s)
             .map_err(|e| PipelineError::Infeasible(format!("continuation duration: {e}")))?;
@@ -178,11 +183,17 @@ impl Twin {
         let log_sha = sha256_hex(format!("continuation:{:?}", log.header.start).as_bytes());
         let (plan, _) =
             plan_from_log(&log, &log_sha, &self.calibrated, &scenario, settings, false)?;
-        let checked = verify::verify(&plan.samples, &scenario, &self.calibrated, criteria)?;
-        if !checked.verdict.passed {
+        let closed = verify::closed_loop(
+            &plan.samples,
+            scenario,
+            &self.calibrated,
+            &TrackerSettings::default(),
+        )?;
+        let verdict = Verdict::judge_closed_loop(&closed.report, criteria);
+        if !verdict.passed {
             return Err(PipelineError::Infeasible(format!(
                 "the continuation fails verification on the twin: {}",
-                checked.verdict.reasons.join("; ")
+                verdict.reasons.join("; ")
             )));
         }
         Ok(plan)

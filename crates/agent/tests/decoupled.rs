@@ -201,7 +201,8 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
         assert_eq!(
             r.outcome,
             Some(Outcome::Completed),
-            "seed {seed}: {:#?}",
+            "seed {seed}: {:?} {:#?}",
+            r.failure,
             r.timeline
         );
         assert!(!r.handbacks.is_empty());

@@ -195,6 +195,23 @@ impl Core {
         }
     }
 
+    /// The events after sequence number `seq`: (seq, level, text).
+    pub fn events_since(&self, seq: u64) -> Vec<(u64, String, String)> {
+        self.events
+            .iter()
+            .filter_map(|e| {
+                let n = e["seq"].as_u64()?;
+                (n > seq).then(|| {
+                    (
+                        n,
+                        e["level"].as_str().unwrap_or("info").to_owned(),
+                        e["text"].as_str().unwrap_or_default().to_owned(),
+                    )
+                })
+            })
+            .collect()
+    }
+
     fn robot(&self, id: &str) -> Result<&SharedSlot, String> {
         self.robots
             .iter()

@@ -227,6 +227,7 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
             let mut interval = tokio::time::interval(Duration::from_millis(20));
             interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
             let mut n = 0u64;
+            let mut said = 0u64;
             while !stop.load(Ordering::Relaxed) {
                 interval.tick().await;
                 n += 1;
@@ -234,6 +235,11 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
                 let frame = {
                     let mut c = core.lock().unwrap_or_else(|e| e.into_inner());
                     c.tick(now);
+                    // The page's events, on stderr too (one line each).
+                    for (seq, level, text) in c.events_since(said) {
+                        said = seq;
+                        eprintln!("console: {level}: {text}");
+                    }
                     if n % 2 == 0
                         && let Some(b) = &mut bridge
                     {

@@ -101,6 +101,8 @@ pub struct Sender {
     /// and is the receiver's whole truth (one that restarted holds less
     /// than an earlier NAK confirmed).
     reoffered: bool,
+    /// End-of-files in a row that went unanswered.
+    eofs_unanswered: u32,
     next_send_ns: u64,
     rtt_ns: u64,
     finished: bool,
@@ -202,6 +204,7 @@ impl Sender {
             heard_at: None,
             eof_now: false,
             reoffered: false,
+            eofs_unanswered: 0,
             next_send_ns: 0,
             rtt_ns: config.rtt_hint_ns.max(1),
             finished: false,
@@ -408,7 +411,7 @@ impl Sender {
                 .eof_sent_at
                 .is_none_or(|t| now_ns >= t + self.rtt_ns + self.rtt_ns / 4);
         if eof_due {
-            // No answer since the last end-of-file: the receiver may have
+            // No answer to two end-of-files in a row: the receiver may have
             // restarted and forgotten this transfer (its chunks and
             // end-of-files then go unheard). The offer goes again first; a
             // receiver answers it with where it stands, so the transfer
@@ -416,7 +419,13 @@ impl Sender {
             let unanswered = self
                 .eof_sent_at
                 .is_some_and(|t| self.heard_at.is_none_or(|h| h < t));
-            if unanswered && !self.eof_now {
+            self.eofs_unanswered = if unanswered {
+                self.eofs_unanswered + 1
+            } else {
+                0
+            };
+            if self.eofs_unanswered >= 2 && !self.eof_now {
+                self.eofs_unanswered = 0;
                 self.eof_now = true;
                 self.reoffered = true;
                 self.stats.reoffers += 1;

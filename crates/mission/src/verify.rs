@@ -34,6 +34,11 @@ pub struct ReplayReport {
     pub collisions: u64,
     /// Times the bumper closed.
     pub bumps: u64,
+    /// How long the robot was in contact at the plan's start before it
+    /// first came clear (s): a plan that starts where its robot touches
+    /// something (a continuation after a bump) is judged on the contacts
+    /// that follow, not on the one it leaves.
+    pub start_contact_s: f64,
     pub max_deviation_m: f64,
     pub mean_deviation_m: f64,
     /// Distance from the plan's last position when the replay ended.
@@ -148,6 +153,8 @@ fn replay(
     let mut out = StepOutput::new(sim.beams());
     let mut deviation = PathCursor::new(samples);
     let mut contacts = twindrive_sim::Contacts::default();
+    let mut leaving_start_contact = true;
+    let mut start_contact_s = 0.0;
     let (mut max_dev, mut sum_dev, mut n) = (0.0f64, 0.0, 0usize);
     let mut track = vec![(0.0, sim.pose())];
     let mut length = 0.0;
@@ -167,7 +174,13 @@ fn replay(
         let t = out.record.t_s() + dt_s;
         length += pose.distance_to(&track.last().expect("non-empty").1);
         track.push((t, pose));
-        contacts.record(out.record.bump, out.blocked, dt_s);
+        let touching = out.record.bump || out.blocked;
+        if leaving_start_contact && touching {
+            start_contact_s += dt_s;
+        } else {
+            leaving_start_contact = false;
+            contacts.record(out.record.bump, out.blocked, dt_s);
+        }
         let d = deviation.advance((pose.x_m, pose.y_m), 0.5);
         max_dev = max_dev.max(d);
         sum_dev += d;
@@ -182,6 +195,7 @@ fn replay(
         report: ReplayReport {
             collisions: u64::from(contacts.collisions),
             bumps: u64::from(contacts.bumps),
+            start_contact_s,
             max_deviation_m: max_dev,
             mean_deviation_m: sum_dev / n.max(1) as f64,
             final_error_m: (end.x_m - last.x_m).hypot(end.y_m - last.y_m),
@@ -402,6 +416,9 @@ pub fn closed_loop(
     )
 }
 
+/// A plan that starts in contact must come clear within this (s).
+pub const MAX_START_CONTACT_S: f64 = 1.0;
+
 /// What a plan must meet, replayed on the twin, before it may be sent.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct Criteria {
@@ -441,6 +458,12 @@ impl Verdict {
             if r.bumps > 0 {
                 reasons.push(format!("{name}: the bumper closed {} time(s)", r.bumps));
             }
+            if r.start_contact_s > MAX_START_CONTACT_S {
+                reasons.push(format!(
+                    "{name}: stays in contact at its start for {:.1} s (at most {MAX_START_CONTACT_S:.1} s to come clear)",
+                    r.start_contact_s
+                ));
+            }
             if beyond(r.max_deviation_m) {
                 reasons.push(format!(
                     "{name}: departs {:.3} m from the plan's path (tolerance {tol:.3} m)",
@@ -459,6 +482,16 @@ impl Verdict {
             max_deviation_m: tol,
             reasons,
         }
+    }
+
+    /// Judges the closed-loop replay alone (the way the robot drives a
+    /// plan): no contact, within the tolerance of the plan's path, ending
+    /// within it of the plan's end.
+    pub fn judge_closed_loop(closed: &ReplayReport, criteria: &Criteria) -> Self {
+        let mut v = Self::judge(closed, closed, criteria);
+        v.reasons.retain(|r| !r.starts_with("open loop"));
+        v.passed = v.reasons.is_empty();
+        v
     }
 
     /// One line for people: `passed (...)` or `FAILED: reason; reason`.
@@ -512,4 +545,93 @@ pub fn verify(
         closed_loop: closed,
         verdict,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn clean() -> ReplayReport {
+        ReplayReport {
+            collisions: 0,
+            bumps: 0,
+            start_contact_s: 0.0,
+            max_deviation_m: 0.02,
+            mean_deviation_m: 0.01,
+            final_error_m: 0.01,
+            duration_s: 10.0,
+            path_length_m: 3.0,
+        }
+    }
+
+    #[test]
+    fn a_verdict_fails_on_every_departure_and_contact_and_says_which() {
+        let c = Criteria {
+            max_deviation_m: 0.15,
+        };
+        assert!(Verdict::judge(&clean(), &clean(), &c).passed);
+        // At the tolerance passes; beyond it, or not a number, fails.
+        let at = ReplayReport {
+            max_deviation_m: 0.15,
+            ..clean()
+        };
+        assert!(Verdict::judge(&at, &at, &c).passed);
+        let cases: Vec<(ReplayReport, ReplayReport, &str)> = vec![
+            (
+                ReplayReport {
+                    max_deviation_m: 3.17,
+                    ..clean()
+                },
+                clean(),
+                "open loop: departs 3.170 m",
+            ),
+            (
+                clean(),
+                ReplayReport {
+                    max_deviation_m: f64::NAN,
+                    ..clean()
+                },
+                "closed loop: departs NaN m",
+            ),
+            (
+                clean(),
+                ReplayReport {
+                    final_error_m: 0.4,
+                    ..clean()
+                },
+                "ends 0.400 m from the plan's end",
+            ),
+            (
+                ReplayReport {
+                    collisions: 2,
+                    ..clean()
+                },
+                clean(),
+                "2 collision(s)",
+            ),
+            (
+                clean(),
+                ReplayReport {
+                    bumps: 1,
+                    ..clean()
+                },
+                "bumper closed 1 time(s)",
+            ),
+            (
+                ReplayReport {
+                    start_contact_s: 2.5,
+                    ..clean()
+                },
+                clean(),
+                "stays in contact at its start for 2.5 s",
+            ),
+        ];
+        for (open, closed, reason) in cases {
+            let v = Verdict::judge(&open, &closed, &c);
+            assert!(!v.passed, "{v:?}");
+            assert_eq!(v.reasons.len(), 1, "{v:?}");
+            assert!(v.reasons[0].contains(reason), "{v:?}");
+            assert!(v.summary().starts_with("FAILED: "), "{}", v.summary());
+        }
+    }
 }

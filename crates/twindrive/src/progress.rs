@@ -87,3 +87,66 @@ impl TermLike for Lines {
         std::io::stderr().flush()
     }
 }
+
+/// A long-running process's voice: event lines as they happen and, when
+/// nothing was said for [`Voice::QUIET_AFTER`], what it is doing now. On a
+/// terminal the latter is a live status line below the events; on a pipe
+/// it is a plain line, so the process is never silent for long.
+pub struct Voice {
+    live: Option<ProgressBar>,
+    last: Instant,
+}
+
+impl Voice {
+    pub const QUIET_AFTER: Duration = Duration::from_secs(4);
+
+    pub fn new() -> Self {
+        let live = std::io::stderr().is_terminal().then(|| {
+            let bar = ProgressBar::new_spinner();
+            bar.enable_steady_tick(Duration::from_millis(250));
+            bar
+        });
+        Self {
+            live,
+            last: Instant::now(),
+        }
+    }
+
+    /// One event, now.
+    pub fn say(&mut self, line: &str) {
+        match &self.live {
+            Some(bar) => bar.println(line),
+            None => eprintln!("{line}"),
+        }
+        self.last = Instant::now();
+    }
+
+    /// What the process is doing now: the live line on a terminal; on a
+    /// pipe, a line when nothing was said for a while. `status` is only
+    /// called when it may be shown.
+    pub fn status(&mut self, status: impl FnOnce() -> String) {
+        match &self.live {
+            Some(bar) => bar.set_message(status()),
+            None => {
+                if self.last.elapsed() >= Self::QUIET_AFTER {
+                    eprintln!("{}", status());
+                    self.last = Instant::now();
+                }
+            }
+        }
+    }
+}
+
+impl Default for Voice {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drop for Voice {
+    fn drop(&mut self) {
+        if let Some(bar) = &self.live {
+            bar.finish_and_clear();
+        }
+    }
+}

@@ -369,3 +369,99 @@ fn prune_removes_a_retraced_loop_and_keeps_explored_ground() {
     assert!(!out.status.success());
     assert!(text(&out.stderr).contains("missing.csv"));
 }
+
+/// A plan made with parameters the robot does not have: its path is dead
+/// reckoning that the robot does not follow.
+#[test]
+fn a_plan_made_with_the_wrong_parameters_fails_verification_and_is_not_signed() {
+    use rand::{RngExt, SeedableRng};
+    let tmp = tempfile::tempdir().unwrap();
+    let (log, _) = mission();
+    let keys = tmp.path().join("keys");
+    assert!(twindrive(&["keygen", "--out", s(&keys)]).status.success());
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(20);
+    // The scenario's hand-measured parameters (the issue's case), then two
+    // random errors of 2 to 5 % on each parameter.
+    let mut params = vec![[0.066, 0.066, 0.26]];
+    for _ in 0..2 {
+        let mut p = [0.0652, 0.0665, 0.2678];
+        for v in &mut p {
+            let e: f64 = rng.random_range(0.02..0.05);
+            *v *= if rng.random_bool(0.5) {
+                1.0 + e
+            } else {
+                1.0 - e
+            };
+        }
+        params.push(p);
+    }
+    for (k, [l, r, b]) in params.into_iter().enumerate() {
+        let dir = tmp.path().join(k.to_string());
+        std::fs::create_dir_all(&dir).unwrap();
+        let calib = dir.join("calib.json");
+        std::fs::write(
+            &calib,
+            format!(r#"{{"left_diameter_m": {l}, "right_diameter_m": {r}, "wheelbase_m": {b}}}"#),
+        )
+        .unwrap();
+        let plan_path = dir.join("plan.json");
+        let out = twindrive(&[
+            "plan",
+            s(log),
+            "--calibration",
+            s(&calib),
+            "--out",
+            s(&plan_path),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let out = twindrive(&["verify-plan", s(&plan_path), "--out", s(&dir.join("v"))]);
+        assert_eq!(out.status.code(), Some(3), "{k}: {}", text(&out.stdout));
+        let said = text(&out.stdout);
+        assert!(said.contains("verification: FAILED"), "{said}");
+        assert!(
+            said.contains("departs") && said.contains("tolerance 0.150 m"),
+            "{said}"
+        );
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("v/report.json")).unwrap()).unwrap();
+        assert_eq!(report["verdict"]["passed"], false, "{report}");
+        let worst = report["max_deviation_m"].as_f64().unwrap();
+        assert!(worst > 0.15, "{k}: {worst}");
+        // The largest departure is in the reasons, with its number.
+        let reasons = report["verdict"]["reasons"].to_string();
+        assert!(reasons.contains(&format!("{worst:.3} m")), "{reasons}");
+        // `sign` refuses it and writes nothing; insisting signs it, said.
+        let signed = dir.join("plan.signed");
+        let key = keys.join("master.key");
+        let sign = |extra: &[&str]| {
+            let mut args = vec![
+                "sign",
+                s(&plan_path),
+                "--key",
+                s(&key),
+                "--robot",
+                "rover",
+                "--out",
+                s(&signed),
+            ];
+            args.extend_from_slice(extra);
+            twindrive(&args)
+        };
+        let out = sign(&[]);
+        assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+        assert!(
+            text(&out.stderr).contains("failed verification"),
+            "{}",
+            text(&out.stderr)
+        );
+        assert!(!signed.exists());
+        let out = sign(&["--allow-failed-verification"]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        assert!(
+            text(&out.stderr).contains("FAILED verification"),
+            "{}",
+            text(&out.stderr)
+        );
+        assert!(signed.exists());
+    }
+}

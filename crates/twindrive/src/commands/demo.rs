@@ -555,10 +555,13 @@ fn case_study_report(c: &CaseStudy) -> Report {
         "5. Decoupled operation over the lunar link (paper section 3)",
     );
     r.paragraph(format!(
-        "The plan is signed (ed25519) and uploaded over an emulated lunar link (1.28 s one way, 256 kbit/s,          2 % loss) to a robot agent whose site has a box on the route that the twin lacks. The signed plan          is {} bytes ({:.2} kB per second of mission). The robot drives on its own, with the link never in          its control loop, and stops and hands control back when reality departs from the twin's          prediction. The master then updates the twin (the robot's pose, its parameters when they differ          beyond their uncertainty, and blocks where range readings and contacts show something the twin          lacks), rehearses a continuation on the updated twin, verifies, signs and uploads it, until the          mission completes. Outcome: **{:?}**; {} collision period(s). It ran in {:.0} s of virtual link          time with the code the `twindrive master` and `twindrive robot` processes run.",
+        "The plan is signed (ed25519) and uploaded over an emulated lunar link (1.28 s one way, 256 kbit/s,          2 % loss) to a robot agent whose site has a box on the route that the twin lacks. The signed plan          is {} bytes ({:.2} kB per second of mission). The robot drives on its own, with the link never in          its control loop, and stops and hands control back when reality departs from the twin's          prediction. The master then updates the twin (the robot's pose, its parameters when they differ          beyond their uncertainty, and blocks where range readings and contacts show something the twin          lacks), rehearses a continuation on the updated twin, verifies, signs and uploads it, until the          mission completes, or a continuation fails verification on the twin (nothing unverified is sent: the          mission then ends handed back, with the reason). Outcome: **{:?}**{}; {} collision period(s). It ran in {:.0} s of virtual link          time with the code the `twindrive master` and `twindrive robot` processes run.",
         d.signed_bytes,
         d.signed_bytes as f64 / 1e3 / d.plan_duration_s,
         rep.outcome.unwrap_or(twindrive_agent::operator::Outcome::Failed),
+        rep.failure
+            .as_ref()
+            .map_or(String::new(), |f| format!(" ({f})")),
         rep.collisions,
         d.virtual_s,
     ));

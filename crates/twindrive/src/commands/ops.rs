@@ -157,6 +157,7 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
         );
         let (tx, rx) = (down_key(&args.id), up_key(&args.id));
         let mut stats = twindrive_net::DriveStats::default();
+        let mut voice = crate::progress::Voice::new();
         let drive = twindrive_net::drive_counting(
             &mut agent,
             &session,
@@ -167,7 +168,15 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
             deadline,
             zero,
             &mut stats,
-            |_| false,
+            |agent| {
+                // Every journal line as it happens, and what the robot is
+                // doing when nothing happened for a while.
+                for line in agent.take_said() {
+                    voice.say(&line);
+                }
+                voice.status(|| agent.doing());
+                false
+            },
         );
         tokio::select! {
             r = drive => {
@@ -192,8 +201,31 @@ pub fn router(listen: Vec<String>, zenoh_config: Option<PathBuf>) -> anyhow::Res
     };
     runtime()?.block_on(async {
         let session = open_session(&options).await?;
-        eprintln!("router: listening on {}", listen.join(", "));
-        tokio::signal::ctrl_c().await.ok();
+        let mut voice = crate::progress::Voice::new();
+        voice.say(&format!("router: listening on {}", listen.join(", ")));
+        let started = std::time::Instant::now();
+        let mut known = None;
+        loop {
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => break,
+                _ = tokio::time::sleep(Duration::from_secs(1)) => {}
+            }
+            // Who is connected: said when it changes, and now and then.
+            let peers = session.info().peers_zid().await.count();
+            let routers = session.info().routers_zid().await.count();
+            if known != Some((peers, routers)) {
+                known = Some((peers, routers));
+                voice.say(&format!(
+                    "router: {peers} peer(s) and {routers} other router(s) connected"
+                ));
+            }
+            voice.status(|| {
+                format!(
+                    "router: up {:.0} s, {peers} peer(s) and {routers} other router(s) connected",
+                    started.elapsed().as_secs_f64()
+                )
+            });
+        }
         let _ = session.close().await;
         anyhow::Ok(())
     })

@@ -192,7 +192,13 @@ pub fn run_fleet(
     if let Some(link) = &args.link {
         cmd.args(["--link", link]);
     }
-    cmd.stdout(Stdio::null()).stderr(Stdio::piped());
+    // What the master says goes to a file: a pipe nobody reads until the
+    // end would fill and stall it.
+    let said = out.join("master.stderr");
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let said_file =
+        std::fs::File::create(&said).with_context(|| format!("creating {}", said.display()))?;
+    cmd.stdout(Stdio::null()).stderr(said_file);
     let started = Instant::now();
     let mut master = Proc(cmd.spawn().context("starting the master")?);
     // Bounded: the master gives up by itself after --timeout; this is the
@@ -211,18 +217,18 @@ pub fn run_fleet(
         std::thread::sleep(Duration::from_millis(100));
     };
     let wall_clock_s = started.elapsed().as_secs_f64();
-    let mut stderr = String::new();
-    if let Some(mut e) = master.0.stderr.take() {
-        use std::io::Read;
-        let _ = e.read_to_string(&mut stderr);
-    }
+    let stderr = std::fs::read_to_string(&said).unwrap_or_default();
     drop(robots);
     let fleet_path = out.join("fleet.json");
     if !fleet_path.exists() {
         bail!(
             "the master exited with {status} and wrote no {}: {}",
             fleet_path.display(),
-            stderr.trim()
+            // Its last words.
+            {
+                let said = stderr.trim();
+                &said[said.char_indices().rev().nth(4_000).map_or(0, |(i, _)| i)..]
+            }
         );
     }
     measure(n, &ids, dir, &out, wall_clock_s, args.telemetry_budget)
