@@ -64,11 +64,14 @@ impl Narrator {
         let at = |t_s: f64| format!("{t_s:7.1} s  {}", self.robot_id);
         // The mission's events, as the operator recorded them.
         for e in &op.report.timeline[self.timeline_said..] {
-            out.push(format!(
-                "{}  {}",
-                at(e.t_s),
-                event_text(&e.event, &e.detail)
-            ));
+            // Executions are recorded by transfer: say the plan.
+            let detail = match e.event.as_str() {
+                "execution_started" | "execution_finished" => op
+                    .plan_sha_of_transfer(&e.detail)
+                    .map_or(e.detail.clone(), |sha| sha[..12].to_string()),
+                _ => e.detail.clone(),
+            };
+            out.push(format!("{}  {}", at(e.t_s), event_text(&e.event, &detail)));
         }
         self.timeline_said = op.report.timeline.len();
         let now_s = now_ns as f64 * 1e-9;
@@ -222,6 +225,7 @@ fn event_text(event: &str, detail: &str) -> String {
         "twin_updated" => "the twin learnt from it:",
         "awaiting_operator" => "waiting for the operator:",
         "continuation_planned" => "continuation verified on the twin and signed:",
+        "continuation_refused" => "NO CONTINUATION:",
         "robot_log" => "robot log received:",
         "operator_ended" => "the operator ended the mission:",
         "outcome" => "OUTCOME:",

@@ -503,6 +503,10 @@ impl<S: ChunkStore> Operator<S> {
             Ok(()) => {}
             Err(e) => {
                 self.report.failure = Some(format!("the continuation: {e}"));
+                self.note(
+                    "continuation_refused",
+                    format!("{e}; it is not sent, the mission ends here"),
+                );
                 self.decide(Outcome::HandedBack);
             }
         }
@@ -516,6 +520,15 @@ impl<S: ChunkStore> Operator<S> {
     /// The latest hand-back as the robot sent it, with its sensor window.
     pub fn last_handback(&self) -> Option<&twindrive_link::wire::Handback> {
         self.last_handback.as_deref()
+    }
+
+    /// The SHA-256 of the plan sent as the transfer whose hex id starts
+    /// with `prefix` (the timeline names transfers so).
+    pub fn plan_sha_of_transfer(&self, prefix: &str) -> Option<&str> {
+        self.plans
+            .iter()
+            .find(|p| hex(&p.transfer).starts_with(prefix))
+            .map(|p| p.plan.sha256.as_str())
     }
 
     /// The plan sent as `transfer`.

@@ -727,6 +727,7 @@ fn event_line(
             "waiting for you: continue or end the mission".into(),
         ),
         "continuation_planned" => ("info", format!("continuation uploading: {d}")),
+        "continuation_refused" => ("error", format!("no continuation: {d}")),
         "operator_ended" => ("info", format!("mission ended by the operator: {d}")),
         "outcome" => {
             let (level, word) = match d.as_str() {

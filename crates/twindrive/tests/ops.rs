@@ -176,6 +176,10 @@ fn an_obstacle_the_twin_lacks_is_handed_back_and_the_continuation_completes() {
     assert_eq!(code, Some(0), "{err}");
     let r = m.report();
     assert_eq!(r["outcome"], "completed");
+    assert_master_speaks(
+        &err,
+        &["HAND-BACK", "continuation verified", "OUTCOME: Completed"],
+    );
     assert!(!r["handbacks"].as_array().unwrap().is_empty());
     let updates = r["twin_updates"].as_array().unwrap();
     assert!(
@@ -630,4 +634,33 @@ fn every_robot_log_comes_home_through_a_dead_master_a_dead_link_and_a_robot_rest
     );
     // Nothing moved for B's plan.
     assert_eq!(m.events("execution_started").len(), 1);
+}
+
+/// The master's stderr on a pipe: one line per event, `what` among them,
+/// and never long without a line: it says what it waits for after 4 s of
+/// quiet; 6 s is allowed between two lines, because a continuation planned
+/// in between holds the loop (a second or more on a loaded machine).
+fn assert_master_speaks(err: &str, what: &[&str]) {
+    for w in what.iter().chain(&[
+        "upload done",
+        "the robot started plan",
+        "robot log received",
+    ]) {
+        assert!(err.contains(w), "no `{w}` in:\n{err}");
+    }
+    let times: Vec<f64> = err
+        .lines()
+        .filter_map(|l| l.trim_start().split_once(" s  rover  "))
+        .filter_map(|(t, _)| t.trim().parse().ok())
+        .collect();
+    assert!(times.len() > 5, "{err}");
+    for w in times.windows(2) {
+        assert!(w[1] >= w[0], "{err}");
+        assert!(
+            w[1] - w[0] <= 6.0,
+            "silent from {} s to {} s:\n{err}",
+            w[0],
+            w[1]
+        );
+    }
 }

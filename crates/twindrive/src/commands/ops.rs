@@ -538,12 +538,16 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         worst = worse(worst, outcome);
         writeln!(
             stdout,
-            "{}outcome: {outcome:?}; {} upload(s), {} hand-back(s), {} robot log(s); report: {}",
+            "{}outcome: {outcome:?}{}; {} upload(s), {} hand-back(s), {} robot log(s); report: {}",
             if fleet {
                 format!("{}: ", m.robot)
             } else {
                 String::new()
             },
+            m.op.report
+                .failure
+                .as_ref()
+                .map_or(String::new(), |f| format!(" ({f})")),
             m.op.report.uploads.len(),
             m.op.report.handbacks.len(),
             m.op.report.robot_logs.len(),
