@@ -36,10 +36,19 @@ pub fn bar(total: u64, message: &str) -> ProgressBar {
 }
 
 /// A stand-in terminal that writes each drawn line to stderr as a plain
-/// line, at most one per [`PIPED_EVERY`].
-#[derive(Debug, Default)]
+/// line, at most one per [`PIPED_EVERY`] (the first one after that long:
+/// work that ends sooner prints nothing).
+#[derive(Debug)]
 pub struct Lines {
     last: Mutex<Option<Instant>>,
+}
+
+impl Default for Lines {
+    fn default() -> Self {
+        Self {
+            last: Mutex::new(Some(Instant::now())),
+        }
+    }
 }
 
 impl Lines {
