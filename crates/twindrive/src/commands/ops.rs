@@ -201,31 +201,8 @@ pub fn router(listen: Vec<String>, zenoh_config: Option<PathBuf>) -> anyhow::Res
     };
     runtime()?.block_on(async {
         let session = open_session(&options).await?;
-        let mut voice = crate::progress::Voice::new();
-        voice.say(&format!("router: listening on {}", listen.join(", ")));
-        let started = std::time::Instant::now();
-        let mut known = None;
-        loop {
-            tokio::select! {
-                _ = tokio::signal::ctrl_c() => break,
-                _ = tokio::time::sleep(Duration::from_secs(1)) => {}
-            }
-            // Who is connected: said when it changes, and now and then.
-            let peers = session.info().peers_zid().await.count();
-            let routers = session.info().routers_zid().await.count();
-            if known != Some((peers, routers)) {
-                known = Some((peers, routers));
-                voice.say(&format!(
-                    "router: {peers} peer(s) and {routers} other router(s) connected"
-                ));
-            }
-            voice.status(|| {
-                format!(
-                    "router: up {:.0} s, {peers} peer(s) and {routers} other router(s) connected",
-                    started.elapsed().as_secs_f64()
-                )
-            });
-        }
+        eprintln!("router: listening on {}", listen.join(", "));
+        tokio::signal::ctrl_c().await.ok();
         let _ = session.close().await;
         anyhow::Ok(())
     })
