@@ -92,8 +92,6 @@ pub struct Sender {
     offer_sent_at: Option<u64>,
     answered: bool,
     eof_sent_at: Option<u64>,
-    /// When the receiver last answered (a NAK), if ever.
-    heard_at: Option<u64>,
     /// The offer went again in place of an end-of-file: the end-of-file
     /// follows at once.
     eof_now: bool,
@@ -101,7 +99,7 @@ pub struct Sender {
     /// and is the receiver's whole truth (one that restarted holds less
     /// than an earlier NAK confirmed).
     reoffered: bool,
-    /// End-of-files in a row that went unanswered.
+    /// End-of-files sent since the receiver last answered (a NAK).
     eofs_unanswered: u32,
     next_send_ns: u64,
     rtt_ns: u64,
@@ -201,7 +199,6 @@ impl Sender {
             offer_sent_at: None,
             answered: false,
             eof_sent_at: None,
-            heard_at: None,
             eof_now: false,
             reoffered: false,
             eofs_unanswered: 0,
@@ -256,7 +253,7 @@ impl Sender {
                 missing,
             } if *transfer == self.offer.transfer => {
                 self.stats.naks_received += 1;
-                self.heard_at = Some(now_ns);
+                self.eofs_unanswered = 0;
                 if std::mem::take(&mut self.reoffered) {
                     // What this receiver lists as missing is missing, even
                     // if an earlier receiver held it.
@@ -416,14 +413,6 @@ impl Sender {
             // end-of-files then go unheard). The offer goes again first; a
             // receiver answers it with where it stands, so the transfer
             // resumes with whoever listens now instead of stalling.
-            let unanswered = self
-                .eof_sent_at
-                .is_some_and(|t| self.heard_at.is_none_or(|h| h < t));
-            self.eofs_unanswered = if unanswered {
-                self.eofs_unanswered + 1
-            } else {
-                0
-            };
             if self.eofs_unanswered >= 2 && !self.eof_now {
                 self.eofs_unanswered = 0;
                 self.eof_now = true;
@@ -433,6 +422,7 @@ impl Sender {
             }
             self.eof_now = false;
             self.eof_sent_at = Some(now_ns);
+            self.eofs_unanswered += 1;
             let message = self.stamper.stamp(
                 Body::EndOfFile {
                     transfer: self.offer.transfer,

@@ -444,11 +444,28 @@ impl Verdict {
     /// deviation tolerance of the plan's path, and the closed loop must
     /// end within it of the plan's end.
     pub fn judge(open: &ReplayReport, closed: &ReplayReport, criteria: &Criteria) -> Self {
+        Self::of(
+            criteria,
+            &[("open loop", open), ("closed loop", closed)],
+            closed,
+        )
+    }
+
+    /// Judges the closed-loop replay alone (the way the robot drives a
+    /// plan): no contact, within the tolerance of the plan's path, ending
+    /// within it of the plan's end.
+    pub fn judge_closed_loop(closed: &ReplayReport, criteria: &Criteria) -> Self {
+        Self::of(criteria, &[("closed loop", closed)], closed)
+    }
+
+    /// The verdict on `replays` (each with its name), and on where
+    /// `closed` ended.
+    fn of(criteria: &Criteria, replays: &[(&str, &ReplayReport)], closed: &ReplayReport) -> Self {
         let tol = criteria.max_deviation_m;
         // A NaN distance is beyond any tolerance.
         let beyond = |d: f64| d.is_nan() || d > tol;
         let mut reasons = Vec::new();
-        for (name, r) in [("open loop", open), ("closed loop", closed)] {
+        for &(name, r) in replays {
             if r.collisions > 0 {
                 reasons.push(format!(
                     "{name}: {} collision(s) with the twin's walls",
@@ -482,16 +499,6 @@ impl Verdict {
             max_deviation_m: tol,
             reasons,
         }
-    }
-
-    /// Judges the closed-loop replay alone (the way the robot drives a
-    /// plan): no contact, within the tolerance of the plan's path, ending
-    /// within it of the plan's end.
-    pub fn judge_closed_loop(closed: &ReplayReport, criteria: &Criteria) -> Self {
-        let mut v = Self::judge(closed, closed, criteria);
-        v.reasons.retain(|r| !r.starts_with("open loop"));
-        v.passed = v.reasons.is_empty();
-        v
     }
 
     /// One line for people: `passed (...)` or `FAILED: reason; reason`.

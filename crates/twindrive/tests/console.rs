@@ -500,13 +500,7 @@ async fn a_rehearsal_becomes_a_plan_with_its_stages_drawn_and_verified() {
             "{l} in {layers}"
         );
     }
-    let summary = c
-        .find(Locator::Id("plan-summary"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let summary = text(c, "plan-summary").await;
     assert!(
         summary.contains("100.00 %") || summary.contains("99."),
         "{summary}"
@@ -699,13 +693,7 @@ async fn a_plan_uploaded_over_a_lossy_link_reaches_100_percent_and_runs() {
     assert_eq!(drawn.len(), 1, "{drawn:?}");
     assert_eq!(drawn[0]["id"], "rover");
     assert_eq!(drawn[0]["pose"], reported, "drawn where it reports itself");
-    let fleet = c
-        .find(Locator::Css("#fleet tbody"))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let fleet = text(c, "fleet").await;
     assert!(
         fleet.contains(&sha[..12]),
         "the plan in the fleet list: {fleet}"
