@@ -3,8 +3,9 @@
 //! plan, a hand-back with its reason and where, the twin's update, a
 //! continuation verified and sent, completion, each robot log) and, when
 //! nothing happened for a while, what it is waiting for and for how long.
-//! No I/O and time as an argument: the process prints the lines (on a pipe
-//! one per line, on a terminal above a live status line).
+//! No I/O and time as an argument: the process prints the events, and
+//! [`Narrator::waiting_line`] as a live line on a terminal or after a quiet
+//! while on a pipe.
 
 use twindrive_link::upload::ChunkStore;
 use twindrive_link::wire::{PlanPhase, TransferId};
@@ -17,7 +18,7 @@ pub enum Verbosity {
     /// The outcome only (and errors).
     Quiet,
     /// Every event, progress every 10 %, and what it waits for when
-    /// nothing happened for [`Narrator::quiet_after_s`].
+    /// nothing happened for a while.
     Normal,
     /// Also every status summary the robot sends.
     Verbose,
@@ -28,13 +29,10 @@ pub enum Verbosity {
 pub struct Narrator {
     robot_id: String,
     verbosity: Verbosity,
-    /// Says what it waits for after this long without a line (s).
-    pub quiet_after_s: f64,
     timeline_said: usize,
     statuses_said: u64,
     upload_tenth: Option<(TransferId, u32)>,
     plan_tenth: Option<(TransferId, u32)>,
-    last_line_ns: u64,
 }
 
 impl Narrator {
@@ -42,12 +40,10 @@ impl Narrator {
         Self {
             robot_id: robot_id.into(),
             verbosity,
-            quiet_after_s: 4.0,
             timeline_said: 0,
             statuses_said: 0,
             upload_tenth: None,
             plan_tenth: None,
-            last_line_ns: 0,
         }
     }
 
@@ -55,7 +51,7 @@ impl Narrator {
         self.verbosity
     }
 
-    /// The lines to print at `now_ns` (the operator's clock).
+    /// The events to print at `now_ns` (the operator's clock).
     pub fn lines<S: ChunkStore>(&mut self, op: &Operator<S>, now_ns: u64) -> Vec<String> {
         let mut out = Vec::new();
         if self.verbosity == Verbosity::Quiet {
@@ -108,13 +104,18 @@ impl Narrator {
                 }
             }
         }
-        if !out.is_empty() {
-            self.last_line_ns = now_ns;
-        } else if now_ns.saturating_sub(self.last_line_ns) as f64 * 1e-9 >= self.quiet_after_s {
-            out.push(format!("{}  {}", at(now_s), self.waiting(op, now_ns)));
-            self.last_line_ns = now_ns;
-        }
         out
+    }
+
+    /// [`Narrator::waiting`] as a line like the events', stamped with the
+    /// time.
+    pub fn waiting_line<S: ChunkStore>(&self, op: &Operator<S>, now_ns: u64) -> String {
+        format!(
+            "{:7.1} s  {}  {}",
+            now_ns as f64 * 1e-9,
+            self.robot_id,
+            self.waiting(op, now_ns)
+        )
     }
 
     /// What the mission waits for now, with how long: the live status line

@@ -121,6 +121,15 @@ impl Voice {
         }
     }
 
+    /// Plain lines even on a terminal (one of several voices in a process,
+    /// which would fight over one live line).
+    pub fn plain() -> Self {
+        Self {
+            live: None,
+            last: Instant::now(),
+        }
+    }
+
     /// One event, now.
     pub fn say(&mut self, line: &str) {
         match &self.live {

@@ -3,7 +3,7 @@
 //! fleet. The protocol is twindrive-agent's state machines; this file reads
 //! inputs, opens the session, drives them and writes what they produce.
 
-use std::io::{IsTerminal, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
@@ -626,64 +626,44 @@ pub(crate) fn process_usage() -> Option<(f64, u64)> {
     Some((ticks / 100.0, hwm_kb * 1024))
 }
 
-/// What the master says about one robot: event lines on stderr (above a
-/// live status line on a terminal), as `-q`/`-v` ask.
+/// What the master says about one robot: its events, and what it waits
+/// for (a live line on a terminal, a line after a quiet while on a pipe),
+/// as `-q`/`-v` ask.
 struct Speaker {
     narrator: Narrator,
-    /// The live status line (a terminal, one robot).
-    live: Option<indicatif::ProgressBar>,
+    /// `None` when quiet.
+    voice: Option<crate::progress::Voice>,
 }
 
 impl Speaker {
+    /// `live`: a live line on a terminal (one robot; a fleet's robots say
+    /// plain lines).
     fn new(robot: &str, verbosity: Verbosity, live: bool) -> Self {
-        let live =
-            (live && verbosity != Verbosity::Quiet && std::io::stderr().is_terminal()).then(|| {
-                let bar = indicatif::ProgressBar::new_spinner();
-                bar.enable_steady_tick(Duration::from_millis(250));
-                bar
-            });
+        let voice = if live {
+            crate::progress::Voice::new
+        } else {
+            crate::progress::Voice::plain
+        };
         Self {
             narrator: Narrator::new(robot, verbosity),
-            live,
+            voice: (verbosity != Verbosity::Quiet).then(voice),
         }
     }
 
-    fn say(&self, line: &str) {
-        if self.narrator_quiet() {
-            return;
+    fn say(&mut self, line: &str) {
+        if let Some(voice) = &mut self.voice {
+            voice.say(line);
         }
-        match &self.live {
-            Some(bar) => bar.println(line),
-            None => eprintln!("{line}"),
-        }
-    }
-
-    fn narrator_quiet(&self) -> bool {
-        self.narrator.verbosity() == Verbosity::Quiet
     }
 
     fn tell(&mut self, op: &Operator<DirStore>, now_ns: u64) {
-        let lines = self.narrator.lines(op, now_ns);
-        match &self.live {
-            Some(bar) => {
-                for l in lines.iter().filter(|l| !l.contains("  waiting")) {
-                    bar.println(l);
-                }
-                bar.set_message(self.narrator.waiting(op, now_ns));
-            }
-            None => {
-                let mut err = std::io::stderr().lock();
-                for l in lines {
-                    let _ = writeln!(err, "{l}");
-                }
-            }
+        let Some(voice) = &mut self.voice else {
+            return;
+        };
+        for line in self.narrator.lines(op, now_ns) {
+            voice.say(&line);
         }
-    }
-
-    fn finish(&self) {
-        if let Some(bar) = &self.live {
-            bar.finish_and_clear();
-        }
+        voice.status(|| self.narrator.waiting_line(op, now_ns));
     }
 }
 
@@ -740,7 +720,6 @@ async fn supervise(
         },
     )
     .await;
-    speaker.finish();
     if let Some(e) = write_error {
         return Err(WriteError(e).into());
     }
