@@ -65,21 +65,14 @@ fn write_new(path: &Path, bytes: &[u8], mode: u32) -> anyhow::Result<()> {
 }
 
 /// The bytes of the twin's world a plan was rehearsed in: `scenario` if
-/// given, else the built-in scenario the plan names.
-pub fn world_bytes(
-    plan_json: &[u8],
-    plan_path: &Path,
-    scenario: Option<&Path>,
-) -> anyhow::Result<Vec<u8>> {
-    let plan: twindrive_mission::plan::MissionPlan =
-        crate::json::parse(plan_json, plan_path, crate::json::PLAN)?;
-    let scenario_name = &plan.header.robot.scenario;
+/// given, else the built-in scenario the plan names (`scenario_name`).
+pub fn world_bytes(scenario_name: &str, scenario: Option<&Path>) -> anyhow::Result<Vec<u8>> {
     Ok(match scenario {
         Some(path) => std::fs::read(path)
             .with_context(|| format!("--scenario: reading {}", path.display()))?,
         None => match twindrive_sim::builtin::ALL
             .iter()
-            .find(|(n, _)| n == scenario_name)
+            .find(|(n, _)| *n == scenario_name)
         {
             Some((_, text)) => text.as_bytes().to_vec(),
             None => bail!(
@@ -102,8 +95,8 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
         .with_context(|| format!("--key: reading {}", args.key.display()))?;
     let key = read_private_key_pem(&key_text)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.key.display()))?;
-    let world = world_bytes(&plan_json, &args.plan, args.scenario.as_deref())?;
-    let plan = super::verify_plan::read_plan(&args.plan)?;
+    let plan = super::verify_plan::parse_plan(&plan_json, &args.plan)?;
+    let world = world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
     let twin = crate::verification::twin_of(&plan, args.scenario.as_deref())?;
     crate::verification::check_before_sending(&plan, &twin, args.allow_failed_verification)?;
     let now = since_epoch()?;

@@ -246,7 +246,9 @@ fn first_plan(
         if same {
             (unfinished.clone().expect("checked"), true)
         } else {
-            let world = super::keys::world_bytes(&plan_json, path, args.scenario.as_deref())?;
+            let plan = super::verify_plan::parse_plan(&plan_json, path)?;
+            let world =
+                super::keys::world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
             let key = key.expect("clap: --plan requires --key");
             let now = super::keys::since_epoch()?;
             let envelope = Envelope::new(

@@ -45,7 +45,13 @@ pub struct VerifyReport {
 
 /// Reads and checks a plan file (format, hash, contents).
 pub fn read_plan(path: &Path) -> anyhow::Result<MissionPlan> {
-    let plan: MissionPlan = crate::json::read(path, crate::json::PLAN)?;
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    parse_plan(&bytes, path)
+}
+
+/// Checks the bytes of the plan file `path` (format, hash, contents).
+pub fn parse_plan(bytes: &[u8], path: &Path) -> anyhow::Result<MissionPlan> {
+    let plan: MissionPlan = crate::json::parse(bytes, path, crate::json::PLAN)?;
     plan.validate()
         .with_context(|| format!("{}", path.display()))?;
     Ok(plan)
