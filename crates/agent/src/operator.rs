@@ -12,12 +12,10 @@ use serde::Serialize;
 use twindrive_link::envelope::{Envelope, Supervision, Tolerances, sign_plan};
 use twindrive_link::upload::ChunkStore;
 use twindrive_link::wire::{Message, PlanPhase, TransferId};
-use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::plan::{MissionPlan, hex, sha256_hex};
-use twindrive_mission::redundancy::RedundancyConfig;
 
 use crate::master::{Master, MasterEvent};
-use crate::twin::{LearnSettings, Twin, TwinUpdate, remaining_s};
+use crate::twin::{ContinuationSettings, LearnSettings, Twin, TwinUpdate};
 
 /// What the operator does when the robot hands control back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -63,20 +61,18 @@ pub struct OperatorConfig {
     pub log_wait_s: f64,
     /// At most this many continuations.
     pub max_continuations: usize,
-    /// The shortest continuation rehearsed (s).
-    pub min_continuation_s: f64,
-    pub pipeline: PipelineSettings,
+    /// How continuations go around what the twin learnt.
+    pub continuation: ContinuationSettings,
 }
 
 impl OperatorConfig {
-    /// An operator that replans on a hand-back (up to ten continuations of
-    /// at least 10 s, with redundancy at the plan's footprint), for plans
+    /// An operator that replans on a hand-back (up to ten continuations,
+    /// with the default detour clearance and pace), for plans
     /// valid a day and unsupervised, with the default tolerances, waiting
-    /// two minutes for the robot's logs. `first` is the plan the mission
-    /// starts with, signed for the world whose hash is `world_sha256`.
+    /// two minutes for the robot's logs. The mission's first plan is
+    /// signed with `first_counter` for the world whose hash is `world_sha256`.
     pub fn replanning(
         robot_id: &str,
-        first: &MissionPlan,
         first_counter: u64,
         world_sha256: String,
         unix_time_at_zero_s: f64,
@@ -94,14 +90,7 @@ impl OperatorConfig {
             world_sha256,
             log_wait_s: 120.0,
             max_continuations: 10,
-            min_continuation_s: 10.0,
-            pipeline: PipelineSettings {
-                planner: Default::default(),
-                redundancy: RedundancyConfig::with_pinch_distance(
-                    first.header.robot.footprint_radius_m,
-                ),
-                filter: Default::default(),
-            },
+            continuation: ContinuationSettings::default(),
         }
     }
 }
@@ -192,8 +181,8 @@ pub struct Operator<S: ChunkStore> {
     /// owner to keep.
     pub new_plans: VecDeque<(Arc<MissionPlan>, Vec<u8>, Vec<u8>)>,
     /// With [`OnHandback::Ask`]: the hand-back waiting for the operator's
-    /// decision, and the plan time a continuation would still cover (s).
-    awaiting: Option<(HandbackEntry, f64)>,
+    /// decision, with the plan it interrupted and where (plan time, s).
+    awaiting: Option<(HandbackEntry, Arc<MissionPlan>, f64)>,
     /// The latest hand-back as the robot sent it (its sensor window).
     last_handback: Option<Box<twindrive_link::wire::Handback>>,
     now_ns: u64,
@@ -483,7 +472,22 @@ impl<S: ChunkStore> Operator<S> {
                 }
             ),
         );
+        let learnt_nothing = !update.changed() && h.reason == "range_residual";
         self.report.twin_updates.push(update);
+        if learnt_nothing {
+            // Readings departed from the twin's, yet none of them is short
+            // of or beyond its prediction by enough to say where: the same
+            // continuation would hand back the same way.
+            let why = "the robot's readings departed from the twin's, but the twin could not \
+                       learn where from them; a continuation would hand back the same way";
+            self.report.failure = Some(format!("the continuation: {why}"));
+            self.note(
+                "continuation_refused",
+                format!("{why}; the mission ends here"),
+            );
+            self.decide(Outcome::HandedBack);
+            return;
+        }
         let continuations = self.plans.len() - 1;
         if self.config.on_handback == OnHandback::Stop
             || continuations >= self.config.max_continuations
@@ -491,15 +495,17 @@ impl<S: ChunkStore> Operator<S> {
             self.decide(Outcome::HandedBack);
             return;
         }
-        let duration = self.plan_of(&h.plan).map_or(0.0, |p| p.plan.duration_s());
-        let remaining = remaining_s(duration, h.plan_t_s, self.config.min_continuation_s);
+        let interrupted = self
+            .plan_of(&h.plan)
+            .map(|p| p.plan.clone())
+            .expect("the current plan is one sent");
         if self.config.on_handback == OnHandback::Ask {
             let entry = self.report.handbacks.last().expect("pushed above").clone();
-            self.awaiting = Some((entry, remaining));
+            self.awaiting = Some((entry, interrupted, h.plan_t_s));
             self.note("awaiting_operator", "continue or end the mission".into());
             return;
         }
-        match self.continue_from(remaining) {
+        match self.continue_from(&interrupted, h.plan_t_s) {
             Ok(()) => {}
             Err(e) => {
                 self.report.failure = Some(format!("the continuation: {e}"));
@@ -538,7 +544,7 @@ impl<S: ChunkStore> Operator<S> {
 
     /// The hand-back waiting for a decision ([`OnHandback::Ask`]).
     pub fn awaiting_decision(&self) -> Option<&HandbackEntry> {
-        self.awaiting.as_ref().map(|(h, _)| h)
+        self.awaiting.as_ref().map(|(h, _, _)| h)
     }
 
     /// The operator's decision on a waiting hand-back: rehearse the rest of
@@ -546,14 +552,14 @@ impl<S: ChunkStore> Operator<S> {
     /// upload it. On failure the hand-back stays waiting.
     pub fn replan(&mut self, now_ns: u64) -> anyhow::Result<()> {
         self.now_ns = now_ns;
-        let Some((_, remaining)) = &self.awaiting else {
+        let Some((_, interrupted, plan_t_s)) = &self.awaiting else {
             anyhow::bail!("no hand-back is waiting for a decision");
         };
         if self.twin.is_none() {
             anyhow::bail!("this operator has no twin to rehearse a continuation on");
         }
-        let remaining = *remaining;
-        self.continue_from(remaining)?;
+        let (interrupted, plan_t_s) = (interrupted.clone(), *plan_t_s);
+        self.continue_from(&interrupted, plan_t_s)?;
         self.awaiting = None;
         Ok(())
     }
@@ -574,12 +580,14 @@ impl<S: ChunkStore> Operator<S> {
         self.master
     }
 
-    /// Rehearses, signs and uploads a continuation of `duration_s`.
-    fn continue_from(&mut self, duration_s: f64) -> anyhow::Result<()> {
+    /// Plans, verifies, signs and uploads the continuation of `interrupted`
+    /// from `plan_t_s` on.
+    fn continue_from(&mut self, interrupted: &MissionPlan, plan_t_s: f64) -> anyhow::Result<()> {
         let twin = self.twin.as_ref().expect("replanning needs the twin");
         let plan = twin.continuation(
-            duration_s,
-            &self.config.pipeline,
+            interrupted,
+            plan_t_s,
+            &self.config.continuation,
             &self.config.tolerances.criteria(),
         )?;
         let learnt = serde_json::to_string(&twin.learnt)?;
@@ -609,8 +617,11 @@ impl<S: ChunkStore> Operator<S> {
         self.note(
             "continuation_planned",
             format!(
-                "{:.1} s rehearsed on the updated twin, plan {} ({} samples)",
-                duration_s,
+                "the rest of plan {} from {:.1} s on, around {} learnt block(s): {:.1} s, plan {} ({} samples)",
+                &interrupted.sha256[..12],
+                plan_t_s,
+                twin.learnt.len(),
+                plan.duration_s(),
                 &plan.sha256[..12],
                 plan.samples.len()
             ),

@@ -9,17 +9,24 @@
 //!   than a tenth of a millimetre: below that no plan changes);
 //! - its world: every range reading in the hand-back's sensor window that
 //!   ends well short of where the twin's world says it should, and a bumper
-//!   contact the twin did not predict, marks an obstacle point; points
-//!   within `cluster_m` of each other make one solid block, grown by
-//!   `grow_m` (a range sensor sees one face of an obstacle, not its depth).
+//!   contact the twin did not predict, marks an obstacle point, kept with
+//!   where it was seen from; a reading that ends well beyond where the twin
+//!   says it should is free space, and removes the points learnt before
+//!   along its ray (the twin learnt them wrong). The learnt world is
+//!   rebuilt from all the points kept: points within `cluster_m` of each
+//!   other make one solid block, given `depth_m` behind the faces seen (a
+//!   range sensor sees one face of an obstacle, not its depth) and
+//!   `grow_m` along them, never towards where they were seen from, so the
+//!   twin predicts the faces where the robot saw them.
 
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::wire::Handback;
 use twindrive_mission::PipelineError;
-use twindrive_mission::pipeline::{PipelineSettings, plan_from_log};
-use twindrive_mission::plan::{MissionPlan, sha256_hex};
+use twindrive_mission::detour::{Block, DetourSettings};
+use twindrive_mission::pipeline::continuation_plan;
+use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::verify::{self, Criteria, TrackerSettings, Verdict};
-use twindrive_sim::{Scenario, SensorModel, Simulator};
+use twindrive_sim::{Scenario, SensorModel, World};
 
 /// The master's twin: its scenario (world and simulated robot) and the
 /// operator's calibrated parameters.
@@ -27,9 +34,24 @@ use twindrive_sim::{Scenario, SensorModel, Simulator};
 pub struct Twin {
     pub scenario: Scenario,
     pub calibrated: DiffDriveParams,
-    /// Blocks learnt from the robot so far.
-    pub learnt: Vec<([f64; 2], [f64; 2])>,
+    /// Blocks learnt from the robot so far (the learnt world now).
+    pub learnt: Vec<Block>,
+    /// The world as the twin knew it before learning.
+    known: World,
+    /// Obstacle points learnt, each with where it was seen from.
+    evidence: Vec<Evidence>,
 }
+
+/// An obstacle point and the place it was seen from (the sensor's mount,
+/// or the robot's centre for a contact).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Evidence {
+    point: [f64; 2],
+    seen_from: [f64; 2],
+}
+
+/// A sight line through free space: from the sensor to short of what it saw.
+type Ray = ([f64; 2], [f64; 2]);
 
 /// What a hand-back changed in the twin.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -38,18 +60,35 @@ pub struct TwinUpdate {
     /// The new parameters, when they changed.
     pub params: Option<DiffDriveParams>,
     /// Blocks added to the world: `(min, max)` corners (m).
-    pub obstacles_added: Vec<([f64; 2], [f64; 2])>,
-    /// Obstacle points behind them (range endpoints and contacts).
+    pub obstacles_added: Vec<Block>,
+    /// Learnt blocks taken out (or replaced by a corrected block).
+    pub obstacles_removed: Vec<Block>,
+    /// Obstacle points behind the new blocks (range endpoints and contacts).
     pub evidence_points: usize,
+    /// Points learnt before that free-space readings contradicted.
+    pub evidence_removed: usize,
+}
+
+impl TwinUpdate {
+    /// Whether the twin's world or parameters changed (its pose always does).
+    pub fn changed(&self) -> bool {
+        self.params.is_some()
+            || !self.obstacles_added.is_empty()
+            || !self.obstacles_removed.is_empty()
+    }
 }
 
 /// How readings become obstacles.
 #[derive(Debug, Clone, Copy)]
 pub struct LearnSettings {
-    /// A reading this much shorter than the twin's prediction marks an obstacle (m).
+    /// A reading this much shorter than the twin's prediction marks an
+    /// obstacle, and this much longer marks free space (m).
     pub shorter_by_m: f64,
     pub cluster_m: f64,
+    /// A block's extent beyond its points along the faces seen (m).
     pub grow_m: f64,
+    /// A block's depth behind the faces seen (m).
+    pub depth_m: f64,
 }
 
 impl Default for LearnSettings {
@@ -57,7 +96,8 @@ impl Default for LearnSettings {
         Self {
             shorter_by_m: 0.08,
             cluster_m: 0.3,
-            grow_m: 0.05,
+            grow_m: 0.03,
+            depth_m: 0.1,
         }
     }
 }
@@ -65,9 +105,11 @@ impl Default for LearnSettings {
 impl Twin {
     pub fn new(scenario: Scenario, calibrated: DiffDriveParams) -> Self {
         Self {
+            known: scenario.world.clone(),
             scenario,
             calibrated,
             learnt: Vec::new(),
+            evidence: Vec::new(),
         }
     }
 
@@ -86,41 +128,70 @@ impl Twin {
             let d = (h.params[i] - twin[i]).abs();
             sigma.is_finite() && d > 3.0 * sigma && d > 1e-4
         });
-        let params = differs.then(|| DiffDriveParams {
-            left_diameter_m: h.params[0],
-            right_diameter_m: h.params[1],
-            wheelbase_m: h.params[2],
-        });
-        if let Some(p) = params.filter(|p| p.validate().is_ok()) {
+        let params = differs
+            .then(|| DiffDriveParams {
+                left_diameter_m: h.params[0],
+                right_diameter_m: h.params[1],
+                wheelbase_m: h.params[2],
+            })
+            .filter(|p| p.validate().is_ok());
+        if let Some(p) = params {
             self.calibrated = p;
             self.scenario.robot.true_params = p;
             self.scenario.robot.nominal_params = p;
         }
-        // The world: points the twin cannot explain.
-        let points = self.obstacle_points(h, settings);
+        // The world: points the twin cannot explain, and free space where
+        // it predicted a learnt obstacle.
+        let (points, free_rays) = self.readings(h, settings);
+        let before = self.evidence.len();
+        self.evidence.retain(|e| {
+            !free_rays
+                .iter()
+                .any(|&(a, b)| distance_to_segment(e.point, a, b) < 0.5 * settings.shorter_by_m)
+        });
+        let evidence_removed = before - self.evidence.len();
+        self.evidence.extend_from_slice(&points);
         // A block never covers where the robot stands (it touched the
         // obstacle's face, it is not inside it).
-        let clear = self.scenario.robot.footprint_radius_m + 0.001;
-        let blocks: Vec<_> = cluster(&points, settings)
+        let clear =
+            self.scenario.robot.footprint_radius_m + 0.1 * self.scenario.bump.contact_margin_m;
+        let blocks: Vec<Block> = cluster(&self.evidence, settings)
             .into_iter()
             .filter_map(|b| clip_clear_of(b, [pose.x_m, pose.y_m], clear))
             .collect();
-        if !blocks.is_empty() {
-            self.scenario.world = self.scenario.world.with_blocks(&blocks);
-            self.learnt.extend_from_slice(&blocks);
+        let obstacles_added: Vec<Block> = blocks
+            .iter()
+            .filter(|b| !self.learnt.contains(b))
+            .copied()
+            .collect();
+        let obstacles_removed: Vec<Block> = self
+            .learnt
+            .iter()
+            .filter(|b| !blocks.contains(b))
+            .copied()
+            .collect();
+        if blocks != self.learnt {
+            self.scenario.world = self.known.with_blocks(&blocks);
+            self.learnt = blocks;
         }
         TwinUpdate {
             pose,
-            params: params.filter(|p| p.validate().is_ok()),
-            obstacles_added: blocks,
+            params,
+            obstacles_added,
+            obstacles_removed,
             evidence_points: points.len(),
+            evidence_removed,
         }
     }
 
-    fn obstacle_points(&self, h: &Handback, settings: &LearnSettings) -> Vec<[f64; 2]> {
+    /// The hand-back window's readings against the twin's predictions:
+    /// obstacle points (readings well short of the prediction, contacts the
+    /// twin did not predict) and free rays (sensor to reading, for readings
+    /// well beyond a prediction that ended on a learnt obstacle).
+    fn readings(&self, h: &Handback, settings: &LearnSettings) -> (Vec<Evidence>, Vec<Ray>) {
         let mut model = SensorModel::new(&self.scenario);
         let mut predicted = vec![0.0; model.beams()];
-        let mut points = Vec::new();
+        let (mut points, mut free) = (Vec::new(), Vec::new());
         let sensors = &self.scenario.range_sensors;
         for w in &h.window {
             let pose = Pose::new(w.pose[0], w.pose[1], w.pose[2]);
@@ -135,54 +206,88 @@ impl Twin {
                     let measured = f64::from(measured);
                     let expected = predicted[beam];
                     beam += 1;
-                    if !measured.is_finite()
-                        || measured >= info.max_range_m - 0.02
-                        || measured > expected - settings.shorter_by_m
-                    {
+                    if !measured.is_finite() {
                         continue;
                     }
                     let (mx, my) = pose.transform_point(info.mount.x_m, info.mount.y_m);
                     let angle = pose.heading_rad + info.mount.heading_rad + info.beam_angle_rad(k);
-                    points.push([mx + measured * angle.cos(), my + measured * angle.sin()]);
+                    let (sn, cs) = angle.sin_cos();
+                    let at = |r: f64| [mx + r * cs, my + r * sn];
+                    if measured < info.max_range_m - 0.02
+                        && measured < expected - settings.shorter_by_m
+                    {
+                        points.push(Evidence {
+                            point: at(measured),
+                            seen_from: [mx, my],
+                        });
+                    } else if measured > expected + settings.shorter_by_m
+                        && self.on_learnt(at(expected))
+                    {
+                        // Free up to a little short of what it saw.
+                        let end = (measured - settings.shorter_by_m).max(0.0);
+                        free.push(([mx, my], at(end)));
+                    }
                 }
             }
             if w.bump && !bump_predicted {
-                let r = self.scenario.robot.footprint_radius_m + 0.005;
-                points.push([
-                    pose.x_m + r * pose.heading_rad.cos(),
-                    pose.y_m + r * pose.heading_rad.sin(),
-                ]);
+                // On the footprint, within the bumper's reach (the twin's
+                // robot standing there touches it too).
+                let r = self.scenario.robot.footprint_radius_m
+                    + 0.25 * self.scenario.bump.contact_margin_m;
+                points.push(Evidence {
+                    point: [
+                        pose.x_m + r * pose.heading_rad.cos(),
+                        pose.y_m + r * pose.heading_rad.sin(),
+                    ],
+                    seen_from: [pose.x_m, pose.y_m],
+                });
             }
         }
-        points
+        (points, free)
     }
 
-    /// The operator's continuation: the mission's controller re-run on the
-    /// updated twin from the hand-back pose for `duration_s`, through the
-    /// pipeline, and verified on the twin the way the robot drives it,
+    /// Whether `p` lies on (within a centimetre of) a learnt block.
+    fn on_learnt(&self, p: [f64; 2]) -> bool {
+        self.learnt.iter().any(|(min, max)| {
+            p[0] >= min[0] - 0.01
+                && p[0] <= max[0] + 0.01
+                && p[1] >= min[1] - 0.01
+                && p[1] <= max[1] + 0.01
+        })
+    }
+
+    /// The operator's continuation of `interrupted`, which the robot
+    /// handed back `plan_t_s` into: from the hand-back pose back onto the
+    /// rest of the plan and around every stretch of it that now passes a
+    /// learnt block ([`twindrive_mission::detour`]), so the mission's route
+    /// is still covered; verified on the twin the way the robot drives it,
     /// closed loop (no contact, within `criteria`'s deviation of its own
-    /// path, ending within it of its end) before it
-    /// is returned. The twin's robot moves with the parameters the plan is
-    /// made with (one robot model for the rehearsal and the plan) and
-    /// without the wheel slip the simulated site adds: slip belongs to the
-    /// real ground, which the twin does not know; the robot's closed-loop
-    /// tracking and its hand-back tolerances absorb it.
+    /// path, ending within it of its end) before it is returned. The twin's
+    /// robot moves with the parameters the plan is made with (one robot
+    /// model for the plan and its verification) and without the wheel slip
+    /// the simulated site adds: slip belongs to the real ground, which the
+    /// twin does not know; the robot's closed-loop tracking and its
+    /// hand-back tolerances absorb it.
     pub fn continuation(
         &self,
-        duration_s: f64,
-        settings: &PipelineSettings,
+        interrupted: &MissionPlan,
+        plan_t_s: f64,
+        settings: &ContinuationSettings,
         criteria: &Criteria,
     ) -> Result<MissionPlan, PipelineError> {
         let mut scenario = self.scenario.clone();
         scenario.robot.true_params = self.calibrated;
         scenario.robot.slip_std = 0.0;
-        scenario
-            .set_duration_s(duration_s)
-            .map_err(|e| PipelineError::Infeasible(format!("continuation duration: {e}")))?;
-        let log = Simulator::new(scenario.clone()).run(|_, _| {});
-        let log_sha = sha256_hex(format!("continuation:{:?}", log.header.start).as_bytes());
-        let (plan, _) =
-            plan_from_log(&log, &log_sha, &self.calibrated, &scenario, settings, false)?;
+        let mut interrupted = interrupted.clone();
+        interrupted.header.calibrated = self.calibrated;
+        let plan = continuation_plan(
+            &interrupted,
+            plan_t_s,
+            &scenario,
+            &self.learnt,
+            &settings.detour,
+            settings.pace,
+        )?;
         let closed = verify::closed_loop(
             &plan.samples,
             scenario,
@@ -200,46 +305,90 @@ impl Twin {
     }
 }
 
-/// Single-linkage clusters of points within `cluster_m`, each as a grown
-/// axis-aligned block.
-fn cluster(points: &[[f64; 2]], settings: &LearnSettings) -> Vec<([f64; 2], [f64; 2])> {
-    let n = points.len();
+/// How continuations are made.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContinuationSettings {
+    pub detour: DetourSettings,
+    /// The share of the robot's wheel speed and acceleration limits the
+    /// continuation is timed for.
+    pub pace: f64,
+}
+
+impl Default for ContinuationSettings {
+    fn default() -> Self {
+        Self {
+            detour: DetourSettings::default(),
+            pace: 0.5,
+        }
+    }
+}
+
+/// Single-linkage clusters of points within `cluster_m`, each as one
+/// block: the union of its points' boxes, each point's box `depth_m` deep
+/// behind the face it lies on (away from where it was seen from, across the
+/// axis its sight line mostly runs along) and `grow_m` wide along it.
+fn cluster(evidence: &[Evidence], settings: &LearnSettings) -> Vec<Block> {
+    let n = evidence.len();
     let mut label: Vec<Option<usize>> = vec![None; n];
     let mut blocks = Vec::new();
     for start in 0..n {
         if label[start].is_some() {
             continue;
         }
-        let id = blocks.len();
-        label[start] = Some(id);
+        label[start] = Some(blocks.len());
         let mut stack = vec![start];
-        let (mut min, mut max) = (points[start], points[start]);
+        let mut block = point_box(&evidence[start], settings);
         while let Some(i) = stack.pop() {
-            let p = points[i];
-            min = [min[0].min(p[0]), min[1].min(p[1])];
-            max = [max[0].max(p[0]), max[1].max(p[1])];
+            let b = point_box(&evidence[i], settings);
+            block = (
+                [block.0[0].min(b.0[0]), block.0[1].min(b.0[1])],
+                [block.1[0].max(b.1[0]), block.1[1].max(b.1[1])],
+            );
+            let p = evidence[i].point;
             for j in 0..n {
-                if label[j].is_none()
-                    && (points[j][0] - p[0]).hypot(points[j][1] - p[1]) <= settings.cluster_m
-                {
-                    label[j] = Some(id);
+                let q = evidence[j].point;
+                if label[j].is_none() && (q[0] - p[0]).hypot(q[1] - p[1]) <= settings.cluster_m {
+                    label[j] = Some(blocks.len());
                     stack.push(j);
                 }
             }
         }
-        let g = settings.grow_m;
-        blocks.push(([min[0] - g, min[1] - g], [max[0] + g, max[1] + g]));
+        blocks.push(block);
     }
     blocks
 }
 
+/// The box one obstacle point stands for (see [`cluster`]).
+fn point_box(e: &Evidence, settings: &LearnSettings) -> Block {
+    let p = e.point;
+    let sight = [p[0] - e.seen_from[0], p[1] - e.seen_from[1]];
+    let across = usize::from(sight[1].abs() > sight[0].abs());
+    let (mut min, mut max) = (p, p);
+    if sight[across] > 0.0 {
+        max[across] += settings.depth_m;
+    } else {
+        min[across] -= settings.depth_m;
+    }
+    min[1 - across] -= settings.grow_m;
+    max[1 - across] += settings.grow_m;
+    (min, max)
+}
+
+/// Distance from `p` to the segment `a`-`b`.
+fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let s = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a[0] + s * dx - p[0]).hypot(a[1] + s * dy - p[1])
+}
+
 /// Moves the face of `block` nearest to `centre` back until the disc of
 /// `radius` around `centre` is clear of it; `None` if nothing is left.
-fn clip_clear_of(
-    (mut min, mut max): ([f64; 2], [f64; 2]),
-    centre: [f64; 2],
-    radius: f64,
-) -> Option<([f64; 2], [f64; 2])> {
+fn clip_clear_of((mut min, mut max): Block, centre: [f64; 2], radius: f64) -> Option<Block> {
     let nearest = [
         centre[0].clamp(min[0], max[0]),
         centre[1].clamp(min[1], max[1]),
@@ -266,9 +415,109 @@ fn clip_clear_of(
     Some((min, max))
 }
 
-/// Wraps an updated twin's plan-making for the operator: the mission
-/// duration left after a hand-back at `plan_t_s` of a plan lasting
-/// `plan_duration_s`, at least `min_s`.
-pub fn remaining_s(plan_duration_s: f64, plan_t_s: f64, min_s: f64) -> f64 {
-    (plan_duration_s - plan_t_s).max(min_s)
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use twindrive_link::wire::WindowSample;
+
+    /// A hand-back whose window holds what the site's sensors read at `poses`.
+    fn handback(site: &Scenario, poses: &[Pose]) -> Handback {
+        let mut model = SensorModel::new(site);
+        let mut ranges = vec![0.0; model.beams()];
+        let window = poses
+            .iter()
+            .map(|p| {
+                let bump = model.read(p, &mut ranges);
+                WindowSample {
+                    plan_t_s: 0.0,
+                    pose: [p.x_m, p.y_m, p.heading_rad],
+                    ranges_m: ranges.iter().map(|&r| r as f32).collect(),
+                    bump,
+                }
+            })
+            .collect();
+        let last = poses.last().unwrap();
+        Handback {
+            plan: [0; 32],
+            reason: "range_residual".into(),
+            plan_t_s: 1.0,
+            progress: 0,
+            pose: [last.x_m, last.y_m, last.heading_rad],
+            params: [0.0652, 0.0665, 0.2678],
+            params_covariance: [1.0; 9],
+            window,
+        }
+    }
+
+    /// Drives westwards past the box's south face (the side IR looks at it)
+    /// and on beyond its west edge.
+    fn sweep(min: [f64; 2], max: [f64; 2]) -> Vec<Pose> {
+        let mut poses = Vec::new();
+        let y = min[1] - 0.3;
+        let mut x = max[0] + 0.3;
+        while x > min[0] - 0.6 {
+            poses.push(Pose::new(x, y, std::f64::consts::PI));
+            x -= 0.01;
+        }
+        poses
+    }
+
+    /// Random boxes the twin lacks, seen by the side IR from random
+    /// distances: the learnt block's seen face is where the box's is (within
+    /// the sensor's noise and a centimetre), and it never reaches towards
+    /// the robot; a wrong point learnt earlier is removed once a reading
+    /// passes through it.
+    #[test]
+    fn learnt_blocks_sit_on_the_faces_seen_and_free_readings_clear_wrong_ones() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let twin_site = twindrive_sim::builtin::load("wall_following")
+            .unwrap()
+            .unwrap();
+        for _ in 0..10 {
+            let (w, h) = (rng.random_range(0.15..0.4), rng.random_range(0.15..0.4));
+            let min = [rng.random_range(1.5..3.5), rng.random_range(0.7..1.0)];
+            let max = [min[0] + w, min[1] + h];
+            let mut site = twin_site.clone();
+            site.world = site.world.with_blocks(&[(min, max)]);
+            let mut twin = Twin::new(twin_site.clone(), twin_site.robot.true_params);
+            // A wrong point first: a block in free space west of the box.
+            let wrong = [min[0] - 0.45, min[1] + 0.05];
+            twin.evidence.push(Evidence {
+                point: wrong,
+                seen_from: [wrong[0], wrong[1] - 0.3],
+            });
+            twin.learnt = cluster(&twin.evidence, &LearnSettings::default());
+            twin.scenario.world = twin.known.with_blocks(&twin.learnt);
+            let update = twin.apply(
+                &handback(&site, &sweep(min, max)),
+                &LearnSettings::default(),
+            );
+            assert!(update.evidence_points > 5, "{update:?}");
+            let seen = twin
+                .learnt
+                .iter()
+                .find(|b| b.0[0] < max[0] && b.1[0] > min[0])
+                .unwrap_or_else(|| panic!("nothing learnt on {min:?}-{max:?}: {:?}", twin.learnt));
+            assert!(
+                (seen.0[1] - min[1]).abs() < 0.01,
+                "south face at {} for {}",
+                seen.0[1],
+                min[1]
+            );
+            assert!(
+                seen.0[0] >= min[0] - 0.05 && seen.1[0] <= max[0] + 0.05,
+                "{seen:?}"
+            );
+            // The readings past the box's west edge went through the wrong
+            // point: it is gone, and no block stands there.
+            assert!(!twin.evidence.iter().any(|e| e.point == wrong));
+            assert!(!twin.learnt.iter().any(|b| {
+                b.0[0] <= wrong[0] && b.1[0] >= wrong[0] && b.0[1] <= wrong[1] && b.1[1] >= wrong[1]
+            }));
+            assert_eq!(update.obstacles_removed.len(), 1, "{update:?}");
+            assert_eq!(update.evidence_removed, 1);
+        }
+    }
 }

@@ -16,8 +16,6 @@ use twindrive_link::emulator::{LinkEmulator, LinkProfile};
 use twindrive_link::envelope::{Envelope, Supervision, generate_key, sign_plan};
 use twindrive_link::upload::{MemoryStore, SenderConfig};
 use twindrive_link::vtime::VirtualLink;
-use twindrive_mission::pipeline::PipelineSettings;
-use twindrive_mission::redundancy::RedundancyConfig;
 
 const S: u64 = 1_000_000_000;
 const UNIX0: f64 = 1.8e9;
@@ -132,12 +130,7 @@ fn harness_with_budget(
             world_sha256: "0".repeat(64),
             log_wait_s: 1_200.0,
             max_continuations: 6,
-            min_continuation_s: 10.0,
-            pipeline: PipelineSettings {
-                planner: Default::default(),
-                redundancy: RedundancyConfig::with_pinch_distance(0.15),
-                filter: Default::default(),
-            },
+            continuation: Default::default(),
         },
     );
     Harness {

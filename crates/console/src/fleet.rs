@@ -376,7 +376,6 @@ impl RobotSlot {
                 supervision: signing.supervision,
                 ..OperatorConfig::replanning(
                     &self.id,
-                    &plan,
                     counter,
                     signing.world_sha256.to_owned(),
                     signing.unix_at_zero_s,

@@ -16,6 +16,7 @@
 //! REP-103 frames, SI units, radians throughout.
 
 pub mod control;
+pub mod detour;
 mod error;
 pub mod path;
 pub mod pipeline;

@@ -205,15 +205,13 @@ pub fn plan_from_log(
     settings: &PipelineSettings,
     time_optimal: bool,
 ) -> Result<(crate::plan::MissionPlan, Stages), PipelineError> {
-    use crate::plan::{MissionPlan, PlanHeader, PlanSample, RobotInfo};
+    use crate::plan::{PlanHeader, RobotInfo};
     let header = &log.header;
     let limits = WheelLimits {
         max_speed_rad_s: header.max_wheel_speed_rad_s,
         max_accel_rad_s2: header.max_wheel_accel_rad_s2,
     };
     let stages = run(log, params, &limits, settings)?;
-    let mut model = twindrive_sim::SensorModel::new(scenario);
-    let mut ranges = vec![0.0; model.beams()];
     let (path, commands) = if time_optimal {
         let (p, c) = stages.fastest.as_ref().map_err(|e| {
             PipelineError::Infeasible(format!("the time-optimal re-timing failed: {e}"))
@@ -222,27 +220,17 @@ pub fn plan_from_log(
     } else {
         (&stages.filtered.samples, &stages.filtered.commands)
     };
-    let samples: Vec<PlanSample> = path
-        .iter()
-        .zip(commands)
-        .map(|(p, c)| {
-            let bump = model.read(&p.pose, &mut ranges);
-            PlanSample::new(p, c, ranges.clone(), bump)
-        })
-        .collect();
     let summary = serde_json::to_value(stages.summary())
         .map_err(|e| PipelineError::Infeasible(format!("the stage summary: {e}")))?;
-    let plan = MissionPlan::new(
+    let plan = plan_document(
+        path,
+        commands,
         PlanHeader {
             robot: RobotInfo {
                 scenario: header.scenario.clone(),
                 footprint_radius_m: header.footprint_radius_m,
                 ticks_per_rev: header.ticks_per_rev,
-                range_sensors: scenario
-                    .range_sensors
-                    .iter()
-                    .map(|s| s.info.clone())
-                    .collect(),
+                range_sensors: Vec::new(),
             },
             calibrated: *params,
             limits,
@@ -255,8 +243,114 @@ pub fn plan_from_log(
             }),
             summary,
         },
-        samples,
+        scenario,
     );
     plan.validate()?;
     Ok((plan, stages))
+}
+
+/// The plan document for a timed path and its commands: each sample with
+/// the twin's predicted range readings and bump there (`header`'s range
+/// sensors are `scenario`'s).
+fn plan_document(
+    path: &[PathSample],
+    commands: &[WheelCommand],
+    mut header: crate::plan::PlanHeader,
+    scenario: &twindrive_sim::Scenario,
+) -> crate::plan::MissionPlan {
+    use crate::plan::{MissionPlan, PlanSample};
+    let mut model = twindrive_sim::SensorModel::new(scenario);
+    let mut ranges = vec![0.0; model.beams()];
+    let samples: Vec<PlanSample> = path
+        .iter()
+        .zip(commands)
+        .map(|(p, c)| {
+            let bump = model.read(&p.pose, &mut ranges);
+            PlanSample::new(p, c, ranges.clone(), bump)
+        })
+        .collect();
+    header.robot.range_sensors = scenario
+        .range_sensors
+        .iter()
+        .map(|s| s.info.clone())
+        .collect();
+    MissionPlan::new(header, samples)
+}
+
+/// A continuation of `interrupted` for a robot that handed back at
+/// `plan_t_s`, standing at `scenario`'s start pose in the twin's updated
+/// world (`learnt`: the blocks learnt so far): back onto the rest of the
+/// plan and around every stretch of it that passes a learnt block
+/// ([`crate::detour`]), re-timed as fast as `pace` times the robot's wheel
+/// limits allow. The plan is validated before it is returned; verifying it
+/// on the twin is the caller's.
+pub fn continuation_plan(
+    interrupted: &crate::plan::MissionPlan,
+    plan_t_s: f64,
+    scenario: &twindrive_sim::Scenario,
+    learnt: &[crate::detour::Block],
+    detour: &crate::detour::DetourSettings,
+    pace: f64,
+) -> Result<crate::plan::MissionPlan, PipelineError> {
+    use crate::plan::PlanHeader;
+    let h = &interrupted.header;
+    let t0 = interrupted.samples.first().map_or(0.0, |s| s.t_s);
+    let remaining: Vec<PathSample> = interrupted
+        .samples
+        .iter()
+        .filter(|s| s.t_s - t0 >= plan_t_s)
+        .map(|s| PathSample {
+            t_s: s.t_s,
+            pose: s.pose(),
+            v_m_s: s.v_m_s,
+            omega_rad_s: s.omega_rad_s,
+        })
+        .collect();
+    if remaining.is_empty() {
+        return Err(PipelineError::Infeasible(format!(
+            "the plan ends before {plan_t_s:.2} s: nothing is left to continue"
+        )));
+    }
+    let start = scenario.robot.start;
+    let path = crate::detour::continuation_path(
+        &scenario.world,
+        h.robot.footprint_radius_m,
+        start,
+        &remaining,
+        learnt,
+        detour,
+    )?;
+    let limits = h.limits.scaled(pace);
+    let (path, commands) =
+        crate::spikes::time_optimal(&path, &h.calibrated, &limits, h.time_step_s)?;
+    let length_m = path_length_m(&path);
+    let duration_s = path.last().map_or(0.0, |s| s.t_s) - path[0].t_s;
+    let plan = plan_document(
+        &path,
+        &commands,
+        PlanHeader {
+            robot: h.robot.clone(),
+            calibrated: h.calibrated,
+            limits: h.limits,
+            time_step_s: h.time_step_s,
+            start,
+            source_log_sha256: h.source_log_sha256.clone(),
+            settings: serde_json::json!({
+                "continuation_of": interrupted.sha256,
+                "from_plan_t_s": plan_t_s,
+                "clearance_m": detour.clearance_m,
+                "pace": pace,
+                "timing": "time_optimal",
+            }),
+            summary: serde_json::json!({
+                "continuation_of": interrupted.sha256,
+                "length_m": length_m,
+                "duration_s": duration_s,
+                "learnt_blocks": learnt.len(),
+            }),
+        },
+        scenario,
+    );
+    plan.validate()?;
+    Ok(plan)
 }

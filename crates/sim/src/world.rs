@@ -179,6 +179,17 @@ impl World {
         best
     }
 
+    /// Distance from `(x_m, y_m)` to the nearest wall, at most `cutoff_m`;
+    /// 0 inside a solid block or an occupied or unknown map cell.
+    pub fn clearance_m(&self, x_m: f64, y_m: f64, cutoff_m: f64) -> f64 {
+        let p = Vector::new(x_m, y_m);
+        if self.inside_obstacle(p) {
+            return 0.0;
+        }
+        self.nearest_within(p, cutoff_m)
+            .map_or(cutoff_m, |n| n.distance_m)
+    }
+
     /// True if `p` is inside a solid block or an occupied or unknown map cell.
     pub fn inside_obstacle(&self, p: Vector) -> bool {
         self.solids.iter().any(|s| s.contains_local_point(p))

@@ -261,7 +261,7 @@ impl<B: RobotBackend> Mission<B> {
             master,
             Some(Twin::new(twin.clone(), plan.header.calibrated)),
             Some(key.clone()),
-            OperatorConfig::replanning(robot_id, plan, 1, world_sha256, UNIX_AT_ZERO_S),
+            OperatorConfig::replanning(robot_id, 1, world_sha256, UNIX_AT_ZERO_S),
         );
         let state = tempfile::Builder::new()
             .prefix(".twindrive-robot-")

@@ -429,7 +429,6 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
                 // Continuations build on the world the first plan was signed for.
                 ..OperatorConfig::replanning(
                     robot,
-                    &first.plan,
                     first.counter,
                     first.world_sha256.clone(),
                     unix_at_zero,
