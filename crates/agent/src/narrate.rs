@@ -136,7 +136,7 @@ impl Narrator {
                 format!("{n} pending on the robot")
             });
             return format!(
-                "waiting for the robot's logs ({pending}): {waited_s:.0} s of at most {limit_s:.0} s{silent}"
+                "waiting for the robot's next log ({pending}): {waited_s:.0} s of at most {limit_s:.0} s{silent}"
             );
         }
         if op.awaiting_decision().is_some() {

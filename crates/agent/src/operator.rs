@@ -57,7 +57,8 @@ pub struct OperatorConfig {
     pub first_counter: u64,
     /// SHA-256 of the twin's world the first plan was rehearsed in.
     pub world_sha256: String,
-    /// How long to wait for the robot's log once the mission is decided (s).
+    /// How long to wait for the robot's next log once the mission is
+    /// decided (s; the wait starts again with each log received).
     pub log_wait_s: f64,
     /// At most this many continuations.
     pub max_continuations: usize,
@@ -171,6 +172,8 @@ pub struct Operator<S: ChunkStore> {
     pub report: Report,
     plans: Vec<SentPlan>,
     decided_at_ns: Option<u64>,
+    /// When the latest robot log came in.
+    last_log_at_ns: Option<u64>,
     logs_received: usize,
     /// Logs pending on the robot, by its latest status since the decision.
     status_after_decision: Option<u32>,
@@ -221,6 +224,7 @@ impl<S: ChunkStore> Operator<S> {
             config,
             plans: Vec::new(),
             decided_at_ns: None,
+            last_log_at_ns: None,
             logs_received: 0,
             status_after_decision: None,
             new_logs: VecDeque::new(),
@@ -283,10 +287,10 @@ impl<S: ChunkStore> Operator<S> {
         }
     }
 
-    /// The mission is decided, and the robot's logs are in (or were waited
-    /// for long enough).
+    /// The mission is decided, and the robot's logs are in (or the next
+    /// one was waited for long enough).
     pub fn is_done(&self) -> bool {
-        let Some(at) = self.decided_at_ns else {
+        let Some(at) = self.waiting_since_ns() else {
             return false;
         };
         // The robot has said, since, that no log of its waits for the master.
@@ -296,11 +300,19 @@ impl<S: ChunkStore> Operator<S> {
         logs_in || self.now_ns >= at + (self.config.log_wait_s * 1e9) as u64
     }
 
+    /// Once the mission is decided, the wait for the robot's next log runs
+    /// from the decision or the latest log received, whichever is later: a
+    /// slow link that keeps delivering logs is waited for.
+    fn waiting_since_ns(&self) -> Option<u64> {
+        let at = self.decided_at_ns?;
+        Some(self.last_log_at_ns.map_or(at, |l| l.max(at)))
+    }
+
     /// Once the mission is decided: the robot's logs still pending by its
     /// latest status since (unknown before one arrives), the seconds waited
-    /// and the seconds the operator waits at most.
+    /// for the next one and the seconds the operator waits for it at most.
     pub fn waiting_for_logs(&self, now_ns: u64) -> Option<(Option<u32>, f64, f64)> {
-        let at = self.decided_at_ns?;
+        let at = self.waiting_since_ns()?;
         Some((
             self.status_after_decision,
             now_ns.saturating_sub(at) as f64 * 1e-9,
@@ -363,6 +375,7 @@ impl<S: ChunkStore> Operator<S> {
                 MasterEvent::Handback(h) => self.handback(&h),
                 MasterEvent::RobotLog { file, .. } => {
                     self.logs_received += 1;
+                    self.last_log_at_ns = Some(now_ns);
                     // Logs come back in the order the plans ran.
                     let plan = self
                         .plans
@@ -655,7 +668,7 @@ impl<S: ChunkStore> Operator<S> {
 
     pub fn poll_timeout(&self) -> Option<u64> {
         let wait = self
-            .decided_at_ns
+            .waiting_since_ns()
             .map(|at| at + (self.config.log_wait_s * 1e9) as u64);
         [self.master.poll_timeout(), wait]
             .into_iter()

@@ -400,8 +400,8 @@ impl RobotSlot {
         ))
     }
 
-    /// Continues after a hand-back: a continuation rehearsed on the updated
-    /// twin from the hand-back pose, signed and uploaded.
+    /// Continues after a hand-back: the rest of the plan from the hand-back
+    /// pose around what the twin learnt, verified, signed and uploaded.
     pub fn replan(&mut self, now_ns: u64) -> Result<String, String> {
         let Some(Link::Operating(op)) = self.link.as_mut() else {
             return Err(format!("robot {}: no mission to continue", self.id));

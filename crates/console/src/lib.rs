@@ -7,7 +7,8 @@
 //! supervises it: the robot's reported pose against the twin's prediction,
 //! residuals against the hand-back tolerances, the link and the age of
 //! every stream, the hand-back banner and the decision after it (a
-//! continuation rehearsed on the updated twin, or the end of the mission).
+//! continuation around what the updated twin learnt, or the end of the
+//! mission).
 //!
 //! Modules: [`workspace`] (the twin, no I/O), [`planning`] (pipeline and
 //! verification), [`fleet`] (one master end and operator per robot),

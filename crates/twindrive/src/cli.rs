@@ -431,7 +431,8 @@ pub struct MasterArgs {
     /// --telemetry-budget.
     #[arg(long, value_name = "BYTES_PER_S", default_value_t = 8000.0, value_parser = usage::telemetry_budget)]
     pub telemetry_budget: f64,
-    /// Wait this long for the robot's logs once the mission is decided, seconds.
+    /// Once the mission is decided, wait this long for the robot's next log
+    /// (the wait starts again with each log received), seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 120.0, value_parser = usage::seconds_or_zero)]
     pub log_wait: f64,
     /// Send the plan even if it fails verification on the twin (its open-
