@@ -22,7 +22,7 @@
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::wire::Handback;
 use twindrive_mission::PipelineError;
-use twindrive_mission::detour::{Block, DetourSettings};
+use twindrive_mission::detour::{Block, DetourSettings, distance_to_block};
 use twindrive_mission::pipeline::continuation_plan;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::verify::{self, Criteria, TrackerSettings, Verdict};
@@ -248,12 +248,7 @@ impl Twin {
 
     /// Whether `p` lies on (within a centimetre of) a learnt block.
     fn on_learnt(&self, p: [f64; 2]) -> bool {
-        self.learnt.iter().any(|(min, max)| {
-            p[0] >= min[0] - 0.01
-                && p[0] <= max[0] + 0.01
-                && p[1] >= min[1] - 0.01
-                && p[1] <= max[1] + 0.01
-        })
+        self.learnt.iter().any(|b| distance_to_block(p, b) <= 0.01)
     }
 
     /// The operator's continuation of `interrupted`, which the robot
@@ -278,11 +273,10 @@ impl Twin {
         let mut scenario = self.scenario.clone();
         scenario.robot.true_params = self.calibrated;
         scenario.robot.slip_std = 0.0;
-        let mut interrupted = interrupted.clone();
-        interrupted.header.calibrated = self.calibrated;
         let plan = continuation_plan(
-            &interrupted,
+            interrupted,
             plan_t_s,
+            &self.calibrated,
             &scenario,
             &self.learnt,
             &settings.detour,

@@ -54,7 +54,7 @@ const BACK_OFF_M: f64 = 0.08;
 pub type Block = ([f64; 2], [f64; 2]);
 
 /// Distance from `p` to `block` (0 inside).
-fn distance_to_block(p: [f64; 2], (min, max): &Block) -> f64 {
+pub fn distance_to_block(p: [f64; 2], (min, max): &Block) -> f64 {
     let dx = (min[0] - p[0]).max(p[0] - max[0]).max(0.0);
     let dy = (min[1] - p[1]).max(p[1] - max[1]).max(0.0);
     dx.hypot(dy)

@@ -282,11 +282,12 @@ fn plan_document(
 /// world (`learnt`: the blocks learnt so far): back onto the rest of the
 /// plan and around every stretch of it that passes a learnt block
 /// ([`crate::detour`]), re-timed as fast as `pace` times the robot's wheel
-/// limits allow. The plan is validated before it is returned; verifying it
+/// limits allow, for a robot with the parameters `params`. The plan is validated before it is returned; verifying it
 /// on the twin is the caller's.
 pub fn continuation_plan(
     interrupted: &crate::plan::MissionPlan,
     plan_t_s: f64,
+    params: &DiffDriveParams,
     scenario: &twindrive_sim::Scenario,
     learnt: &[crate::detour::Block],
     detour: &crate::detour::DetourSettings,
@@ -321,8 +322,7 @@ pub fn continuation_plan(
         detour,
     )?;
     let limits = h.limits.scaled(pace);
-    let (path, commands) =
-        crate::spikes::time_optimal(&path, &h.calibrated, &limits, h.time_step_s)?;
+    let (path, commands) = crate::spikes::time_optimal(&path, params, &limits, h.time_step_s)?;
     let length_m = path_length_m(&path);
     let duration_s = path.last().map_or(0.0, |s| s.t_s) - path[0].t_s;
     let plan = plan_document(
@@ -330,7 +330,7 @@ pub fn continuation_plan(
         &commands,
         PlanHeader {
             robot: h.robot.clone(),
-            calibrated: h.calibrated,
+            calibrated: *params,
             limits: h.limits,
             time_step_s: h.time_step_s,
             start,

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::process::Output;
 
 use common::{repo, text, twindrive_in as twindrive};
+use twindrive_mission::detour::distance_to_block;
 
 fn files(dir: &Path) -> Vec<String> {
     let mut names: Vec<String> = std::fs::read_dir(dir)
@@ -137,9 +138,8 @@ fn demo_runs_from_any_directory() {
     for h in handbacks {
         // The box is [1.9, 2.1] x [0.9, 1.2]; its side IR sees 0.8 m at most.
         let p: Vec<f64> = serde_json::from_value(h["pose"].clone()).unwrap();
-        let dx = (1.9 - p[0]).max(p[0] - 2.1).max(0.0);
-        let dy = (0.9 - p[1]).max(p[1] - 1.2).max(0.0);
-        assert!(dx.hypot(dy) < 0.5, "a hand-back away from the box: {h}");
+        let d = distance_to_block([p[0], p[1]], &([1.9, 0.9], [2.1, 1.2]));
+        assert!(d < 0.5, "a hand-back away from the box: {h}");
     }
     assert!(
         report["twin_updates"]
