@@ -1,20 +1,27 @@
 //! The robot's executive: runs an accepted plan on its own, at the control
 //! rate, and decides every stop locally.
 //!
-//! Each tick takes what the robot sensed and gives the wheel commands for
-//! the next period. The plan's trajectory is tracked on the robot's own
-//! odometry (the tracker `verify-plan` uses on the twin). It stops, with
-//! zero wheel speeds from then on:
+//! Each tick takes what the robot sensed and where it believes it is (its
+//! filter's estimate: odometry fused with localization against the plan's
+//! map, in the site's frame) and gives the wheel commands for the next
+//! period. The plan's trajectory is tracked from that estimate (the
+//! tracker `verify-plan` uses on the twin). It stops, with zero wheel
+//! speeds from then on:
 //! - when the plan is done;
 //! - on a bump the plan did not predict;
-//! - when reality departs from the twin's prediction: odometry farther
+//! - when reality departs from the twin's prediction: the estimate farther
 //!   from the plan's pose at that time than `max_deviation_m` (a robot held
-//!   back by something the twin lacks), or range readings whose absolute
-//!   difference from the plan's predicted ones has a median over the last
-//!   `residual_window` ticks above `max_range_residual_m` (a wall or box
-//!   where the twin saw none; the median lets a reading that jumps at a
-//!   wall's edge a tick early pass). These are hand-backs: control returns to the
-//!   operator;
+//!   back by something the twin lacks), or range readings whose mean
+//!   absolute difference from what the map predicts has a median over the
+//!   last `residual_window` ticks above `max_range_residual_m` (a wall or
+//!   box where the twin saw none; the median lets a reading that jumps at
+//!   a wall's edge a tick early pass). The prediction is the robot's own,
+//!   from the map the plan carries, bit for bit the twin's, and the best of
+//!   several counts: at the estimate and at poses within its uncertainty
+//!   (when the robot localizes; a beam that skims a wall's end flips on a
+//!   millimetre), and at the plan's poses within `range_match_s` of now. A
+//!   localized robot's residual means the world changed, not that the
+//!   robot is lost. These are hand-backs: control returns to the operator;
 //! - when a supervised plan has heard nothing from the master for longer
 //!   than its dead-man timeout.
 //!
@@ -28,6 +35,7 @@ use twindrive_kinematics::Pose;
 use twindrive_mission::PipelineError;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::verify::{Tracker, TrackerSettings};
+use twindrive_sim::RangeModel;
 
 use crate::backend::Reading;
 pub use twindrive_link::envelope::Tolerances;
@@ -80,12 +88,34 @@ impl Stop {
     }
 }
 
+/// Where the robot believes it is, for one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Belief {
+    /// The pose to steer by, in the site's frame.
+    pub pose: Pose,
+    /// Its standard deviations (x, y m; heading rad).
+    pub pose_std: [f64; 3],
+    /// Whether the pose comes from localization against the plan's map
+    /// (else from odometry alone).
+    pub localizing: bool,
+}
+
 /// One plan being driven.
 pub struct Executive {
     plan: Arc<MissionPlan>,
     tracker: Tracker,
     tolerances: Tolerances,
     dead_man_timeout_s: Option<f64>,
+    /// What the robot's range sensors should read, from the plan's map.
+    model: RangeModel,
+    predicted: Vec<f64>,
+    /// The residual of the latest fresh readings (repeated until the next).
+    last_residual: Option<f64>,
+    /// Standard deviations of the estimate (x, y m; heading rad).
+    pose_std: [f64; 3],
+    /// Whether the estimate is localized on the map (else readings are
+    /// compared with the map along the plan).
+    localizing: bool,
     /// Time of the first tick (the plan's time zero).
     t0_s: Option<f64>,
     last_heard_s: f64,
@@ -109,7 +139,13 @@ impl Executive {
             plan.header.robot.ticks_per_rev,
             max_wheel_rad_s.min(plan.header.limits.max_speed_rad_s),
         )?;
+        let model = plan.range_model();
         Ok(Self {
+            predicted: vec![0.0; model.beams()],
+            model,
+            last_residual: None,
+            pose_std: [0.0; 3],
+            localizing: true,
             plan,
             tracker,
             tolerances,
@@ -132,7 +168,7 @@ impl Executive {
         self.stopped.as_ref()
     }
 
-    /// Odometry's pose estimate.
+    /// The pose the plan was last tracked from.
     pub fn estimate(&self) -> Pose {
         self.tracker.estimate()
     }
@@ -156,9 +192,12 @@ impl Executive {
         self.last_median
     }
 
-    /// What the robot sensed over the last period in; the wheel commands for
-    /// the next one out.
-    pub fn tick(&mut self, reading: &Reading) -> [f64; 2] {
+    /// What the robot sensed over the last period and where it believes it
+    /// is now in; the wheel commands for the next period out.
+    pub fn tick(&mut self, reading: &Reading, belief: &Belief) -> [f64; 2] {
+        self.pose_std = belief.pose_std;
+        self.localizing = belief.localizing;
+        let estimate = belief.pose;
         if self.stopped.is_some() {
             return [0.0, 0.0];
         }
@@ -168,9 +207,7 @@ impl Executive {
             self.last_heard_s = reading.t_s;
         }
         let t = reading.t_s - t0;
-        let command = self
-            .tracker
-            .command(&self.plan.samples, t, reading.encoder_ticks);
+        let command = self.tracker.command_from(&self.plan.samples, t, estimate);
         if let Some(stop) = self.check(reading, t) {
             self.stopped = Some((reading.t_s, stop));
             return [0.0, 0.0];
@@ -217,32 +254,68 @@ impl Executive {
         if deviation_m > self.tolerances.max_deviation_m {
             return Some(Stop::Deviation { deviation_m });
         }
-        // Predicted against measured ranges: the best match among the plan's
-        // samples within `range_match_s` of now (a reading that flips at a
-        // wall's edge a little early or late is explained by a neighbour; a
-        // box the twin lacks is explained by none).
-        let lo = self
-            .plan
-            .samples
-            .partition_point(|s| s.t_s < now - self.tolerances.range_match_s);
-        let hi = self
-            .plan
-            .samples
-            .partition_point(|s| s.t_s <= now + self.tolerances.range_match_s);
-        let mut best: Option<f64> = None;
-        for s in &self.plan.samples[lo..hi.max(lo)] {
-            let (mut sum, mut count) = (0.0, 0usize);
-            for (m, e) in reading.ranges_m.iter().zip(&s.expected_ranges_m) {
-                if m.is_finite() && e.is_finite() {
-                    sum += (m - e).abs();
-                    count += 1;
+        // Measured against predicted ranges, on fresh readings; the latest
+        // stands until the next. A beam that skims a wall's end flips
+        // between the wall and the distance on a millimetre of pose: the
+        // best of the predictions at the estimate and at poses a little off
+        // it (within the estimate's uncertainty, at least 1 cm and 0.01 rad,
+        // at most 3 cm and 0.03 rad) counts, when the robot localizes.
+        if reading.fresh_ranges_m.iter().any(|r| r.is_finite()) {
+            let d = [
+                (2.0 * self.pose_std[0].max(self.pose_std[1])).clamp(0.01, 0.03),
+                (2.0 * self.pose_std[2]).clamp(0.01, 0.03),
+            ];
+            let (s, c) = estimate.heading_rad.sin_cos();
+            // And the plan's poses within `range_match_s` of now (every
+            // fifth), as when plans carried the twin's predictions: a
+            // reading the map explains near the estimate or along the plan
+            // is no discrepancy.
+            let m = self.tolerances.range_match_s;
+            let lo = self.plan.samples.partition_point(|s| s.t_s < now - m);
+            let hi = self.plan.samples.partition_point(|s| s.t_s <= now + m);
+            let along_plan = self.plan.samples[lo..hi.max(lo)]
+                .iter()
+                .step_by(5)
+                .map(|s| s.pose());
+            let near_estimate = [
+                (0.0, 0.0, 0.0),
+                (d[0] * c, d[0] * s, 0.0),
+                (-d[0] * c, -d[0] * s, 0.0),
+                (-d[0] * s, d[0] * c, 0.0),
+                (d[0] * s, -d[0] * c, 0.0),
+                (0.0, 0.0, d[1]),
+                (0.0, 0.0, -d[1]),
+            ]
+            .into_iter()
+            .filter(|_| self.localizing)
+            .map(|(dx, dy, dh)| {
+                Pose::new(
+                    estimate.x_m + dx,
+                    estimate.y_m + dy,
+                    estimate.heading_rad + dh,
+                )
+            });
+            let candidates: Vec<Pose> = near_estimate.chain(along_plan).collect();
+            let mut best: Option<f64> = None;
+            for pose in candidates {
+                self.model.read(&pose, &mut self.predicted);
+                let (mut sum, mut count) = (0.0, 0usize);
+                for (m, e) in reading.fresh_ranges_m.iter().zip(&self.predicted) {
+                    if m.is_finite() && e.is_finite() {
+                        sum += (m - e).abs();
+                        count += 1;
+                    }
+                }
+                if count > 0 {
+                    let r = sum / count as f64;
+                    best = Some(best.map_or(r, |b: f64| b.min(r)));
                 }
             }
-            if count > 0 {
-                let r = sum / count as f64;
-                best = Some(best.map_or(r, |b: f64| b.min(r)));
+            if best.is_some() {
+                self.last_residual = best;
             }
         }
+        let best = self.last_residual;
         if let Some(residual) = best {
             self.residuals.push_back(residual);
             if self.residuals.len() > self.tolerances.residual_window {

@@ -4,6 +4,10 @@
 //!
 //! - [`backend`]: the boundary to the robot (a site simulator today);
 //! - [`executive`]: drives an accepted plan and decides every stop locally;
+//! - [`localize`]: where the robot is on the plan's map, from its range
+//!   readings, for the robot's filter;
+//! - [`navigator`]: the robot's estimate (augmented EKF on encoders, any
+//!   tracker and the localizer's matches);
 //! - [`robot`]: the robot agent (uploads, plan gate, execution, online EKF,
 //!   journal, telemetry, hand-back, log back-fill);
 //! - [`master`]: the master's end (upload, supervision, telemetry, hand-backs, robot logs);
@@ -15,8 +19,10 @@
 pub mod backend;
 pub mod direct;
 pub mod executive;
+pub mod localize;
 pub mod master;
 pub mod narrate;
+pub mod navigator;
 pub mod operator;
 pub mod robot;
 pub mod ros;

@@ -32,10 +32,6 @@ use std::sync::Arc;
 
 use ed25519_dalek::VerifyingKey;
 use serde_json::json;
-use twindrive_estimation::NoiseModel;
-use twindrive_estimation::{
-    FilterConfig, OnlineCalibrator, PoseSample, WheelSample, initial_estimate,
-};
 use twindrive_link::envelope::{CounterFile, PlanGate};
 use twindrive_link::upload::{
     DirStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
@@ -46,8 +42,10 @@ use twindrive_link::wire::{
 use twindrive_log::{MissionLog, StepRecord};
 use twindrive_mission::plan::{MissionPlan, hex};
 
-use crate::backend::{Reading, RobotBackend};
+use crate::backend::RobotBackend;
 use crate::executive::{Executive, Stop};
+use crate::localize::{LocalizeSettings, Mode};
+use crate::navigator::{Navigator, initial_estimate};
 
 /// How the agent runs.
 #[derive(Debug, Clone)]
@@ -68,6 +66,8 @@ pub struct AgentConfig {
     pub time_scale: f64,
     /// Largest signed plan file accepted.
     pub max_plan_file_bytes: u64,
+    /// How the robot localizes against each plan's map.
+    pub localization: LocalizeSettings,
 }
 
 impl AgentConfig {
@@ -81,6 +81,7 @@ impl AgentConfig {
             status_period_s: 1.0,
             time_scale: 1.0,
             max_plan_file_bytes: 16 << 20,
+            localization: LocalizeSettings::default(),
         }
     }
 }
@@ -127,8 +128,10 @@ impl Journal {
 struct Running {
     transfer: TransferId,
     exec: Executive,
-    ekf: Option<OnlineCalibrator>,
-    rad_per_tick: f64,
+    /// The augmented EKF and the localizer.
+    nav: Navigator,
+    /// Whether the localizer has a recent fix (as last journaled).
+    localized: bool,
     log: MissionLog,
     /// Backend time of the plan's first tick.
     t0_s: Option<f64>,
@@ -183,6 +186,8 @@ pub struct RobotAgent<B: RobotBackend> {
     params: [f64; 3],
     params_std: [f64; 3],
     pose: [f64; 3],
+    /// The pose's 3 x 3 covariance (row major; infinite before any estimate).
+    pose_covariance: [f64; 9],
     bumps: u32,
     collisions: u32,
     last_bump: bool,
@@ -257,6 +262,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             params: [f64::NAN; 3],
             params_std: [f64::NAN; 3],
             pose: [f64::NAN; 3],
+            pose_covariance: [f64::INFINITY; 9],
             bumps: 0,
             collisions: 0,
             last_bump: false,
@@ -720,18 +726,47 @@ impl<B: RobotBackend> RobotAgent<B> {
         };
         let mut header = self.backend.log_header();
         header.nominal = plan.header.calibrated;
-        let rad_per_tick = std::f64::consts::TAU / f64::from(header.ticks_per_rev.max(1));
         self.record(
             now_ns,
             "execution_started",
             json!({ "transfer": hex(&transfer), "plan_sha256": plan.sha256 }),
         );
         self.set_phase(transfer, PlanPhase::Executing);
+        let initial = initial_estimate(
+            self.believed_pose(),
+            Some(&self.pose_covariance),
+            &plan.header.calibrated,
+        );
+        let nav = Navigator::new(
+            &plan,
+            initial,
+            header.ticks_per_rev,
+            self.config.localization,
+        );
+        let localizer = nav.localizer();
+        let how = match localizer.mode() {
+            Mode::Scan => format!(
+                "matching each scan ({} beams) against the plan's map",
+                localizer.beams()
+            ),
+            Mode::Window => format!(
+                "matching {} beam(s) against the plan's map over windows of driving",
+                localizer.beams()
+            ),
+            Mode::None => {
+                "no range sensor or no map: odometry only, as without localization".into()
+            }
+        };
+        self.record(
+            now_ns,
+            "localization",
+            json!({ "transfer": hex(&transfer), "how": how }),
+        );
         self.running = Some(Running {
             transfer,
             exec,
-            ekf: None,
-            rad_per_tick,
+            nav,
+            localized: false,
             log: MissionLog::new(header),
             t0_s: None,
             wheels: [0.0, 0.0],
@@ -770,24 +805,28 @@ impl<B: RobotBackend> RobotAgent<B> {
         self.backend_t_s = reading.t_s;
         let r = self.running.as_mut().expect("running");
         let t0 = *r.t0_s.get_or_insert(reading.t_s - self.backend.period_s());
-        r.wheels = r.exec.tick(&reading);
+        // Where the robot is: encoders, any absolute pose, and its range
+        // readings matched against the plan's map.
+        let belief = r.nav.update(&reading);
+        let pose = pose3(&r.nav.pose());
+        let covariance = r.nav.pose_covariance();
+        r.wheels = r.exec.tick(&reading, &belief);
         r.tick += 1;
         // The robot's own log of this period.
         let mut record: StepRecord = reading.record;
         record.t_ns = ((reading.t_s - t0).max(0.0) * 1e9).round() as u64;
         r.log.steps.push(record);
         r.log.ranges.extend_from_slice(&reading.fresh_ranges_m);
-        // Online calibration on encoders and absolute poses.
-        fuse(r, &reading);
-        let (pose, reference) = match &r.ekf {
-            Some(ekf) => {
-                let e = ekf.estimate();
-                ([e.state[0], e.state[1], e.state[2]], r.exec.reference())
-            }
-            None => (pose3(&r.exec.estimate()), r.exec.reference()),
-        };
+        let reference = r.exec.reference();
         let deviation = (pose[0] - reference.x_m).hypot(pose[1] - reference.y_m);
         r.max_deviation_m = r.max_deviation_m.max(deviation);
+        let localizer = r.nav.localizer();
+        let localized = localizer.localized(reading.t_s);
+        let localization_changed = (localized != r.localized && localizer.mode() != Mode::None)
+            .then(|| {
+                r.localized = localized;
+                (hex(&r.transfer), localizer.fixes, localizer.failures)
+            });
         // Every few ticks, and every tick with a contact or a stop.
         if r.tick % WINDOW_EVERY == 0 || reading.bump || r.exec.stopped().is_some() {
             r.window.push_back(WindowSample {
@@ -800,12 +839,11 @@ impl<B: RobotBackend> RobotAgent<B> {
                 r.window.pop_front();
             }
         }
-        if let Some(ekf) = &r.ekf {
-            let e = ekf.estimate();
-            self.params = [e.state[3], e.state[4], e.state[5]];
-            self.params_std = [e.std(3), e.std(4), e.std(5)];
-        }
+        let pc = r.nav.params_covariance();
+        self.params = r.nav.params();
+        self.params_std = [pc[0].sqrt(), pc[4].sqrt(), pc[8].sqrt()];
         self.pose = pose;
+        self.pose_covariance = covariance;
         if reading.bump && !self.last_bump {
             self.bumps += 1;
         }
@@ -813,7 +851,25 @@ impl<B: RobotBackend> RobotAgent<B> {
         if reading.blocked {
             self.collisions += 1;
         }
-        if let Some((_, stop)) = r.exec.stopped().cloned() {
+        let stopped = r.exec.stopped().cloned();
+        if let Some((transfer, fixes, failures)) = localization_changed {
+            let event = if localized {
+                "localized"
+            } else {
+                "not_localized"
+            };
+            let note = if localized {
+                "the range readings match the plan's map: tracking in the site's frame"
+            } else {
+                "no match with the plan's map for a while: going on by odometry, as without a map"
+            };
+            self.record(
+                now_ns,
+                event,
+                json!({ "transfer": transfer, "fixes": fixes, "failed_matches": failures, "note": note }),
+            );
+        }
+        if let Some((_, stop)) = stopped {
             self.end(Some(stop), None, now_ns);
         }
     }
@@ -853,41 +909,14 @@ impl<B: RobotBackend> RobotAgent<B> {
             );
         }
         if let Some(s) = stop.as_ref().filter(|s| s.is_handback()) {
-            let (params, covariance) = match &r.ekf {
-                Some(ekf) => {
-                    let e = ekf.estimate();
-                    let mut c = [0.0; 9];
-                    for i in 0..3 {
-                        for j in 0..3 {
-                            c[3 * i + j] = e.covariance[(3 + i, 3 + j)];
-                        }
-                    }
-                    ([e.state[3], e.state[4], e.state[5]], c)
-                }
-                None => {
-                    let p = plan.header.calibrated;
-                    (
-                        [p.left_diameter_m, p.right_diameter_m, p.wheelbase_m],
-                        [
-                            f64::INFINITY,
-                            0.0,
-                            0.0,
-                            0.0,
-                            f64::INFINITY,
-                            0.0,
-                            0.0,
-                            0.0,
-                            f64::INFINITY,
-                        ],
-                    )
-                }
-            };
+            let (params, covariance) = (r.nav.params(), r.nav.params_covariance());
             let handback = Handback {
                 plan: r.transfer,
                 reason: s.reason().to_string(),
                 plan_t_s,
                 progress: r.exec.progress() as u32,
                 pose: self.pose,
+                pose_covariance: self.pose_covariance,
                 params,
                 params_covariance: covariance,
                 window: r.window.iter().cloned().collect(),
@@ -1086,61 +1115,5 @@ impl<B: RobotBackend> RobotAgent<B> {
         .into_iter()
         .flatten()
         .min()
-    }
-}
-
-/// Feeds one period's encoders and absolute pose to the online EKF,
-/// starting it at the first absolute pose.
-fn fuse(r: &mut Running, reading: &Reading) {
-    let t = reading.t_s;
-    if r.ekf.is_none()
-        && let Some(p) = reading.pose
-    {
-        let c = r.exec.plan().header.calibrated;
-        let noise = NoiseModel::default();
-        let sample = PoseSample {
-            t_s: t,
-            x_m: p.x_m,
-            y_m: p.y_m,
-            heading_rad: Some(p.heading_rad),
-        };
-        let initial = initial_estimate(
-            &sample,
-            [c.left_diameter_m, c.right_diameter_m, c.wheelbase_m],
-            &noise,
-            0.03,
-        );
-        let mut ekf = OnlineCalibrator::new(initial, t, FilterConfig::default(), false);
-        if let Some(ticks) = reading.encoder_ticks {
-            let _ = ekf.push_wheels(WheelSample {
-                t_s: t,
-                left_rad: ticks[0] as f64 * r.rad_per_tick,
-                right_rad: ticks[1] as f64 * r.rad_per_tick,
-            });
-        }
-        r.ekf = Some(ekf);
-        return;
-    }
-    let Some(ekf) = &mut r.ekf else {
-        return;
-    };
-    if let Some(p) = reading.pose
-        && let Err(e) = ekf.push_pose(PoseSample {
-            t_s: t,
-            x_m: p.x_m,
-            y_m: p.y_m,
-            heading_rad: Some(p.heading_rad),
-        })
-    {
-        tracing::debug!(error = %e, "a pose the filter did not take");
-    }
-    if let Some(ticks) = reading.encoder_ticks
-        && let Err(e) = ekf.push_wheels(WheelSample {
-            t_s: t,
-            left_rad: ticks[0] as f64 * r.rad_per_tick,
-            right_rad: ticks[1] as f64 * r.rad_per_tick,
-        })
-    {
-        tracing::debug!(error = %e, "an encoder sample the filter did not take");
     }
 }

@@ -439,6 +439,7 @@ mod tests {
             plan_t_s: 1.0,
             progress: 0,
             pose: [last.x_m, last.y_m, last.heading_rad],
+            pose_covariance: [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4],
             params: [0.0652, 0.0665, 0.2678],
             params_covariance: [1.0; 9],
             window,

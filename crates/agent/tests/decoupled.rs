@@ -471,8 +471,18 @@ fn a_robot_restarted_mid_upload_resumes_and_the_plan_arrives_byte_identical() {
             sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
             1,
         );
-        // Part of the way, then the robot's process dies and comes back.
-        assert!(!h.run_until(6.0));
+        // Part of the way (the first progress the robot journals), then the
+        // robot's process dies and comes back.
+        let mut t = 0.0;
+        while events(dir.path(), "upload_progress").is_empty() {
+            t += 0.05;
+            assert!(!h.run_until(t));
+            assert!(t < 60.0, "no upload progress in a minute");
+        }
+        assert!(
+            events(dir.path(), "execution_started").is_empty(),
+            "still uploading"
+        );
         let before = events(dir.path(), "upload_progress");
         let held = before.last().unwrap()["received"].as_u64().unwrap();
         assert!(held > 0);

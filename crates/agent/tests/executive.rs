@@ -8,6 +8,8 @@ mod common;
 use common::{plan, site, twin};
 use twindrive_agent::backend::{RobotBackend, SimBackend};
 use twindrive_agent::executive::{Executive, Stop, Tolerances};
+use twindrive_agent::localize::LocalizeSettings;
+use twindrive_agent::navigator::{Navigator, initial_estimate};
 use twindrive_sim::Scenario;
 
 /// Runs the executive until it stops (or `max_s`), hearing from the master
@@ -29,6 +31,17 @@ fn run(
     let mut backend = SimBackend::new(site, plan.samples[0].pose(), max_s + 5.0).unwrap();
     let mut exec =
         Executive::new(plan.clone(), Tolerances::default(), dead_man_s, max_wheel).unwrap();
+    let initial = initial_estimate(
+        pose3(&plan.samples[0].pose()),
+        None,
+        &plan.header.calibrated,
+    );
+    let mut nav = Navigator::new(
+        plan,
+        initial,
+        plan.header.robot.ticks_per_rev,
+        LocalizeSettings::default(),
+    );
     let mut wheels = [0.0, 0.0];
     let mut after = Vec::new();
     let mut collisions = 0;
@@ -43,7 +56,8 @@ fn run(
             exec.heard_from_master(reading.t_s);
             next_heard += every;
         }
-        wheels = exec.tick(&reading);
+        let belief = nav.update(&reading);
+        wheels = exec.tick(&reading, &belief);
         if exec.stopped().is_some() {
             after.push(backend.true_pose());
             if after.len() > 100 {
@@ -55,6 +69,10 @@ fn run(
         }
     }
     (exec.stopped().cloned(), backend, after, collisions)
+}
+
+fn pose3(p: &twindrive_kinematics::Pose) -> [f64; 3] {
+    [p.x_m, p.y_m, p.heading_rad]
 }
 
 #[test]

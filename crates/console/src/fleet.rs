@@ -802,20 +802,23 @@ fn handback_window(op: &Operator<DirStore>) -> Option<Value> {
                 .collect()
         })
         .collect();
-    let t0 = plan.samples[0].t_s;
-    let predicted: Vec<Vec<Option<f64>>> = (0..beams)
-        .map(|b| {
-            h.window
-                .iter()
-                .map(|w| {
-                    let k = plan
-                        .samples
-                        .partition_point(|p| p.t_s <= t0 + w.plan_t_s)
-                        .saturating_sub(1);
-                    plan.samples[k].expected_ranges_m.get(b).copied()
-                })
-                .collect()
+    // What the plan's map predicts at the pose the robot believed it had:
+    // the robot's own comparison.
+    let mut model = plan.range_model();
+    let mut ranges = vec![0.0; model.beams()];
+    let per_sample: Vec<Vec<f64>> = h
+        .window
+        .iter()
+        .map(|w| {
+            model.read(
+                &twindrive_kinematics::Pose::new(w.pose[0], w.pose[1], w.pose[2]),
+                &mut ranges,
+            );
+            ranges.clone()
         })
+        .collect();
+    let predicted: Vec<Vec<Option<f64>>> = (0..beams)
+        .map(|b| per_sample.iter().map(|r| r.get(b).copied()).collect())
         .collect();
     Some(json!({
         "reason": h.reason,
@@ -897,6 +900,7 @@ mod tests {
             plan_t_s: 15.75,
             progress: 41,
             pose: [1.1, 2.0, 0.5],
+            pose_covariance: [0.0; 9],
             params: [0.1; 3],
             params_covariance: [0.0; 9],
             window: Vec::new(),

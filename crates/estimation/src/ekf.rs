@@ -315,7 +315,94 @@ impl AugmentedEkf {
     }
 }
 
+/// What became of a pose measurement with an information matrix: the
+/// directions fused and those the gate refused.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct InformationOutcome {
+    pub accepted: usize,
+    pub rejected: usize,
+    /// The largest normalised innovation squared (one degree of freedom each).
+    pub max_nis: f64,
+}
+
 impl AugmentedEkf {
+    /// Fuses a pose measurement known only along some directions (a scan
+    /// match: a corridor says nothing of where along it the robot is):
+    /// `information` is its inverse covariance, singular where it says
+    /// nothing. Each eigen-direction of the information is fused as one
+    /// scalar measurement (Joseph form), gated on its own at the filter's
+    /// gate probability with one degree of freedom; directions with no
+    /// information are skipped. The gate's rejections here do not count
+    /// towards the absolute-pose divergence test.
+    pub fn update_pose_information(
+        &mut self,
+        t_s: f64,
+        pose: [f64; 3],
+        information: &[[f64; 3]; 3],
+    ) -> Result<InformationOutcome, FilterError> {
+        use nalgebra::{Matrix3, SVector, SymmetricEigen};
+        if pose
+            .iter()
+            .chain(information.iter().flatten())
+            .any(|v| !v.is_finite())
+        {
+            return Err(FilterError::NonFinite {
+                t_s,
+                what: "pose measurement",
+            });
+        }
+        let info = Matrix3::from_fn(|r, c| 0.5 * (information[r][c] + information[c][r]));
+        let eig = SymmetricEigen::new(info);
+        let gate = chi2_quantile(1, self.gate.probability);
+        let mut outcome = InformationOutcome::default();
+        for i in 0..3 {
+            let lambda = eig.eigenvalues[i];
+            if lambda.is_nan() || lambda <= 0.0 {
+                continue;
+            }
+            let u = eig.eigenvectors.column(i);
+            let variance = 1.0 / lambda;
+            let s = &self.est.state;
+            let nu = u[0] * (pose[0] - s[0])
+                + u[1] * (pose[1] - s[1])
+                + u[2] * wrap_angle(pose[2] - s[2]);
+            let p = &self.est.covariance;
+            // P Hᵀ for H = [uᵀ 0].
+            let pht: SVector<f64, 6> =
+                SVector::from_fn(|r, _| p[(r, 0)] * u[0] + p[(r, 1)] * u[1] + p[(r, 2)] * u[2]);
+            let innovation_var = u[0] * pht[0] + u[1] * pht[1] + u[2] * pht[2] + variance;
+            if innovation_var.is_nan() || innovation_var <= 0.0 {
+                return Err(FilterError::NotPositiveDefinite {
+                    t_s,
+                    what: "innovation covariance",
+                });
+            }
+            let nis = nu * nu / innovation_var;
+            outcome.max_nis = outcome.max_nis.max(nis);
+            if nis > gate {
+                outcome.rejected += 1;
+                self.stats.rejected += 1;
+                continue;
+            }
+            let k = pht / innovation_var;
+            for r in 0..6 {
+                self.est.state[r] += k[r] * nu;
+            }
+            // Joseph form: (I - K H) P (I - K H)ᵀ + K R Kᵀ.
+            let mut h = SVector::<f64, 6>::zeros();
+            h[0] = u[0];
+            h[1] = u[1];
+            h[2] = u[2];
+            let a = Mat6::identity() - k * h.transpose();
+            let updated = a * p * a.transpose() + k * k.transpose() * variance;
+            self.est.covariance = 0.5 * (updated + updated.transpose());
+            outcome.accepted += 1;
+            self.stats.accepted += 1;
+        }
+        check_covariance(&self.est.covariance, t_s, true)?;
+        Ok(outcome)
+    }
+
     /// Moves the pose onto the reference (innovation `nu`, noise `r`),
     /// keeps the parameters and forgets the pose-parameter correlation.
     fn reanchor<const M: usize>(&mut self, nu: &[f64; M], r: &[f64; M]) {
@@ -545,5 +632,62 @@ mod tests {
             "{err}"
         );
         assert!(err.to_string().contains("t = 1.5 s"));
+    }
+
+    #[test]
+    fn information_updates_match_the_pose_update_and_skip_what_is_unknown() {
+        let mut initial = StateAndCovariance {
+            state: StateVec::from([1.0, 2.0, 0.3, 0.066, 0.066, 0.26]),
+            covariance: Mat6::from_diagonal(&nalgebra::Vector6::new(
+                0.01, 0.02, 0.005, 1e-6, 1e-6, 1e-5,
+            )),
+        };
+        initial.covariance[(0, 3)] = 2e-5;
+        initial.covariance[(3, 0)] = 2e-5;
+        let noise = NoiseModel {
+            position_std_m: 0.03,
+            heading_std_rad: 0.02,
+            ..NoiseModel::default()
+        };
+        let mut a = AugmentedEkf::new(initial, noise, GateConfig::default());
+        let mut b = a.clone();
+        let z = [1.05, 1.93, 0.33];
+        a.update_pose(0.0, z[0], z[1], z[2]).unwrap();
+        let info = [
+            [1.0 / 0.03f64.powi(2), 0.0, 0.0],
+            [0.0, 1.0 / 0.03f64.powi(2), 0.0],
+            [0.0, 0.0, 1.0 / 0.02f64.powi(2)],
+        ];
+        let out = b.update_pose_information(0.0, z, &info).unwrap();
+        assert_eq!((out.accepted, out.rejected), (3, 0));
+        let (ea, eb) = (a.estimate(), b.estimate());
+        for i in 0..6 {
+            assert!((ea.state[i] - eb.state[i]).abs() < 1e-12, "state {i}");
+            for j in 0..6 {
+                assert!(
+                    (ea.covariance[(i, j)] - eb.covariance[(i, j)]).abs() < 1e-12,
+                    "covariance ({i}, {j})"
+                );
+            }
+        }
+        // Information along y only: x and the heading keep their prior.
+        let mut c = AugmentedEkf::new(initial, noise, GateConfig::default());
+        let only_y = [[0.0; 3], [0.0, 1e4, 0.0], [0.0; 3]];
+        let out = c.update_pose_information(0.0, z, &only_y).unwrap();
+        assert_eq!(out.accepted, 1);
+        let e = c.estimate();
+        assert!(
+            (e.state[1] - 1.93).abs() < 0.001,
+            "y moves to the measurement"
+        );
+        assert_eq!(e.state[2], 0.3, "uncorrelated heading stays");
+        assert!(e.covariance[(1, 1)] < 1.1e-4 && e.covariance[(0, 0)] == 0.01);
+        // A measurement far outside the gate is refused.
+        let far = [[1e6, 0.0, 0.0], [0.0; 3], [0.0; 3]];
+        let out = c
+            .update_pose_information(0.0, [9.0, 1.93, 0.3], &far)
+            .unwrap();
+        assert_eq!((out.accepted, out.rejected), (0, 1));
+        assert_eq!(c.estimate().state[0], 1.0);
     }
 }

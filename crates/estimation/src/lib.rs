@@ -19,14 +19,15 @@ pub mod dead_reckoning;
 mod ekf;
 pub mod ellipse_fit;
 pub mod evaluation;
+pub mod localize;
 mod offline;
 mod online;
 mod smoother;
 
 pub use covariance::{PackedCovariance, PackedEstimate, chain};
 pub use ekf::{
-    AugmentedEkf, FilterError, FilterStats, GateConfig, NoiseModel, StateAndCovariance,
-    UpdateOutcome, chi2_quantile, nees,
+    AugmentedEkf, FilterError, FilterStats, GateConfig, InformationOutcome, NoiseModel,
+    StateAndCovariance, UpdateOutcome, chi2_quantile, nees,
 };
 pub use offline::{FilterRun, run_filter, smooth};
 pub use online::{

@@ -260,6 +260,21 @@ impl OnlineCalibrator {
         }
     }
 
+    /// Fuses a pose measurement with an information matrix (a scan match,
+    /// [`AugmentedEkf::update_pose_information`]) at the filter's current
+    /// time: the time of the latest encoder sample.
+    ///
+    /// [`AugmentedEkf::update_pose_information`]: crate::AugmentedEkf::update_pose_information
+    pub fn update_pose_information(
+        &mut self,
+        pose: [f64; 3],
+        information: &[[f64; 3]; 3],
+    ) -> Result<crate::ekf::InformationOutcome, CalibrationError> {
+        Ok(self
+            .ekf
+            .update_pose_information(self.t_s, pose, information)?)
+    }
+
     fn predict_between(&mut self, from: &WheelSample, to: &WheelSample) {
         let dt = to.t_s - from.t_s;
         if dt <= 0.0 {

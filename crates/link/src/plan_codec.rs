@@ -21,7 +21,7 @@ use twindrive_kinematics::{Pose, arc_step, wheel_speeds};
 use twindrive_mission::plan::{MissionPlan, PlanHeader, PlanSample};
 
 /// First bytes of an encoded plan.
-pub const MAGIC: &[u8; 8] = b"TWDPLAN1";
+pub const MAGIC: &[u8; 8] = b"TWDPLAN2";
 
 /// Why bytes are not an encoded plan.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -40,7 +40,6 @@ struct Head {
     sha256: String,
     header_json: String,
     samples: u32,
-    beams: u32,
     /// The document ends with a newline after the JSON.
     newline: bool,
     /// Predictor chosen per column.
@@ -152,19 +151,8 @@ pub fn encode(plan_json: &[u8]) -> Option<Vec<u8>> {
         Some(b"\n") => true,
         _ => return None,
     };
-    let beams = plan
-        .samples
-        .first()
-        .map_or(0, |s| s.expected_ranges_m.len());
-    if plan
-        .samples
-        .iter()
-        .any(|s| s.expected_ranges_m.len() != beams)
-    {
-        return None;
-    }
     let n = plan.samples.len();
-    let mut body = Vec::with_capacity(n * (COLUMNS + beams) * 8 + n / 8 + 1);
+    let mut body = Vec::with_capacity(n * COLUMNS * 8 + n / 8 + 1);
     let mut predictors = Vec::with_capacity(COLUMNS);
     for c in 0..COLUMNS {
         let residuals_for = |p: u8| -> Vec<u64> {
@@ -183,19 +171,6 @@ pub fn encode(plan_json: &[u8]) -> Option<Vec<u8>> {
         predictors.push(p);
         push_planes(&mut body, &residuals);
     }
-    for b in 0..beams {
-        let residuals: Vec<u64> = (0..n)
-            .map(|i| {
-                let pred = if i == 0 {
-                    0.0
-                } else {
-                    plan.samples[i - 1].expected_ranges_m[b]
-                };
-                plan.samples[i].expected_ranges_m[b].to_bits() ^ pred.to_bits()
-            })
-            .collect();
-        push_planes(&mut body, &residuals);
-    }
     let mut bits = vec![0u8; n.div_ceil(8)];
     for (i, s) in plan.samples.iter().enumerate() {
         if s.expected_bump {
@@ -209,7 +184,6 @@ pub fn encode(plan_json: &[u8]) -> Option<Vec<u8>> {
         sha256: plan.sha256.clone(),
         header_json: serde_json::to_string(&plan.header).ok()?,
         samples: n as u32,
-        beams: beams as u32,
         newline,
         predictors,
     };
@@ -231,7 +205,7 @@ pub fn decode(bytes: &[u8], max_raw_bytes: u64) -> Result<Vec<u8>, CodecError> {
     let bad = |m: &str| CodecError::Malformed(m.into());
     let rest = bytes
         .strip_prefix(MAGIC.as_slice())
-        .ok_or_else(|| bad("no TWDPLAN1"))?;
+        .ok_or_else(|| bad("no TWDPLAN2"))?;
     let (len, rest) = rest
         .split_first_chunk::<8>()
         .ok_or_else(|| bad("no length"))?;
@@ -251,8 +225,8 @@ pub fn decode(bytes: &[u8], max_raw_bytes: u64) -> Result<Vec<u8>, CodecError> {
     let head: Head = postcard::from_bytes(&raw[..hl])
         .map_err(|e| CodecError::Malformed(format!("head: {e}")))?;
     let body = &raw[hl..];
-    let (n, beams) = (head.samples as usize, head.beams as usize);
-    let need = (COLUMNS + beams)
+    let n = head.samples as usize;
+    let need = COLUMNS
         .checked_mul(n)
         .and_then(|x| x.checked_mul(8))
         .and_then(|x| x.checked_add(n.div_ceil(8)))
@@ -276,7 +250,6 @@ pub fn decode(bytes: &[u8], max_raw_bytes: u64) -> Result<Vec<u8>, CodecError> {
         omega_rad_s: 0.0,
         left_rad_s: 0.0,
         right_rad_s: 0.0,
-        expected_ranges_m: vec![0.0; beams],
         expected_bump: false,
     };
     let mut samples = vec![blank; n];
@@ -288,15 +261,7 @@ pub fn decode(bytes: &[u8], max_raw_bytes: u64) -> Result<Vec<u8>, CodecError> {
             let v = f64::from_bits(read(c, i) ^ pred.to_bits());
             set_column(&mut samples[i], c, v);
         }
-        for b in 0..beams {
-            let pred = if i == 0 {
-                0.0
-            } else {
-                samples[i - 1].expected_ranges_m[b]
-            };
-            samples[i].expected_ranges_m[b] = f64::from_bits(read(COLUMNS + b, i) ^ pred.to_bits());
-        }
-        samples[i].expected_bump = body[(COLUMNS + beams) * 8 * n + i / 8] & (1 << (i % 8)) != 0;
+        samples[i].expected_bump = body[COLUMNS * 8 * n + i / 8] & (1 << (i % 8)) != 0;
     }
     let plan = MissionPlan {
         format: head.format,

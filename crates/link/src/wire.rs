@@ -149,8 +149,11 @@ pub struct Handback {
     /// Time since the plan started (s), and plan samples passed.
     pub plan_t_s: f64,
     pub progress: u32,
-    /// Pose estimate: x, y (m), heading (rad).
+    /// Pose estimate: x, y (m), heading (rad), in the site's frame (odometry
+    /// fused with localization against the plan's map) ...
     pub pose: [f64; 3],
+    /// ... and its 3 x 3 covariance (row major).
+    pub pose_covariance: [f64; 9],
     /// Wheel diameters and wheelbase (m) with their 3 × 3 covariance (row
     /// major).
     pub params: [f64; 3],

@@ -22,7 +22,6 @@ fn plan_json() -> Vec<u8> {
             omega_rad_s: 0.0,
             left_rad_s: 6.1,
             right_rad_s: 6.0,
-            expected_ranges_m: Vec::new(),
             expected_bump: false,
         })
         .collect();
@@ -41,6 +40,7 @@ fn plan_json() -> Vec<u8> {
             },
             time_step_s: 0.01,
             start: Pose::new(0.0, 0.0, 0.0),
+            site_map: Default::default(),
             source_log_sha256: "0".repeat(64),
             settings: serde_json::json!({}),
             summary: serde_json::json!({}),

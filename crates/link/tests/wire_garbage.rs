@@ -64,6 +64,7 @@ fn samples() -> Vec<Vec<u8>> {
             plan_t_s: 8.0,
             progress: 700,
             pose: [1.7, 0.7, -2.0],
+            pose_covariance: [1e-4; 9],
             params: [0.065, 0.066, 0.27],
             params_covariance: [1e-8; 9],
             window: vec![

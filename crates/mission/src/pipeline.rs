@@ -9,6 +9,7 @@ use twindrive_log::MissionLog;
 use crate::control::{WheelCommand, recompute};
 use crate::error::PipelineError;
 use crate::path::{PathSample, path_length_m};
+use crate::plan::SiteMap;
 use crate::planner::{PlannerSettings, executed_path};
 use crate::redundancy::{
     Deletion, DeletionReason, Pruned, RedundancyConfig, RefusedCut, RouteCoverage,
@@ -236,6 +237,7 @@ pub fn plan_from_log(
             limits,
             time_step_s: stages.period_s,
             start: header.start,
+            site_map: SiteMap::default(),
             source_log_sha256: log_sha256.to_owned(),
             settings: serde_json::json!({
                 "pipeline": settings,
@@ -249,9 +251,9 @@ pub fn plan_from_log(
     Ok((plan, stages))
 }
 
-/// The plan document for a timed path and its commands: each sample with
-/// the twin's predicted range readings and bump there (`header`'s range
-/// sensors are `scenario`'s).
+/// The plan document for a timed path and its commands: the site's map
+/// and the robot's range sensors (`scenario`'s) in the header, and whether
+/// the twin's bumper touches at each sample.
 fn plan_document(
     path: &[PathSample],
     commands: &[WheelCommand],
@@ -259,21 +261,18 @@ fn plan_document(
     scenario: &twindrive_sim::Scenario,
 ) -> crate::plan::MissionPlan {
     use crate::plan::{MissionPlan, PlanSample};
-    let mut model = twindrive_sim::SensorModel::new(scenario);
-    let mut ranges = vec![0.0; model.beams()];
+    let model = twindrive_sim::SensorModel::new(scenario);
     let samples: Vec<PlanSample> = path
         .iter()
         .zip(commands)
-        .map(|(p, c)| {
-            let bump = model.read(&p.pose, &mut ranges);
-            PlanSample::new(p, c, ranges.clone(), bump)
-        })
+        .map(|(p, c)| PlanSample::new(p, c, model.bump(&p.pose)))
         .collect();
     header.robot.range_sensors = scenario
         .range_sensors
         .iter()
         .map(|s| s.info.clone())
         .collect();
+    header.site_map = SiteMap::of(&scenario.world);
     MissionPlan::new(header, samples)
 }
 
@@ -334,6 +333,7 @@ pub fn continuation_plan(
             limits: h.limits,
             time_step_s: h.time_step_s,
             start,
+            site_map: SiteMap::default(),
             source_log_sha256: h.source_log_sha256.clone(),
             settings: serde_json::json!({
                 "continuation_of": interrupted.sha256,

@@ -1,11 +1,13 @@
 //! The mission plan: what is uploaded to the real robot.
 //!
 //! A versioned JSON document: a header (robot, calibrated parameters,
-//! limits, time step, pipeline settings, the SHA-256 of the source log, the
-//! pipeline's summary) and one sample per plan step: time, pose, body
-//! velocities, each wheel's angular speed, and what the twin predicts the
-//! robot's sensors will read there (so the robot can tell when reality
-//! departs). `sha256` is the SHA-256 of the plan's canonical content: the
+//! limits, time step, the site's map, pipeline settings, the SHA-256 of the
+//! source log, the pipeline's summary) and one sample per plan step: time,
+//! pose, body velocities, each wheel's angular speed, and whether the twin's
+//! bumper touched there. The robot predicts its range readings itself from
+//! the map ([`MissionPlan::range_model`]: the same code and the same walls
+//! as the twin, so the same bits), localizes against it, and can tell when
+//! the world departs from it. `sha256` is the SHA-256 of the plan's canonical content: the
 //! document itself serialised compactly with the `sha256` field empty, as
 //! serde_json writes it (fields in their declared order, object keys of the
 //! free-form settings sorted, floats in their shortest round-trip form as
@@ -26,7 +28,7 @@ use crate::retime::WheelLimits;
 /// Identifies a plan document.
 pub const PLAN_FORMAT: &str = "twindrive-mission-plan";
 /// Bumped whenever the meaning of a field changes.
-pub const PLAN_VERSION: u32 = 1;
+pub const PLAN_VERSION: u32 = 2;
 
 /// The robot the plan is for.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -36,7 +38,7 @@ pub struct RobotInfo {
     pub scenario: String,
     pub footprint_radius_m: f64,
     pub ticks_per_rev: u32,
-    /// The range sensors whose beams `expected_ranges_m` predicts, in order.
+    /// The robot's range sensors, in the order its readings come.
     pub range_sensors: Vec<twindrive_log::RangeSensorInfo>,
 }
 
@@ -51,12 +53,65 @@ pub struct PlanHeader {
     /// period); sample times may be further apart where the plan slows down.
     pub time_step_s: f64,
     pub start: Pose,
+    /// The site as the twin knows it: what the robot localizes against and
+    /// predicts its readings from.
+    pub site_map: SiteMap,
     /// SHA-256 (hex) of the source log files.
     pub source_log_sha256: String,
     /// The pipeline's settings, as given.
     pub settings: serde_json::Value,
     /// What the pipeline did (deletions, durations), for people.
     pub summary: serde_json::Value,
+}
+
+/// The site's map in a plan: the twin's walls (two-sided segments, metres,
+/// `[x0, y0, x1, y1]`) in the twin's order, and its solid blocks
+/// (`[min_x, min_y, max_x, max_y]`; their outlines are among the walls).
+/// A map_server map travels as the boundary segments of its occupied cells,
+/// merged into straight runs: the office map is 36 segments.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SiteMap {
+    pub segments: Vec<[f64; 4]>,
+    pub boxes: Vec<[f64; 4]>,
+}
+
+impl SiteMap {
+    /// The walls and blocks of the twin's `world`.
+    pub fn of(world: &twindrive_sim::World) -> Self {
+        Self {
+            segments: world.walls(),
+            boxes: world.blocks(),
+        }
+    }
+
+    /// The map as a world for geometry queries (no occupancy grid: cells
+    /// travel as their outlines).
+    pub fn world(&self) -> twindrive_sim::World {
+        twindrive_sim::World::from_walls(&self.segments, &self.boxes)
+    }
+
+    fn validate(&self) -> Result<(), PipelineError> {
+        for (what, rows) in [
+            ("header.site_map.segments", &self.segments),
+            ("header.site_map.boxes", &self.boxes),
+        ] {
+            if let Some(index) = rows.iter().position(|r| r.iter().any(|v| !v.is_finite())) {
+                return Err(PipelineError::NonFinite { what, index });
+            }
+        }
+        if let Some(index) = self
+            .boxes
+            .iter()
+            .position(|b| !(b[0] <= b[2] && b[1] <= b[3]))
+        {
+            return Err(PipelineError::Infeasible(format!(
+                "header.site_map.boxes[{index}]: min must not exceed max, got {:?}",
+                self.boxes[index]
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// One step of the plan: hold the wheel speeds from `t_s` to the next sample.
@@ -71,19 +126,17 @@ pub struct PlanSample {
     pub omega_rad_s: f64,
     pub left_rad_s: f64,
     pub right_rad_s: f64,
-    /// The twin's prediction of each beam (metres; the sensor's maximum
-    /// range when nothing is in reach).
-    pub expected_ranges_m: Vec<f64>,
+    /// The twin's bumper touches a wall here (the plan drives into contact
+    /// on purpose, as the wall follower does).
     pub expected_bump: bool,
 }
 
 impl PlanSample {
-    /// The step at a path sample driven with `command`, with the sensor
-    /// readings expected there.
+    /// The step at a path sample driven with `command`, with whether the
+    /// twin's bumper touches there.
     pub fn new(
         at: &crate::PathSample,
         command: &crate::control::WheelCommand,
-        expected_ranges_m: Vec<f64>,
         expected_bump: bool,
     ) -> Self {
         Self {
@@ -95,7 +148,6 @@ impl PlanSample {
             omega_rad_s: command.omega_rad_s,
             left_rad_s: command.left_rad_s,
             right_rad_s: command.right_rad_s,
-            expected_ranges_m,
             expected_bump,
         }
     }
@@ -181,13 +233,7 @@ impl MissionPlan {
                 index: 0,
             });
         }
-        let beams: usize = self
-            .header
-            .robot
-            .range_sensors
-            .iter()
-            .map(|s| s.beams as usize)
-            .sum();
+        h.site_map.validate()?;
         let mut previous = f64::NEG_INFINITY;
         for (index, s) in self.samples.iter().enumerate() {
             let numbers = [
@@ -202,18 +248,6 @@ impl MissionPlan {
             ];
             if let Some((what, _)) = numbers.iter().find(|(_, v)| !v.is_finite()) {
                 return Err(PipelineError::NonFinite { what, index });
-            }
-            if s.expected_ranges_m.iter().any(|v| !v.is_finite()) {
-                return Err(PipelineError::NonFinite {
-                    what: "expected_ranges_m",
-                    index,
-                });
-            }
-            if s.expected_ranges_m.len() != beams {
-                return Err(PipelineError::Infeasible(format!(
-                    "sample {index} predicts {} range readings for {beams} beams",
-                    s.expected_ranges_m.len()
-                )));
             }
             if s.t_s <= previous {
                 return Err(PipelineError::TimeNotIncreasing {
@@ -232,6 +266,15 @@ impl MissionPlan {
             )));
         }
         Ok(())
+    }
+
+    /// What the robot's range sensors read, free of noise, at any pose on
+    /// the plan's map: the twin's predictions, bit for bit.
+    pub fn range_model(&self) -> twindrive_sim::RangeModel {
+        twindrive_sim::RangeModel::new(
+            self.header.site_map.world(),
+            &self.header.robot.range_sensors,
+        )
     }
 
     /// Mission duration (first to last sample).
@@ -315,6 +358,10 @@ mod tests {
             },
             time_step_s: 0.01,
             start: Pose::new(3.0, 1.05, std::f64::consts::PI),
+            site_map: SiteMap {
+                segments: vec![[0.0, 0.0, 6.0, 0.0], [1.5, 1.5, 4.5, 1.5]],
+                boxes: vec![],
+            },
             source_log_sha256: sha256_hex(b"log"),
             settings: serde_json::json!({ "pinch_distance_m": 0.1 }),
             summary: serde_json::json!({ "loops_removed": 2 }),
@@ -329,7 +376,6 @@ mod tests {
                 omega_rad_s: 0.0,
                 left_rad_s: 6.13,
                 right_rad_s: 6.01,
-                expected_ranges_m: vec![0.8 - 0.001 * k as f64],
                 expected_bump: false,
             })
             .collect();
@@ -357,7 +403,7 @@ mod tests {
                 match field {
                     0 => s.x_m = f64::from_bits(s.x_m.to_bits() + 1),
                     1 => s.left_rad_s += 1e-9,
-                    2 => s.expected_ranges_m[0] += 1e-6,
+                    2 => s.heading_rad += 1e-6,
                     _ => s.expected_bump = !s.expected_bump,
                 }
                 assert_ne!(b.content_hash(), a.sha256, "sample {k} field {field}");
@@ -385,6 +431,16 @@ mod tests {
                 .unwrap_err()
                 .to_string()
                 .contains("header.calibrated")
+        );
+        let mut m = plan();
+        m.header.site_map.segments[1][2] = f64::INFINITY;
+        m.sha256 = m.content_hash();
+        assert_eq!(
+            m.validate(),
+            Err(PipelineError::NonFinite {
+                what: "header.site_map.segments",
+                index: 1
+            })
         );
         let mut c = plan();
         c.samples[5].t_s = c.samples[4].t_s;

@@ -360,6 +360,24 @@ impl Tracker {
             }
             self.last_ticks = Some(ticks);
         }
+        self.steer(samples, t_s)
+    }
+
+    /// The wheel commands at `t_s` steering from `estimate` (a robot's own
+    /// estimate in the site's frame: odometry fused with localization)
+    /// instead of this tracker's odometry; `None` once the plan has ended
+    /// and the robot is level with its goal.
+    pub fn command_from(
+        &mut self,
+        samples: &[PlanSample],
+        t_s: f64,
+        estimate: Pose,
+    ) -> Option<[f64; 2]> {
+        self.estimate = estimate;
+        self.steer(samples, t_s)
+    }
+
+    fn steer(&mut self, samples: &[PlanSample], t_s: f64) -> Option<[f64; 2]> {
         let g = &self.settings;
         let t0 = samples[0].t_s;
         let (r, v_r, omega_r, ended) = reference_at(samples, t_s + t0, &mut self.cursor);

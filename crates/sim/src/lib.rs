@@ -24,7 +24,7 @@ mod world;
 
 pub use config::{ControllerConfig, RangeSensorConfig, RobotConfig, Scenario, TrackerConfig};
 pub use scan::{Fan, ScanKernel};
-pub use simulator::{Contacts, Sensed, SensorModel, Simulator, StepOutput};
+pub use simulator::{Contacts, RangeModel, Sensed, SensorModel, Simulator, StepOutput};
 pub use summary::MissionSummary;
 pub use world::{Nearest, World, polyline_segments, rectangle_segments};
 

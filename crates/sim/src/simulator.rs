@@ -168,9 +168,35 @@ fn bumper_pressed(scenario: &Scenario, pose: &Pose) -> bool {
     }
 }
 
+/// Noise-free readings of every beam of `sensors` from the robot at `pose`
+/// in `world`: the maximum range where nothing is in reach, the minimum
+/// where something is closer. The one implementation the twin's
+/// [`SensorModel`] and the robot's [`RangeModel`] share, so the two predict
+/// the same bits.
+fn predict_ranges<'s>(
+    world: &crate::World,
+    sensors: impl Iterator<Item = &'s twindrive_log::RangeSensorInfo>,
+    kernels: &mut [Option<ScanKernel>],
+    pose: &Pose,
+    ranges: &mut [f64],
+) {
+    let mut offset = 0;
+    for (info, kernel) in sensors.zip(kernels) {
+        let n = info.beams as usize;
+        let beams = &mut ranges[offset..offset + n];
+        offset += n;
+        cast_beams(world, info, kernel.as_mut(), pose, beams);
+        let max = info.max_range_m;
+        for r in beams.iter_mut() {
+            if *r < max {
+                *r = r.max(info.min_range_m);
+            }
+        }
+    }
+}
+
 /// Noise-free readings of a scenario's sensors at any pose: what the twin
-/// expects the robot to read there (plans carry them so the robot can tell
-/// when reality departs).
+/// expects the robot to read there.
 pub struct SensorModel<'a> {
     scenario: &'a Scenario,
     kernels: Vec<Option<ScanKernel>>,
@@ -204,21 +230,66 @@ impl<'a> SensorModel<'a> {
     /// nothing is in reach, the minimum where something is closer) and
     /// returns whether the bumper is pressed.
     pub fn read(&mut self, pose: &Pose, ranges: &mut [f64]) -> bool {
-        let world = &self.scenario.world;
-        let mut offset = 0;
-        for (cfg, kernel) in self.scenario.range_sensors.iter().zip(&mut self.kernels) {
-            let n = cfg.info.beams as usize;
-            let beams = &mut ranges[offset..offset + n];
-            offset += n;
-            cast_beams(world, &cfg.info, kernel.as_mut(), pose, beams);
-            let max = cfg.info.max_range_m;
-            for r in beams.iter_mut() {
-                if *r < max {
-                    *r = r.max(cfg.info.min_range_m);
-                }
-            }
-        }
+        predict_ranges(
+            &self.scenario.world,
+            self.scenario.range_sensors.iter().map(|s| &s.info),
+            &mut self.kernels,
+            pose,
+            ranges,
+        );
         bumper_pressed(self.scenario, pose)
+    }
+
+    /// Whether the bumper is pressed at `pose`.
+    pub fn bump(&self, pose: &Pose) -> bool {
+        bumper_pressed(self.scenario, pose)
+    }
+}
+
+/// Noise-free range readings from a world and the robot's sensors alone
+/// (no scenario): what a robot carrying its site's map predicts it will
+/// read. Built from the same walls as the twin's world it gives the twin's
+/// [`SensorModel`] readings bit for bit.
+#[derive(Debug, Clone)]
+pub struct RangeModel {
+    world: crate::World,
+    sensors: Vec<twindrive_log::RangeSensorInfo>,
+    kernels: Vec<Option<ScanKernel>>,
+    beams: usize,
+}
+
+impl RangeModel {
+    pub fn new(world: crate::World, sensors: &[twindrive_log::RangeSensorInfo]) -> Self {
+        Self {
+            world,
+            kernels: sensors.iter().map(range_kernel).collect(),
+            beams: sensors.iter().map(|s| s.beams as usize).sum(),
+            sensors: sensors.to_vec(),
+        }
+    }
+
+    pub fn world(&self) -> &crate::World {
+        &self.world
+    }
+
+    pub fn sensors(&self) -> &[twindrive_log::RangeSensorInfo] {
+        &self.sensors
+    }
+
+    /// Beams over all range sensors (the length `read` fills).
+    pub fn beams(&self) -> usize {
+        self.beams
+    }
+
+    /// Fills `ranges` with every beam's noise-free reading at `pose`.
+    pub fn read(&mut self, pose: &Pose, ranges: &mut [f64]) {
+        predict_ranges(
+            &self.world,
+            self.sensors.iter(),
+            &mut self.kernels,
+            pose,
+            ranges,
+        );
     }
 }
 

@@ -63,6 +63,37 @@ impl World {
         }
     }
 
+    /// A world of walls `[x0, y0, x1, y1]` and solid blocks
+    /// `[min_x, min_y, max_x, max_y]` (whose outlines are among the walls),
+    /// as [`World::walls`] and [`World::blocks`] give them back.
+    pub fn from_walls(walls: &[[f64; 4]], blocks: &[[f64; 4]]) -> Self {
+        let segments = walls
+            .iter()
+            .map(|w| Segment::new(Vector::new(w[0], w[1]), Vector::new(w[2], w[3])))
+            .collect();
+        let solids = blocks
+            .iter()
+            .map(|b| Aabb::new(Vector::new(b[0], b[1]), Vector::new(b[2], b[3])))
+            .collect();
+        Self::new(segments, solids, None)
+    }
+
+    /// The walls as `[x0, y0, x1, y1]`, in order.
+    pub fn walls(&self) -> Vec<[f64; 4]> {
+        self.segments
+            .iter()
+            .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
+            .collect()
+    }
+
+    /// The solid blocks as `[min_x, min_y, max_x, max_y]`, in order.
+    pub fn blocks(&self) -> Vec<[f64; 4]> {
+        self.solids
+            .iter()
+            .map(|a| [a.mins.x, a.mins.y, a.maxs.x, a.maxs.y])
+            .collect()
+    }
+
     pub fn segments(&self) -> &[Segment] {
         &self.segments
     }
@@ -90,16 +121,8 @@ impl World {
     /// The world as a log's `/map` topic draws it.
     pub fn log_map(&self) -> twindrive_log::WorldMap {
         twindrive_log::WorldMap {
-            segments: self
-                .segments()
-                .iter()
-                .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
-                .collect(),
-            boxes: self
-                .solids()
-                .iter()
-                .map(|a| [a.mins.x, a.mins.y, a.maxs.x, a.maxs.y])
-                .collect(),
+            segments: self.walls(),
+            boxes: self.blocks(),
             grid: self.grid().map(|g| twindrive_log::MapGrid {
                 width: g.width as u32,
                 height: g.height as u32,

@@ -374,6 +374,12 @@ pub struct RobotArgs {
     /// Exit after this many seconds (default: run until stopped).
     #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
     pub run_for: Option<f64>,
+    /// Localize against the map each plan carries (`on`), or drive by
+    /// odometry and any tracker alone (`off`: how robots drove before plans
+    /// carried maps; the fleet experiment's robots, whose hand-backs it
+    /// times).
+    #[arg(long, value_name = "on|off", default_value = "on", value_parser = ["on", "off"])]
+    pub localization: String,
 }
 
 #[derive(Debug, clap::Args)]

@@ -464,7 +464,7 @@ fn bad_input_is_a_clear_error() {
 fn a_master_killed_mid_upload_resumes_it_when_restarted() {
     let m = Mission::new("", "keys", 10.0);
     let _robot = m.robot();
-    let link = ["--link", "lan,bandwidth_bit_s=3e5"];
+    let link = ["--link", "lan,bandwidth_bit_s=1e5"];
     let master = m.master(&link);
     m.wait_for("upload_progress", 60.0);
     std::thread::sleep(Duration::from_millis(1500));

@@ -68,6 +68,9 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
     config.unix_time_at_zero_s = unix_now_s()?;
     config.telemetry_budget_bytes_s = args.telemetry_budget;
     config.time_scale = args.time_scale;
+    if args.localization == "off" {
+        config.localization = twindrive_agent::localize::LocalizeSettings::odometry_only();
+    }
     let rt = runtime()?;
     match ros {
         None => {
@@ -774,20 +777,23 @@ pub(super) fn write_robot_log(
         let mut predicted = Vec::new();
         plan.write_tum(&mut predicted)?;
         write_durably(&dir.join("predicted.tum"), &predicted)?;
-        // Range readings against the plan's prediction at the same time.
+        // Range readings against what the plan's map predicts at the pose
+        // the log records (the truth on a simulated site, the robot's
+        // estimate on a real one).
         let mut rows = String::from("t_s,beam,measured_m,predicted_m,residual_m\n");
         let beams = log.beams_per_step();
-        let t0 = plan.samples[0].t_s;
-        let mut k = 0;
+        let mut model = plan.range_model();
+        let mut predicted = vec![0.0; model.beams()];
         let mut residuals: Vec<(f64, f64)> = Vec::new();
         for (i, step) in log.steps.iter().enumerate() {
-            let t = step.t_s() + t0;
-            while k + 1 < plan.samples.len() && plan.samples[k + 1].t_s <= t {
-                k += 1;
+            let fresh = &log.ranges[i * beams..(i + 1) * beams];
+            if !fresh.iter().any(|m| m.is_finite()) {
+                continue;
             }
+            model.read(&step.ground_truth, &mut predicted);
             for b in 0..beams {
                 let m = log.ranges[i * beams + b];
-                let Some(&p) = plan.samples[k].expected_ranges_m.get(b) else {
+                let Some(&p) = predicted.get(b) else {
                     continue;
                 };
                 if m.is_finite() {

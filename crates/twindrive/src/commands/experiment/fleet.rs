@@ -6,8 +6,11 @@
 //! id, site, state directory, zenoh client of the router) and one
 //! `twindrive master --robot r001 --robot r002 …` (a client too). Each site
 //! is the case study with its own true kinematics (as the latency
-//! experiment's) and seed, so each robot hands back once and finishes on a
-//! continuation. Measured: the master's CPU time and peak memory (it reports
+//! experiment's) and seed, and the robots go by odometry alone
+//! (`--localization off`), so each hands back once and finishes on a
+//! continuation: what is measured is the protocol, not the robot's autonomy
+//! (a robot that localizes against its map does not hand back for this
+//! mismatch at all). Measured: the master's CPU time and peak memory (it reports
 //! them itself), the time until every robot held its plan, the hand-back
 //! reaction time (the robot's stop, from its journal, to the master's
 //! receipt, from its report: one clock, one machine), and telemetry: bytes
@@ -154,6 +157,8 @@ pub fn run_fleet(
             .args(["--connect", &router, "--zenoh-config"])
             .arg(&client)
             .args([
+                "--localization",
+                "off",
                 "--time-scale",
                 &args.time_scale.to_string(),
                 "--telemetry-budget",

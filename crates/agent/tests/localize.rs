@@ -1,0 +1,210 @@
+//! Localization on the robot, on held-out-style sites: the executive driven
+//! from the navigator's estimate, on a site whose true kinematics differ
+//! from the twin's by a random few percent and that has no motion-capture
+//! tracker. A lidar robot localizes against the plan's map and stays on
+//! its plan; a one-IR robot is never worse than odometry alone.
+
+mod common;
+
+use std::sync::{Arc, OnceLock};
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use twindrive_agent::backend::{RobotBackend, SimBackend};
+use twindrive_agent::executive::{Executive, Stop, Tolerances};
+use twindrive_agent::localize::{LocalizeSettings, Mode};
+use twindrive_agent::navigator::{Navigator, initial_estimate};
+use twindrive_mission::pipeline::{self, PipelineSettings};
+use twindrive_mission::plan::MissionPlan;
+use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_sim::{Scenario, Simulator};
+
+fn office() -> Scenario {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/office_drive.toml");
+    Scenario::load(&path).unwrap()
+}
+
+/// The office drive's plan (a 181-beam lidar), made on its twin.
+fn office_plan() -> &'static Arc<MissionPlan> {
+    static PLAN: OnceLock<Arc<MissionPlan>> = OnceLock::new();
+    PLAN.get_or_init(|| {
+        let scenario = office();
+        let log = Simulator::new(scenario.clone()).run(|_, _| {});
+        let settings = PipelineSettings {
+            planner: Default::default(),
+            redundancy: RedundancyConfig::with_pinch_distance(0.15),
+            filter: Default::default(),
+        };
+        let (plan, _) = pipeline::plan_from_log(
+            &log,
+            &"0".repeat(64),
+            &scenario.robot.true_params,
+            &scenario,
+            &settings,
+            false,
+        )
+        .unwrap();
+        Arc::new(plan)
+    })
+}
+
+/// `twin` as a remote site: no tracker, true kinematics off by `error`
+/// (each parameter scaled by 1 ± error, signs at random), its own noise.
+fn site(twin: &Scenario, error: f64, rng: &mut ChaCha8Rng) -> Scenario {
+    let mut s = twin.clone();
+    s.tracker = None;
+    let t = &mut s.robot.true_params;
+    let mut sign = || if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    t.left_diameter_m *= 1.0 + sign() * error;
+    t.right_diameter_m *= 1.0 + sign() * error;
+    t.wheelbase_m *= 1.0 + sign() * error;
+    s.seed = rng.random_range(0..1_000_000);
+    s
+}
+
+struct Trial {
+    stop: Option<Stop>,
+    /// Largest distance from the true position to the plan's path (m).
+    path_error_m: f64,
+    collisions: u32,
+    localized_fixes: u64,
+}
+
+/// Largest distance of `p` to the polyline of the plan's positions.
+fn distance_to_path(plan: &MissionPlan, x: f64, y: f64) -> f64 {
+    plan.samples
+        .windows(2)
+        .map(|w| {
+            let (ax, ay, bx, by) = (w[0].x_m, w[0].y_m, w[1].x_m, w[1].y_m);
+            let (dx, dy) = (bx - ax, by - ay);
+            let l2 = dx * dx + dy * dy;
+            let t = if l2 > 0.0 {
+                (((x - ax) * dx + (y - ay) * dy) / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (x - ax - t * dx).hypot(y - ay - t * dy)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn drive(plan: &Arc<MissionPlan>, site: Scenario, localize: bool) -> Trial {
+    let max_wheel = site.robot.max_wheel_speed_rad_s;
+    let duration = plan.duration_s();
+    let mut backend = SimBackend::new(site, plan.samples[0].pose(), duration + 30.0).unwrap();
+    let mut exec = Executive::new(plan.clone(), Tolerances::default(), None, max_wheel).unwrap();
+    let start = plan.samples[0].pose();
+    let initial = initial_estimate(
+        [start.x_m, start.y_m, start.heading_rad],
+        None,
+        &plan.header.calibrated,
+    );
+    let settings = if localize {
+        LocalizeSettings::default()
+    } else {
+        LocalizeSettings::odometry_only()
+    };
+    let mut nav = Navigator::new(plan, initial, plan.header.robot.ticks_per_rev, settings);
+    let mut wheels = [0.0, 0.0];
+    let (mut path_error_m, mut collisions, mut k) = (0.0f64, 0, 0u64);
+    while let Some(reading) = backend.step(wheels) {
+        if backend.blocked() {
+            collisions += 1;
+        }
+        let belief = nav.update(&reading);
+        wheels = exec.tick(&reading, &belief);
+        k += 1;
+        if k % 10 == 0 {
+            let p = backend.true_pose();
+            path_error_m = path_error_m.max(distance_to_path(plan, p.x_m, p.y_m));
+        }
+        if exec.stopped().is_some() || reading.t_s > duration + 25.0 {
+            break;
+        }
+    }
+    Trial {
+        stop: exec.stopped().map(|(_, s)| s.clone()),
+        path_error_m,
+        collisions,
+        localized_fixes: nav.localizer().fixes,
+    }
+}
+
+#[test]
+fn a_lidar_robot_with_up_to_two_percent_kinematic_error_stays_on_its_plan() {
+    let plan = office_plan();
+    let twin = office();
+    let mut rng = ChaCha8Rng::seed_from_u64(2026);
+    for error in [0.0, 0.005, 0.01, 0.02, 0.02] {
+        let site = site(&twin, error, &mut rng);
+        let t = drive(plan, site.clone(), true);
+        assert_eq!(t.stop, Some(Stop::Finished), "error {error}");
+        assert!(t.path_error_m < 0.05, "error {error}: {} m", t.path_error_m);
+        assert_eq!(t.collisions, 0, "error {error}");
+        // About one fix per scan (10 Hz).
+        assert!(
+            t.localized_fixes as f64 > 8.0 * plan.duration_s(),
+            "{}",
+            t.localized_fixes
+        );
+        if error >= 0.01 {
+            // Without the map the same robot does not finish on its plan.
+            let blind = drive(plan, site, false);
+            assert_ne!(
+                blind.stop,
+                Some(Stop::Finished),
+                "error {error}: odometry alone finished"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_one_ir_robot_is_never_worse_than_odometry_alone() {
+    let plan = common::plan();
+    let twin = common::twin();
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let start = initial_estimate([0.0; 3], None, &plan.header.calibrated);
+    let nav = Navigator::new(plan, start, 512, LocalizeSettings::default());
+    assert_eq!(nav.localizer().mode(), Mode::Window);
+    for error in [0.0, 0.005, 0.01, 0.01, 0.02] {
+        let site = site(&twin, error, &mut rng);
+        let t = drive(plan, site.clone(), true);
+        let blind = drive(plan, site, false);
+        assert_eq!(t.collisions, 0, "error {error}");
+        if blind.stop == Some(Stop::Finished) {
+            assert_eq!(t.stop, Some(Stop::Finished), "error {error}");
+            assert!(t.path_error_m <= blind.path_error_m + 0.01, "error {error}");
+        }
+        // On this plan (along walls the beam keeps seeing) it does better.
+        assert_eq!(t.stop, Some(Stop::Finished), "error {error}");
+        assert!(t.path_error_m < 0.05, "error {error}: {} m", t.path_error_m);
+        assert!(t.localized_fixes > 30, "error {error}");
+    }
+}
+
+#[test]
+fn one_beam_in_an_open_room_cannot_localize_and_goes_by_odometry() {
+    // The case-study plan in a room four times larger: the side IR reads
+    // nothing on most of it.
+    let plan = common::plan();
+    let mut twin = common::twin();
+    twin.world = twindrive_sim::World::from_walls(
+        &[
+            [-10.0, -10.0, 20.0, -10.0],
+            [20.0, -10.0, 20.0, 20.0],
+            [20.0, 20.0, -10.0, 20.0],
+            [-10.0, 20.0, -10.0, -10.0],
+        ],
+        &[],
+    );
+    let mut plan_in_open = (**plan).clone();
+    plan_in_open.header.site_map = twindrive_mission::plan::SiteMap::of(&twin.world);
+    let plan_in_open = Arc::new(plan_in_open);
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let site = site(&twin, 0.0, &mut rng);
+    let t = drive(&plan_in_open, site, true);
+    assert_eq!(t.localized_fixes, 0, "no wall in reach, no fix");
+    assert_eq!(t.stop, Some(Stop::Finished), "odometry alone, as before");
+}
