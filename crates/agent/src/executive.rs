@@ -111,11 +111,6 @@ pub struct Executive {
     predicted: Vec<f64>,
     /// The residual of the latest fresh readings (repeated until the next).
     last_residual: Option<f64>,
-    /// Standard deviations of the estimate (x, y m; heading rad).
-    pose_std: [f64; 3],
-    /// Whether the estimate is localized on the map (else readings are
-    /// compared with the map along the plan).
-    localizing: bool,
     /// Time of the first tick (the plan's time zero).
     t0_s: Option<f64>,
     last_heard_s: f64,
@@ -144,8 +139,6 @@ impl Executive {
             predicted: vec![0.0; model.beams()],
             model,
             last_residual: None,
-            pose_std: [0.0; 3],
-            localizing: true,
             plan,
             tracker,
             tolerances,
@@ -195,9 +188,6 @@ impl Executive {
     /// What the robot sensed over the last period and where it believes it
     /// is now in; the wheel commands for the next period out.
     pub fn tick(&mut self, reading: &Reading, belief: &Belief) -> [f64; 2] {
-        self.pose_std = belief.pose_std;
-        self.localizing = belief.localizing;
-        let estimate = belief.pose;
         if self.stopped.is_some() {
             return [0.0, 0.0];
         }
@@ -207,8 +197,10 @@ impl Executive {
             self.last_heard_s = reading.t_s;
         }
         let t = reading.t_s - t0;
-        let command = self.tracker.command_from(&self.plan.samples, t, estimate);
-        if let Some(stop) = self.check(reading, t) {
+        let command = self
+            .tracker
+            .command_from(&self.plan.samples, t, belief.pose);
+        if let Some(stop) = self.check(reading, t, belief) {
             self.stopped = Some((reading.t_s, stop));
             return [0.0, 0.0];
         }
@@ -221,19 +213,17 @@ impl Executive {
         }
     }
 
-    fn check(&mut self, reading: &Reading, t: f64) -> Option<Stop> {
-        // A bump is expected when the plan predicts one within
-        // `range_match_s` of now (contact starts and ends a little early or
-        // late on a real robot).
+    fn check(&mut self, reading: &Reading, t: f64, belief: &Belief) -> Option<Stop> {
+        // The plan's samples within `range_match_s` of now. A bump is
+        // expected when the plan predicts one among them (contact starts and
+        // ends a little early or late on a real robot).
         let now = t + self.plan.samples[0].t_s;
         let m = self.tolerances.range_match_s;
         let lo = self.plan.samples.partition_point(|s| s.t_s < now - m);
         let hi = self.plan.samples.partition_point(|s| s.t_s <= now + m);
+        let near = &self.plan.samples[lo..hi.max(lo)];
         let k = self.tracker.progress().min(self.plan.samples.len() - 1);
-        let predicted = self.plan.samples[k].expected_bump
-            || self.plan.samples[lo..hi.max(lo)]
-                .iter()
-                .any(|s| s.expected_bump);
+        let predicted = self.plan.samples[k].expected_bump || near.iter().any(|s| s.expected_bump);
         if let Some(what) = &reading.fault {
             return Some(Stop::SensorFault { what: what.clone() });
         }
@@ -246,10 +236,10 @@ impl Executive {
                 return Some(Stop::DeadMan { silent_s: silent });
             }
         }
-        // Where the plan is at this time, against where odometry says the
-        // robot is.
+        // Where the plan is at this time, against where the robot believes
+        // it is.
         let reference = self.tracker.reference();
-        let estimate = self.tracker.estimate();
+        let estimate = belief.pose;
         let deviation_m = (reference.x_m - estimate.x_m).hypot(reference.y_m - estimate.y_m);
         if deviation_m > self.tolerances.max_deviation_m {
             return Some(Stop::Deviation { deviation_m });
@@ -261,22 +251,17 @@ impl Executive {
         // it (within the estimate's uncertainty, at least 1 cm and 0.01 rad,
         // at most 3 cm and 0.03 rad) counts, when the robot localizes.
         if reading.fresh_ranges_m.iter().any(|r| r.is_finite()) {
+            let std = belief.pose_std;
             let d = [
-                (2.0 * self.pose_std[0].max(self.pose_std[1])).clamp(0.01, 0.03),
-                (2.0 * self.pose_std[2]).clamp(0.01, 0.03),
+                (2.0 * std[0].max(std[1])).clamp(0.01, 0.03),
+                (2.0 * std[2]).clamp(0.01, 0.03),
             ];
             let (s, c) = estimate.heading_rad.sin_cos();
             // And the plan's poses within `range_match_s` of now (every
             // fifth), as when plans carried the twin's predictions: a
             // reading the map explains near the estimate or along the plan
             // is no discrepancy.
-            let m = self.tolerances.range_match_s;
-            let lo = self.plan.samples.partition_point(|s| s.t_s < now - m);
-            let hi = self.plan.samples.partition_point(|s| s.t_s <= now + m);
-            let along_plan = self.plan.samples[lo..hi.max(lo)]
-                .iter()
-                .step_by(5)
-                .map(|s| s.pose());
+            let along_plan = near.iter().step_by(5).map(|s| s.pose());
             let near_estimate = [
                 (0.0, 0.0, 0.0),
                 (d[0] * c, d[0] * s, 0.0),
@@ -287,7 +272,7 @@ impl Executive {
                 (0.0, 0.0, -d[1]),
             ]
             .into_iter()
-            .filter(|_| self.localizing)
+            .filter(|_| belief.localizing)
             .map(|(dx, dy, dh)| {
                 Pose::new(
                     estimate.x_m + dx,
@@ -295,9 +280,8 @@ impl Executive {
                     estimate.heading_rad + dh,
                 )
             });
-            let candidates: Vec<Pose> = near_estimate.chain(along_plan).collect();
             let mut best: Option<f64> = None;
-            for pose in candidates {
+            for pose in near_estimate.chain(along_plan) {
                 self.model.read(&pose, &mut self.predicted);
                 let (mut sum, mut count) = (0.0, 0usize);
                 for (m, e) in reading.fresh_ranges_m.iter().zip(&self.predicted) {

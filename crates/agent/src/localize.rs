@@ -20,7 +20,7 @@
 //! odometry, as it did before it had a map, and says so.
 
 use twindrive_estimation::localize::{MatchSettings, ScanMatch, SegmentMap, match_points, search};
-use twindrive_kinematics::{DiffDriveParams, Pose, arc_step_wheels};
+use twindrive_kinematics::{DiffDriveParams, Pose, WheelOdometry};
 use twindrive_log::RangeSensorInfo;
 use twindrive_mission::plan::MissionPlan;
 
@@ -103,16 +103,14 @@ pub struct Localizer {
     beams: Vec<Beam>,
     mode: Mode,
     settings: LocalizeSettings,
-    /// Odometry pose (the window's frame) and the encoder angles last seen.
-    odom: Pose,
-    last_wheels_rad: Option<[f64; 2]>,
+    /// Odometry: the window's frame.
+    odom: WheelOdometry,
     /// Endpoints in the odometry frame.
     window: Vec<[f64; 2]>,
     window_start_s: Option<f64>,
     /// Scratch: endpoints in the robot frame.
     points: Vec<[f64; 2]>,
     last_fix_s: Option<f64>,
-    started_s: Option<f64>,
     pub fixes: u64,
     pub failures: u64,
 }
@@ -137,13 +135,11 @@ impl Localizer {
             beams,
             mode,
             settings,
-            odom: Pose::default(),
-            last_wheels_rad: None,
+            odom: WheelOdometry::new(Pose::default()),
             window: Vec::new(),
             window_start_s: None,
             points: Vec::new(),
             last_fix_s: None,
-            started_s: None,
             fixes: 0,
             failures: 0,
         }
@@ -161,10 +157,10 @@ impl Localizer {
     /// Whether a match was fused within [`LocalizeSettings::lost_after_s`]
     /// of `t_s`.
     pub fn localized(&self, t_s: f64) -> bool {
-        let since = self.last_fix_s.or(self.started_s).unwrap_or(t_s);
         self.mode != Mode::None
-            && self.last_fix_s.is_some()
-            && t_s - since <= self.settings.lost_after_s
+            && self
+                .last_fix_s
+                .is_some_and(|fix| t_s - fix <= self.settings.lost_after_s)
     }
 
     /// A fix was fused (the filter took it).
@@ -186,16 +182,13 @@ impl Localizer {
         estimate: [f64; 3],
         covariance: &[[f64; 3]; 3],
     ) -> Option<Fix> {
-        self.started_s.get_or_insert(t_s);
         if self.mode == Mode::None {
             return None;
         }
         if let Some(w) = wheels_rad {
-            if let Some(prev) = self.last_wheels_rad {
-                self.odom = arc_step_wheels(&self.odom, params, w[0] - prev[0], w[1] - prev[1]);
-            }
-            self.last_wheels_rad = Some(w);
+            self.odom.advance(params, w);
         }
+        let odom = self.odom.pose;
         let fresh = fresh_ranges_m.iter().any(|r| r.is_finite());
         if !fresh {
             return None;
@@ -209,7 +202,7 @@ impl Localizer {
                 beam.origin[0] + r * beam.dir[0],
                 beam.origin[1] + r * beam.dir[1],
             );
-            let (x, y) = self.odom.transform_point(bx, by);
+            let (x, y) = odom.transform_point(bx, by);
             self.window.push([x, y]);
         }
         let start = *self.window_start_s.get_or_insert(t_s);
@@ -217,10 +210,10 @@ impl Localizer {
             return None;
         }
         // Into the robot frame now.
-        let (s, c) = self.odom.heading_rad.sin_cos();
+        let (s, c) = odom.heading_rad.sin_cos();
         self.points.clear();
         self.points.extend(self.window.iter().map(|p| {
-            let (dx, dy) = (p[0] - self.odom.x_m, p[1] - self.odom.y_m);
+            let (dx, dy) = (p[0] - odom.x_m, p[1] - odom.y_m);
             [c * dx + s * dy, -s * dx + c * dy]
         }));
         self.window.clear();
@@ -229,11 +222,8 @@ impl Localizer {
             Mode::Scan => match_points(&self.map, &self.points, estimate, &self.settings.matching),
             _ => {
                 let w = self.settings.search_half_width;
-                let half = [
-                    w[0].max(3.0 * covariance[0][0].max(0.0).sqrt()).min(0.3),
-                    w[1].max(3.0 * covariance[1][1].max(0.0).sqrt()).min(0.3),
-                    w[2].max(3.0 * covariance[2][2].max(0.0).sqrt()).min(0.3),
-                ];
+                let half =
+                    [0, 1, 2].map(|i| w[i].max(3.0 * covariance[i][i].max(0.0).sqrt()).min(0.3));
                 search(
                     &self.map,
                     &self.points,

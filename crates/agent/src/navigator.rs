@@ -7,7 +7,7 @@
 use twindrive_estimation::{
     FilterConfig, Mat6, OnlineCalibrator, PoseSample, StateAndCovariance, WheelSample,
 };
-use twindrive_kinematics::{DiffDriveParams, Pose};
+use twindrive_kinematics::{DiffDriveParams, Pose, WheelOdometry};
 use twindrive_mission::plan::MissionPlan;
 
 use crate::backend::Reading;
@@ -58,9 +58,9 @@ pub struct Navigator {
     initial: StateAndCovariance,
     localizer: Localizer,
     rad_per_tick: f64,
-    /// Steer by odometry alone (localization off): the pose dead reckoning
-    /// gives with the plan's parameters, and the encoder angles last seen.
-    odometry: Option<(Pose, DiffDriveParams, Option<[f64; 2]>)>,
+    /// Steer by odometry alone (localization off): dead reckoning with the
+    /// plan's parameters.
+    odometry: Option<(WheelOdometry, DiffDriveParams)>,
 }
 
 impl Navigator {
@@ -78,8 +78,12 @@ impl Navigator {
             initial,
             localizer: Localizer::new(plan, settings),
             rad_per_tick: std::f64::consts::TAU / f64::from(ticks_per_rev.max(1)),
-            odometry: (!settings.enabled)
-                .then(|| (Pose::new(s[0], s[1], s[2]), plan.header.calibrated, None)),
+            odometry: (!settings.enabled).then(|| {
+                (
+                    WheelOdometry::new(Pose::new(s[0], s[1], s[2])),
+                    plan.header.calibrated,
+                )
+            }),
         }
     }
 
@@ -114,16 +118,8 @@ impl Navigator {
                 ticks[1] as f64 * self.rad_per_tick,
             ]
         });
-        if let (Some((pose, params, last)), Some(w)) = (&mut self.odometry, wheels_rad) {
-            if let Some(prev) = *last {
-                *pose = twindrive_kinematics::arc_step_wheels(
-                    pose,
-                    params,
-                    w[0] - prev[0],
-                    w[1] - prev[1],
-                );
-            }
-            *last = Some(w);
+        if let (Some((odometry, params)), Some(w)) = (&mut self.odometry, wheels_rad) {
+            odometry.advance(params, w);
         }
         if let Some([left_rad, right_rad]) = wheels_rad
             && let Err(e) = ekf.push_wheels(WheelSample {
@@ -155,7 +151,7 @@ impl Navigator {
         let localizing = self.odometry.is_none() && self.localizer.mode() != Mode::None;
         Belief {
             pose: match &self.odometry {
-                Some((pose, _, _)) => *pose,
+                Some((odometry, _)) => odometry.pose,
                 None => self.pose(),
             },
             pose_std: self.pose_std(),

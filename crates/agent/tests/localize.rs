@@ -14,10 +14,8 @@ use twindrive_agent::backend::{RobotBackend, SimBackend};
 use twindrive_agent::executive::{Executive, Stop, Tolerances};
 use twindrive_agent::localize::{LocalizeSettings, Mode};
 use twindrive_agent::navigator::{Navigator, initial_estimate};
-use twindrive_mission::pipeline::{self, PipelineSettings};
 use twindrive_mission::plan::MissionPlan;
-use twindrive_mission::redundancy::RedundancyConfig;
-use twindrive_sim::{Scenario, Simulator};
+use twindrive_sim::Scenario;
 
 fn office() -> Scenario {
     let path =
@@ -30,22 +28,7 @@ fn office_plan() -> &'static Arc<MissionPlan> {
     static PLAN: OnceLock<Arc<MissionPlan>> = OnceLock::new();
     PLAN.get_or_init(|| {
         let scenario = office();
-        let log = Simulator::new(scenario.clone()).run(|_, _| {});
-        let settings = PipelineSettings {
-            planner: Default::default(),
-            redundancy: RedundancyConfig::with_pinch_distance(0.15),
-            filter: Default::default(),
-        };
-        let (plan, _) = pipeline::plan_from_log(
-            &log,
-            &"0".repeat(64),
-            &scenario.robot.true_params,
-            &scenario,
-            &settings,
-            false,
-        )
-        .unwrap();
-        Arc::new(plan)
+        Arc::new(common::plan_of(&scenario, &scenario.robot.true_params))
     })
 }
 

@@ -98,6 +98,39 @@ pub fn arc_step_wheels(
     arc_step(pose, ds, dtheta)
 }
 
+/// Dead reckoning from cumulative wheel angles: the pose stepped by
+/// [`arc_step_wheels`] on each increment since the angles last seen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WheelOdometry {
+    pub pose: Pose,
+    last_rad: Option<[f64; 2]>,
+}
+
+impl WheelOdometry {
+    /// Starting at `pose`; the first angles given only set the reference.
+    pub fn new(pose: Pose) -> Self {
+        Self {
+            pose,
+            last_rad: None,
+        }
+    }
+
+    /// Steps through the rotation since the last angles (left, right,
+    /// cumulative radians) with `params`; the pose after it.
+    pub fn advance(&mut self, params: &DiffDriveParams, wheels_rad: [f64; 2]) -> Pose {
+        if let Some(prev) = self.last_rad {
+            self.pose = arc_step_wheels(
+                &self.pose,
+                params,
+                wheels_rad[0] - prev[0],
+                wheels_rad[1] - prev[1],
+            );
+        }
+        self.last_rad = Some(wheels_rad);
+        self.pose
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

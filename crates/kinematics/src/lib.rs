@@ -12,8 +12,8 @@ mod jacobian;
 mod params;
 
 pub use arc::{
-    arc_step, arc_step_wheels, body_increment, encoder_increment, sinc, sinc_derivative,
-    wheel_travel_m,
+    WheelOdometry, arc_step, arc_step_wheels, body_increment, encoder_increment, sinc,
+    sinc_derivative, wheel_travel_m,
 };
 pub use inverse::{body_velocity, wheel_angles_from_speeds, wheel_speeds};
 pub use jacobian::{

@@ -24,25 +24,28 @@ pub fn twin() -> Scenario {
 /// The case-study plan, made on the twin (as `twindrive plan` makes it).
 pub fn plan() -> &'static Arc<MissionPlan> {
     static PLAN: OnceLock<Arc<MissionPlan>> = OnceLock::new();
-    PLAN.get_or_init(|| {
-        let scenario = twin();
-        let log = Simulator::new(scenario.clone()).run(|_, _| {});
-        let settings = PipelineSettings {
-            planner: Default::default(),
-            redundancy: RedundancyConfig::with_pinch_distance(0.15),
-            filter: Default::default(),
-        };
-        let (plan, _) = pipeline::plan_from_log(
-            &log,
-            &"0".repeat(64),
-            &CALIBRATED,
-            &scenario,
-            &settings,
-            false,
-        )
-        .unwrap();
-        Arc::new(plan)
-    })
+    PLAN.get_or_init(|| Arc::new(plan_of(&twin(), &CALIBRATED)))
+}
+
+/// The plan `twindrive plan` makes from a run of `scenario` on its twin,
+/// for a robot calibrated to `calibrated`.
+pub fn plan_of(scenario: &Scenario, calibrated: &DiffDriveParams) -> MissionPlan {
+    let log = Simulator::new(scenario.clone()).run(|_, _| {});
+    let settings = PipelineSettings {
+        planner: Default::default(),
+        redundancy: RedundancyConfig::with_pinch_distance(0.15),
+        filter: Default::default(),
+    };
+    pipeline::plan_from_log(
+        &log,
+        &"0".repeat(64),
+        calibrated,
+        scenario,
+        &settings,
+        false,
+    )
+    .unwrap()
+    .0
 }
 
 /// The site: the twin's world, plus what the twin does not know.

@@ -268,35 +268,24 @@ mod tests {
 
     use super::*;
 
-    /// Endpoints of a full scan from `pose` in a room, by brute-force ray
-    /// casting against the walls, in the robot frame, with noise.
+    /// Endpoints of a full scan from `pose` (an 8 m range) among the walls,
+    /// cast by the simulator's world, in the robot frame, with noise.
     fn scan(
         walls: &[[f64; 4]],
         pose: [f64; 3],
         beams: usize,
         rng: &mut ChaCha8Rng,
     ) -> Vec<[f64; 2]> {
+        use twindrive_sim::{Vector, World};
+        let world = World::from_walls(walls, &[]);
         let noise = Gauss::new(0.0, 0.01).unwrap();
         (0..beams)
             .filter_map(|i| {
                 let a = i as f64 * std::f64::consts::TAU / beams as f64;
-                let (dx, dy) = ((pose[2] + a).cos(), (pose[2] + a).sin());
-                let mut best = 8.0f64;
-                for w in walls {
-                    let (ex, ey) = (w[2] - w[0], w[3] - w[1]);
-                    let den = dx * ey - dy * ex;
-                    if den.abs() < 1e-12 {
-                        continue;
-                    }
-                    let (qx, qy) = (w[0] - pose[0], w[1] - pose[1]);
-                    let t = (qx * ey - qy * ex) / den;
-                    let u = (qx * dy - qy * dx) / den;
-                    if t > 0.0 && (0.0..=1.0).contains(&u) {
-                        best = best.min(t);
-                    }
-                }
-                (best < 8.0).then(|| {
-                    let r = best + noise.sample(rng);
+                let dir = Vector::new((pose[2] + a).cos(), (pose[2] + a).sin());
+                let r = world.cast_ray(Vector::new(pose[0], pose[1]), dir, 8.0);
+                (r < 8.0).then(|| {
+                    let r = r + noise.sample(rng);
                     [r * a.cos(), r * a.sin()]
                 })
             })
