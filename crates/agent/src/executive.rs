@@ -21,7 +21,10 @@
 //!   (when the robot localizes; a beam that skims a wall's end flips on a
 //!   millimetre), and at the plan's poses within `range_match_s` of now. A
 //!   localized robot's residual means the world changed, not that the
-//!   robot is lost. These are hand-backs: control returns to the operator;
+//!   robot is lost. A reading that ends past a block the twin learnt but
+//!   not past what stands behind it is no departure: the twin guesses a
+//!   block's extent from a contact, and a smaller obstacle endangers
+//!   nothing. These are hand-backs: control returns to the operator;
 //! - when a supervised plan has heard nothing from the master for longer
 //!   than its dead-man timeout.
 //!
@@ -109,6 +112,10 @@ pub struct Executive {
     /// What the robot's range sensors should read, from the plan's map.
     model: RangeModel,
     predicted: Vec<f64>,
+    /// The map without its learnt blocks, when it has some, and its
+    /// predictions.
+    behind: Option<RangeModel>,
+    predicted_behind: Vec<f64>,
     /// The residual of the latest fresh readings (repeated until the next).
     last_residual: Option<f64>,
     /// Time of the first tick (the plan's time zero).
@@ -135,8 +142,11 @@ impl Executive {
             max_wheel_rad_s.min(plan.header.limits.max_speed_rad_s),
         )?;
         let model = plan.range_model();
+        let behind = plan.range_model_without_boxes();
         Ok(Self {
             predicted: vec![0.0; model.beams()],
+            predicted_behind: vec![0.0; behind.as_ref().map_or(0, |m| m.beams())],
+            behind,
             model,
             last_residual: None,
             plan,
@@ -283,10 +293,26 @@ impl Executive {
             let mut best: Option<f64> = None;
             for pose in near_estimate.chain(along_plan) {
                 self.model.read(&pose, &mut self.predicted);
+                if let Some(behind) = &mut self.behind {
+                    behind.read(&pose, &mut self.predicted_behind);
+                }
                 let (mut sum, mut count) = (0.0, 0usize);
-                for (m, e) in reading.fresh_ranges_m.iter().zip(&self.predicted) {
+                for (i, (m, e)) in reading
+                    .fresh_ranges_m
+                    .iter()
+                    .zip(&self.predicted)
+                    .enumerate()
+                {
                     if m.is_finite() && e.is_finite() {
-                        sum += (m - e).abs();
+                        // A reading past a learnt block's face, but not past
+                        // what stands behind it, says the block is smaller
+                        // than the twin guessed: no departure.
+                        let far = self.predicted_behind.get(i).copied().unwrap_or(*e);
+                        sum += if *m > *e {
+                            (m - far).max(0.0).min(m - e)
+                        } else {
+                            e - m
+                        };
                         count += 1;
                     }
                 }

@@ -24,6 +24,7 @@ pub mod master;
 pub mod narrate;
 pub mod navigator;
 pub mod operator;
+pub mod refine;
 pub mod robot;
 pub mod ros;
 pub mod twin;

@@ -83,11 +83,11 @@ pub enum Mode {
 
 /// One beam: its origin and direction in the robot frame and its limits.
 #[derive(Debug, Clone, Copy)]
-struct Beam {
-    origin: [f64; 2],
-    dir: [f64; 2],
-    min_m: f64,
-    max_m: f64,
+pub(crate) struct Beam {
+    pub origin: [f64; 2],
+    pub dir: [f64; 2],
+    pub min_m: f64,
+    pub max_m: f64,
 }
 
 /// A match the filter should fuse.
@@ -120,7 +120,10 @@ impl Localizer {
     pub fn new(plan: &MissionPlan, settings: LocalizeSettings) -> Self {
         let sensors = &plan.header.robot.range_sensors;
         let reach = settings.matching.outlier_m + settings.resolution_m;
-        let map = SegmentMap::new(&plan.header.site_map.segments, settings.resolution_m, reach);
+        // The walls only: a learnt block's extent is partly a guess, no
+        // landmark.
+        let walls = plan.header.site_map.without_boxes().walls();
+        let map = SegmentMap::new(&walls, settings.resolution_m, reach);
         let beams = beams(sensors);
         let mode =
             if !settings.enabled || beams.is_empty() || plan.header.site_map.segments.is_empty() {
@@ -245,7 +248,7 @@ impl Localizer {
 }
 
 /// Every beam of `sensors`, in reading order.
-fn beams(sensors: &[RangeSensorInfo]) -> Vec<Beam> {
+pub(crate) fn beams(sensors: &[RangeSensorInfo]) -> Vec<Beam> {
     sensors
         .iter()
         .flat_map(|s| {

@@ -362,6 +362,11 @@ impl<B: RobotBackend> RobotAgent<B> {
         Ok(())
     }
 
+    /// How the robot localizes the plans it starts from now on.
+    pub fn set_localization(&mut self, settings: LocalizeSettings) {
+        self.config.localization = settings;
+    }
+
     pub fn backend(&self) -> &B {
         &self.backend
     }

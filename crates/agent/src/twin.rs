@@ -3,7 +3,9 @@
 //! continuation is rehearsed on it.
 //!
 //! From a hand-back the twin takes:
-//! - the robot's pose (where the continuation starts);
+//! - the robot's pose (where the continuation starts), refined against the
+//!   twin's map with the hand-back's window of readings, with its
+//!   uncertainty ([`crate::refine`]);
 //! - its kinematic parameters, when the robot's estimates differ from the
 //!   twin's by more than three of their standard deviations (and by more
 //!   than a tenth of a millimetre: below that no plan changes);
@@ -17,7 +19,18 @@
 //!   other make one solid block, given `depth_m` behind the faces seen (a
 //!   range sensor sees one face of an obstacle, not its depth) and
 //!   `grow_m` along them, never towards where they were seen from, so the
-//!   twin predicts the faces where the robot saw them.
+//!   twin predicts the faces where the robot saw them. The window's poses
+//!   are moved with the refinement, so the points are placed where the
+//!   refined pose says they were. A contact says there is something at the
+//!   bumper, not how wide it is: its block reaches `contact_grow_m` along
+//!   the face either way.
+//!
+//! Where a continuation leaves the interrupted plan's path (its back-off,
+//! its way back, its detours) it keeps three standard deviations of the
+//! refined position (towards the nearest wall or block) clear of everything
+//! the twin knows, walls and learnt blocks; from where the robot stands it
+//! first moves away from what is nearer than that. One that cannot is not
+//! sent, and the operator is told where it came too close.
 
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::wire::Handback;
@@ -27,6 +40,8 @@ use twindrive_mission::pipeline::continuation_plan;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::verify::{self, Criteria, TrackerSettings, Verdict};
 use twindrive_sim::{Scenario, SensorModel, World};
+
+use crate::refine::{RefineSettings, RefinedPose, refine};
 
 /// The master's twin: its scenario (world and simulated robot) and the
 /// operator's calibrated parameters.
@@ -40,6 +55,12 @@ pub struct Twin {
     known: World,
     /// Obstacle points learnt, each with where it was seen from.
     evidence: Vec<Evidence>,
+    /// Sight lines through where a learnt block was (they cut its guessed
+    /// extent back).
+    free: Vec<Ray>,
+    /// The latest hand-back's pose as refined, with its covariance (the
+    /// continuation starts there).
+    pub refined: Option<RefinedPose>,
 }
 
 /// An obstacle point and the place it was seen from (the sensor's mount,
@@ -48,6 +69,8 @@ pub struct Twin {
 struct Evidence {
     point: [f64; 2],
     seen_from: [f64; 2],
+    /// A bumper contact (its extent along the face is unknown).
+    contact: bool,
 }
 
 /// A sight line through free space: from the sensor to short of what it saw.
@@ -57,6 +80,8 @@ type Ray = ([f64; 2], [f64; 2]);
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct TwinUpdate {
     pub pose: Pose,
+    /// The pose as refined against the twin's map, with the robot's own.
+    pub refined: RefinedPose,
     /// The new parameters, when they changed.
     pub params: Option<DiffDriveParams>,
     /// Blocks added to the world: `(min, max)` corners (m).
@@ -89,6 +114,12 @@ pub struct LearnSettings {
     pub grow_m: f64,
     /// A block's depth behind the faces seen (m).
     pub depth_m: f64,
+    /// A contact's block extent along the face either way, and its depth
+    /// (m): a bumper says something is there, not how large it is. Readings
+    /// through the guess cut it back.
+    pub contact_grow_m: f64,
+    pub contact_depth_m: f64,
+    pub refine: RefineSettings,
 }
 
 impl Default for LearnSettings {
@@ -98,6 +129,9 @@ impl Default for LearnSettings {
             cluster_m: 0.3,
             grow_m: 0.03,
             depth_m: 0.1,
+            contact_grow_m: 0.3,
+            contact_depth_m: 0.3,
+            refine: RefineSettings::default(),
         }
     }
 }
@@ -110,12 +144,24 @@ impl Twin {
             calibrated,
             learnt: Vec::new(),
             evidence: Vec::new(),
+            free: Vec::new(),
+            refined: None,
         }
     }
 
     /// Updates the twin from a hand-back.
     pub fn apply(&mut self, h: &Handback, settings: &LearnSettings) -> TwinUpdate {
-        let pose = Pose::new(h.pose[0], h.pose[1], h.pose[2]);
+        let sensors: Vec<_> = self
+            .scenario
+            .range_sensors
+            .iter()
+            .map(|s| s.info.clone())
+            .collect();
+        // Against the walls the twin knew: a learnt block's extent is
+        // partly a guess, no landmark.
+        let refined = refine(&self.known, &sensors, &self.calibrated, h, &settings.refine);
+        self.refined = Some(refined);
+        let pose = Pose::new(refined.pose[0], refined.pose[1], refined.pose[2]);
         self.scenario.robot.start = pose;
         // Parameters: only when the robot's estimate is confidently different.
         let twin = [
@@ -142,7 +188,7 @@ impl Twin {
         }
         // The world: points the twin cannot explain, and free space where
         // it predicted a learnt obstacle.
-        let (points, free_rays) = self.readings(h, settings);
+        let (points, free_rays) = self.readings(h, &refined, settings);
         let before = self.evidence.len();
         self.evidence.retain(|e| {
             !free_rays
@@ -151,11 +197,12 @@ impl Twin {
         });
         let evidence_removed = before - self.evidence.len();
         self.evidence.extend_from_slice(&points);
+        self.free.extend_from_slice(&free_rays);
         // A block never covers where the robot stands (it touched the
         // obstacle's face, it is not inside it).
         let clear =
             self.scenario.robot.footprint_radius_m + 0.1 * self.scenario.bump.contact_margin_m;
-        let blocks: Vec<Block> = cluster(&self.evidence, settings)
+        let blocks: Vec<Block> = cluster(&self.evidence, &self.free, settings)
             .into_iter()
             .filter_map(|b| clip_clear_of(b, [pose.x_m, pose.y_m], clear))
             .collect();
@@ -176,6 +223,7 @@ impl Twin {
         }
         TwinUpdate {
             pose,
+            refined,
             params,
             obstacles_added,
             obstacles_removed,
@@ -188,13 +236,19 @@ impl Twin {
     /// obstacle points (readings well short of the prediction, contacts the
     /// twin did not predict) and free rays (sensor to reading, for readings
     /// well beyond a prediction that ended on a learnt obstacle).
-    fn readings(&self, h: &Handback, settings: &LearnSettings) -> (Vec<Evidence>, Vec<Ray>) {
+    fn readings(
+        &self,
+        h: &Handback,
+        refined: &RefinedPose,
+        settings: &LearnSettings,
+    ) -> (Vec<Evidence>, Vec<Ray>) {
         let mut model = SensorModel::new(&self.scenario);
         let mut predicted = vec![0.0; model.beams()];
         let (mut points, mut free) = (Vec::new(), Vec::new());
         let sensors = &self.scenario.range_sensors;
         for w in &h.window {
-            let pose = Pose::new(w.pose[0], w.pose[1], w.pose[2]);
+            let [x, y, heading] = refined.correct(w.pose);
+            let pose = Pose::new(x, y, heading);
             let bump_predicted = model.read(&pose, &mut predicted);
             let mut beam = 0;
             for s in sensors {
@@ -219,6 +273,7 @@ impl Twin {
                         points.push(Evidence {
                             point: at(measured),
                             seen_from: [mx, my],
+                            contact: false,
                         });
                     } else if measured > expected + settings.shorter_by_m
                         && self.on_learnt(at(expected))
@@ -240,6 +295,7 @@ impl Twin {
                         pose.y_m + r * pose.heading_rad.sin(),
                     ],
                     seen_from: [pose.x_m, pose.y_m],
+                    contact: true,
                 });
             }
         }
@@ -273,15 +329,21 @@ impl Twin {
         let mut scenario = self.scenario.clone();
         scenario.robot.true_params = self.calibrated;
         scenario.robot.slip_std = 0.0;
+        // Three standard deviations of where the robot stands, and at least
+        // the clearance wanted anyway.
+        let required_m = 3.0 * self.refined.map_or(0.0, |r| r.position_std_m());
+        let mut detour = settings.detour;
+        detour.clearance_m = detour.clearance_m.max(required_m);
         let plan = continuation_plan(
             interrupted,
             plan_t_s,
             &self.calibrated,
             &scenario,
             &self.learnt,
-            &settings.detour,
+            &detour,
             settings.pace,
         )?;
+        self.check_clearance(&plan, interrupted, plan_t_s)?;
         let closed = verify::closed_loop(
             &plan.samples,
             scenario,
@@ -296,6 +358,120 @@ impl Twin {
             )));
         }
         Ok(plan)
+    }
+
+    /// Whether `plan`, the continuation of `interrupted` from `plan_t_s`,
+    /// keeps its footprint three standard deviations of the robot's
+    /// position clear of everything the twin knows wherever it leaves the
+    /// interrupted plan's path (its back-off, its way back onto the plan,
+    /// its detours: the geometry the twin made for a robot it knows only
+    /// that well; the rest is the plan the robot was driving, localizing as
+    /// it went, verified before), or nearer than that plan keeps where
+    /// the leg leaves or joins it. The deviation is taken towards the
+    /// nearest wall or block: a robot that followed a wall knows its
+    /// distance from it well and its place along it less. Where the robot
+    /// stands it may be nearer (it handed back against an obstacle, or
+    /// close to a wall): from there the continuation may only move away
+    /// until it is clear, on the plan's path or off it.
+    fn check_clearance(
+        &self,
+        plan: &MissionPlan,
+        interrupted: &MissionPlan,
+        plan_t_s: f64,
+    ) -> Result<(), PipelineError> {
+        let Some(refined) = self.refined else {
+            return Ok(());
+        };
+        let t_start = interrupted.samples.first().map_or(0.0, |s| s.t_s) + plan_t_s;
+        let k0 = interrupted.samples.partition_point(|s| s.t_s < t_start);
+        let remaining = &interrupted.samples[k0..];
+        // The next sample of the interrupted plan the continuation may
+        // still pass (it follows the plan in order).
+        let mut next = 0;
+        let c = &refined.covariance;
+        let sigma_towards = |n: [f64; 2]| {
+            (n[0] * n[0] * c[0] + 2.0 * n[0] * n[1] * c[1] + n[1] * n[1] * c[4])
+                .max(0.0)
+                .sqrt()
+        };
+        let footprint = self.scenario.robot.footprint_radius_m;
+        let cutoff = footprint + 3.0 * refined.position_std_m() + 0.05;
+        let world = &self.scenario.world;
+        // Each sample: on the interrupted plan's path or not, its clearance,
+        // the position's deviation towards what is nearest.
+        let mut samples = Vec::with_capacity(plan.samples.len());
+        for s in &plan.samples {
+            let on_plan = remaining[next..]
+                .iter()
+                .position(|r| (r.x_m - s.x_m).hypot(r.y_m - s.y_m) < 1e-6);
+            if let Some(j) = on_plan {
+                next += j;
+            }
+            let p = twindrive_sim::Vector::new(s.x_m, s.y_m);
+            let (clear, sigma) = if world.inside_obstacle(p) {
+                (-footprint, refined.position_std_m())
+            } else {
+                match world.nearest_within(p, cutoff) {
+                    None => (cutoff - footprint, 0.0),
+                    Some(n) => {
+                        let d = n.distance_m.max(1e-9);
+                        let towards = [(n.point.x - p.x) / d, (n.point.y - p.y) / d];
+                        (n.distance_m - footprint, sigma_towards(towards))
+                    }
+                }
+            };
+            samples.push((on_plan.is_some(), clear, sigma));
+        }
+        // A leg off the plan never needs more clearance than the plan it
+        // leaves or joins keeps there (the robot drives that anyway).
+        let mut join = vec![None; samples.len()];
+        let mut previous: Option<f64> = None;
+        for (k, &(on, clear, _)) in samples.iter().enumerate() {
+            if on {
+                previous = Some(clear);
+            } else {
+                join[k] = previous;
+            }
+        }
+        let mut following: Option<f64> = None;
+        for (k, &(on, clear, _)) in samples.iter().enumerate().rev() {
+            if on {
+                following = Some(clear);
+            } else if let Some(f) = following {
+                join[k] = Some(join[k].map_or(f, |p: f64| p.max(f)));
+            }
+        }
+        let mut leaving = true;
+        let mut last = f64::NEG_INFINITY;
+        let t0 = plan.samples.first().map_or(0.0, |s| s.t_s);
+        for (k, (s, &(on_plan, clear, sigma))) in plan.samples.iter().zip(&samples).enumerate() {
+            let required_m = join[k].map_or(3.0 * sigma, |j| (3.0 * sigma).min(j));
+            if leaving && clear >= required_m {
+                leaving = false;
+            }
+            let closing = if leaving {
+                clear < last - 1e-3
+            } else {
+                !on_plan && clear < required_m - 1e-6
+            };
+            if closing {
+                let what =
+                    if self.known.clearance_m(s.x_m, s.y_m, cutoff) - footprint <= clear + 1e-6 {
+                        "a wall the twin knew"
+                    } else {
+                        "a block learnt from the robot"
+                    };
+                return Err(PipelineError::Infeasible(format!(
+                    "the continuation comes within {clear:.3} m of {what} at ({:.2}, {:.2}) m, {:.1} s in; the robot's position is known to {sigma:.3} m that way (one standard deviation, refined against the twin's map), and a continuation keeps three of them ({:.3} m) clear of everything the twin knows where it leaves the plan, and moves away from what it stands near",
+                    s.x_m,
+                    s.y_m,
+                    s.t_s - t0,
+                    3.0 * sigma,
+                )));
+            }
+            last = last.max(clear);
+        }
+        Ok(())
     }
 }
 
@@ -321,7 +497,11 @@ impl Default for ContinuationSettings {
 /// block: the union of its points' boxes, each point's box `depth_m` deep
 /// behind the face it lies on (away from where it was seen from, across the
 /// axis its sight line mostly runs along) and `grow_m` wide along it.
-fn cluster(evidence: &[Evidence], settings: &LearnSettings) -> Vec<Block> {
+///
+/// A block is then cut back by every sight line through it that passes
+/// none of its points (the guessed part of a contact's block, or a grown
+/// edge, that a reading went through).
+fn cluster(evidence: &[Evidence], free: &[Ray], settings: &LearnSettings) -> Vec<Block> {
     let n = evidence.len();
     let mut label: Vec<Option<usize>> = vec![None; n];
     let mut blocks = Vec::new();
@@ -331,8 +511,10 @@ fn cluster(evidence: &[Evidence], settings: &LearnSettings) -> Vec<Block> {
         }
         label[start] = Some(blocks.len());
         let mut stack = vec![start];
+        let mut members = Vec::new();
         let mut block = point_box(&evidence[start], settings);
         while let Some(i) = stack.pop() {
+            members.push(evidence[i].point);
             let b = point_box(&evidence[i], settings);
             block = (
                 [block.0[0].min(b.0[0]), block.0[1].min(b.0[1])],
@@ -347,9 +529,59 @@ fn cluster(evidence: &[Evidence], settings: &LearnSettings) -> Vec<Block> {
                 }
             }
         }
+        for ray in free {
+            block = cut(block, &members, ray);
+        }
         blocks.push(block);
     }
     blocks
+}
+
+/// `block` cut back so that `ray` no longer passes through it, keeping every
+/// point of `members` and as much of it as can be: along one axis, the slab
+/// the ray crosses and everything beyond it on the side without points is
+/// taken off. Unchanged when the ray misses it or runs between its points.
+fn cut((min, max): Block, members: &[[f64; 2]], &(a, b): &Ray) -> Block {
+    // The part of the ray inside the block (Liang-Barsky).
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for k in 0..2 {
+        if d[k] == 0.0 {
+            if a[k] <= min[k] || a[k] >= max[k] {
+                return (min, max);
+            }
+            continue;
+        }
+        let (u, v) = ((min[k] - a[k]) / d[k], (max[k] - a[k]) / d[k]);
+        t0 = t0.max(u.min(v));
+        t1 = t1.min(u.max(v));
+    }
+    if t0 >= t1 {
+        return (min, max);
+    }
+    let p = [a[0] + t0 * d[0], a[1] + t0 * d[1]];
+    let q = [a[0] + t1 * d[0], a[1] + t1 * d[1]];
+    let mut best: Option<(f64, Block)> = None;
+    for k in 0..2 {
+        let (lo, hi) = (p[k].min(q[k]), p[k].max(q[k]));
+        let options = [
+            (members.iter().all(|m| m[k] >= hi), true, hi),
+            (members.iter().all(|m| m[k] <= lo), false, lo),
+        ];
+        for (valid, keep_above, at) in options {
+            let (mut nmin, mut nmax) = (min, max);
+            if keep_above {
+                nmin[k] = at;
+            } else {
+                nmax[k] = at;
+            }
+            let area = (nmax[0] - nmin[0]) * (nmax[1] - nmin[1]);
+            if valid && nmax[k] > nmin[k] && best.is_none_or(|(b, _)| area > b) {
+                best = Some((area, (nmin, nmax)));
+            }
+        }
+    }
+    best.map_or((min, max), |(_, b)| b)
 }
 
 /// The box one obstacle point stands for (see [`cluster`]).
@@ -358,13 +590,18 @@ fn point_box(e: &Evidence, settings: &LearnSettings) -> Block {
     let sight = [p[0] - e.seen_from[0], p[1] - e.seen_from[1]];
     let across = usize::from(sight[1].abs() > sight[0].abs());
     let (mut min, mut max) = (p, p);
-    if sight[across] > 0.0 {
-        max[across] += settings.depth_m;
+    let (grow, depth) = if e.contact {
+        (settings.contact_grow_m, settings.contact_depth_m)
     } else {
-        min[across] -= settings.depth_m;
+        (settings.grow_m, settings.depth_m)
+    };
+    if sight[across] > 0.0 {
+        max[across] += depth;
+    } else {
+        min[across] -= depth;
     }
-    min[1 - across] -= settings.grow_m;
-    max[1 - across] += settings.grow_m;
+    min[1 - across] -= grow;
+    max[1 - across] += grow;
     (min, max)
 }
 
@@ -482,8 +719,9 @@ mod tests {
             twin.evidence.push(Evidence {
                 point: wrong,
                 seen_from: [wrong[0], wrong[1] - 0.3],
+                contact: false,
             });
-            twin.learnt = cluster(&twin.evidence, &LearnSettings::default());
+            twin.learnt = cluster(&twin.evidence, &[], &LearnSettings::default());
             twin.scenario.world = twin.known.with_blocks(&twin.learnt);
             let update = twin.apply(
                 &handback(&site, &sweep(min, max)),

@@ -91,6 +91,32 @@ impl SiteMap {
         twindrive_sim::World::from_walls(&self.segments, &self.boxes)
     }
 
+    /// The map without its blocks: the walls that are not a block's
+    /// outline. Blocks are what the twin learnt from the robot, their
+    /// extent partly a guess; what stands behind one is in this map.
+    pub fn without_boxes(&self) -> twindrive_sim::World {
+        let on_outline = |w: &[f64; 4]| {
+            self.boxes.iter().any(|b| {
+                let along_x = w[1] == w[3]
+                    && (w[1] == b[1] || w[1] == b[3])
+                    && w[0].min(w[2]) >= b[0]
+                    && w[0].max(w[2]) <= b[2];
+                let along_y = w[0] == w[2]
+                    && (w[0] == b[0] || w[0] == b[2])
+                    && w[1].min(w[3]) >= b[1]
+                    && w[1].max(w[3]) <= b[3];
+                along_x || along_y
+            })
+        };
+        let walls: Vec<[f64; 4]> = self
+            .segments
+            .iter()
+            .filter(|w| !on_outline(w))
+            .copied()
+            .collect();
+        twindrive_sim::World::from_walls(&walls, &[])
+    }
+
     fn validate(&self) -> Result<(), PipelineError> {
         for (what, rows) in [
             ("header.site_map.segments", &self.segments),
@@ -275,6 +301,17 @@ impl MissionPlan {
             self.header.site_map.world(),
             &self.header.robot.range_sensors,
         )
+    }
+
+    /// The robot's range predictions from the map without its blocks
+    /// ([`SiteMap::without_boxes`]); `None` when the map has none.
+    pub fn range_model_without_boxes(&self) -> Option<twindrive_sim::RangeModel> {
+        (!self.header.site_map.boxes.is_empty()).then(|| {
+            twindrive_sim::RangeModel::new(
+                self.header.site_map.without_boxes(),
+                &self.header.robot.range_sensors,
+            )
+        })
     }
 
     /// Mission duration (first to last sample).

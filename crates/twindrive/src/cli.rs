@@ -241,6 +241,69 @@ pub enum ExperimentCommand {
     /// budget and the logs back-filled; with --cost, the master's protocol
     /// cost per robot in virtual time as N grows.
     Fleet(FleetExperimentArgs),
+    /// Decoupled operation as the site's kinematics depart from the twin's:
+    /// the case study's plan, made with the twin's parameters, on sites
+    /// whose true wheel diameters and wheelbase each differ by --errors
+    /// (random signs per seed) and that have no tracker, for the paper's
+    /// one-IR robot and the same robot with a 181-beam 2D lidar, with and
+    /// without the demo's box the twin lacks, localizing against the plan's
+    /// map or on dead reckoning, over a link profile in virtual time. Per
+    /// run: completed, completion time, hand-backs, contacts with what the
+    /// twin knew and with what it did not, the true path's largest distance
+    /// from the plan's. Writes results.csv and results.md into --out.
+    Mismatch(MismatchExperimentArgs),
+}
+
+/// The robot's range sensors in `experiment mismatch`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SensorsArg {
+    /// The paper's one side IR.
+    Ir,
+    /// The side IR and a 181-beam 2D lidar (4 m, 10 Hz).
+    Lidar,
+}
+
+/// An unknown obstacle on the route, or none.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ObstacleArg {
+    None,
+    /// The demo's box on the route, which the twin lacks.
+    Box,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnOff {
+    On,
+    Off,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct MismatchExperimentArgs {
+    /// Output directory.
+    #[arg(long, default_value = "twindrive-out/experiment-mismatch")]
+    pub out: PathBuf,
+    /// Kinematic errors (fractions: 0.01 is 1 %), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "0,0.005,0.01,0.02,0.03", value_parser = usage::kinematic_error)]
+    pub errors: Vec<f64>,
+    /// The robot's sensors, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "ir,lidar")]
+    pub sensors: Vec<SensorsArg>,
+    /// An unknown obstacle on the route, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "none,box")]
+    pub obstacle: Vec<ObstacleArg>,
+    /// Localization against the plan's map, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "on,off")]
+    pub localization: Vec<OnOff>,
+    /// Seeds per cell (the kinematic error's signs, the site's noise, the
+    /// link's draws).
+    #[arg(long, default_value_t = 1, value_parser = usage::count)]
+    pub seeds: u64,
+    /// The link profile (see `twindrive link-profiles`).
+    #[arg(long, default_value = "lunar")]
+    pub profile: String,
+    /// Give a run up after this long, seconds of mission time.
+    #[arg(long, value_name = "SECONDS", default_value_t = 1_800.0, value_parser = usage::seconds)]
+    pub max_duration: f64,
 }
 
 #[derive(Debug, clap::Args)]

@@ -105,6 +105,13 @@ pub fn fraction(text: &str) -> Result<f64, String> {
     number(text, "a fraction in (0, 1]", |v| v > 0.0 && v <= 1.0)
 }
 
+/// A kinematic error: a fraction in [0, 0.5).
+pub fn kinematic_error(text: &str) -> Result<f64, String> {
+    number(text, "a fraction in [0, 0.5) (0.01 is 1 %)", |v| {
+        (0.0..0.5).contains(&v)
+    })
+}
+
 /// Unix seconds that a ROS time holds.
 pub fn unix_time(text: &str) -> Result<f64, String> {
     number(text, "Unix seconds between 0 and 4e9", |v| {

@@ -151,10 +151,29 @@ fn demo_runs_from_any_directory() {
     for f in ["twin.svg", "timeline.svg", "robot_journal.jsonl"] {
         assert!(d.join(f).is_file(), "{f}");
     }
+    // The robot localizes against the plan's map and the twin guesses the
+    // box's extent from the contact: at most two hand-backs (issue 21).
+    assert!(handbacks.len() <= 2, "{} hand-backs", handbacks.len());
     let robot_logs = report["robot_logs"].as_array().unwrap();
     assert!(!robot_logs.is_empty());
+    // Every contact is with the box: the robot's true footprint never
+    // touches a wall the twin knew.
+    let known = twindrive_sim::builtin::load("wall_following")
+        .unwrap()
+        .unwrap();
+    let footprint = known.robot.footprint_radius_m;
     for l in robot_logs {
-        assert!(d.join(l.as_str().unwrap()).join("log.csv").is_file());
+        let csv = std::fs::read_to_string(d.join(l.as_str().unwrap()).join("log.csv")).unwrap();
+        let mut lines = csv.lines();
+        let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+        let (x, y) = (col("gt_x"), col("gt_y"));
+        for line in lines {
+            let f: Vec<&str> = line.split(',').collect();
+            let (px, py) = (f[x].parse::<f64>().unwrap(), f[y].parse::<f64>().unwrap());
+            let clear = known.world.clearance_m(px, py, 1.0) - footprint;
+            assert!(clear > 0.0, "{l}: touches a known wall at ({px}, {py})");
+        }
     }
     assert!(stdout.contains("outcome Completed"), "{stdout}");
 

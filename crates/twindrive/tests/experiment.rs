@@ -262,3 +262,44 @@ fn a_fleet_of_three_robot_processes_completes_through_a_router_with_every_log_ba
     assert_eq!(cost.len(), 2);
     assert!(cost[1]["messages"].as_u64().unwrap() > cost[0]["messages"].as_u64().unwrap());
 }
+
+/// The kinematic-mismatch experiment on two random errors of up to 3 %
+/// (random signs per seed), no tracker: the lidar robot localizing
+/// against the plan's map completes with no hand-back and stays within
+/// 5 cm of its plan, where dead reckoning hands back; localizing, with or
+/// without the box the twin lacks, it never touches what the twin knew.
+#[test]
+fn the_mismatch_experiment_keeps_a_localizing_lidar_robot_on_its_plan() {
+    let dir = tempfile::tempdir().unwrap();
+    let errors = format!(
+        "{:.4},{:.4}",
+        0.01 + 0.02 * (std::process::id() % 97) as f64 / 97.0,
+        0.005 + 0.015 * (std::process::id() % 89) as f64 / 89.0
+    );
+    let out = twindrive()
+        .args(["experiment", "mismatch", "--errors", &errors])
+        .args(["--sensors", "lidar", "--seeds", "2", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = read_csv(&dir.path().join("results.csv"));
+    assert_eq!(rows.len(), 2 * 2 * 2 * 2, "{rows:?}");
+    for r in &rows {
+        if r["localization"] == "true" {
+            assert_eq!(num(r, "contacts_known"), 0.0, "{r:?}");
+        }
+        if r["obstacle"] == "false" && r["localization"] == "true" {
+            assert_eq!(r["completed"], "true", "{r:?}");
+            assert_eq!(num(r, "handbacks"), 0.0, "{r:?}");
+            assert!(num(r, "path_error_max_m") < 0.05, "{r:?}");
+        }
+        if r["obstacle"] == "false" && r["localization"] == "false" {
+            assert!(num(r, "handbacks") >= 1.0, "{r:?}");
+        }
+    }
+}
