@@ -205,13 +205,19 @@ impl Navigator {
     }
 
     fn block(&self, at: usize) -> [f64; 9] {
-        let c = self.estimate().covariance;
-        let mut out = [0.0; 9];
-        for i in 0..3 {
-            for j in 0..3 {
-                out[3 * i + j] = c[(at + i, at + j)];
-            }
-        }
-        out
+        covariance_block(&self.estimate(), at)
     }
+}
+
+/// The 3 x 3 block of `estimate`'s covariance from row and column `at` (0:
+/// the pose, 3: the parameters), row major.
+pub fn covariance_block(estimate: &StateAndCovariance, at: usize) -> [f64; 9] {
+    let c = &estimate.covariance;
+    let mut out = [0.0; 9];
+    for i in 0..3 {
+        for j in 0..3 {
+            out[3 * i + j] = c[(at + i, at + j)];
+        }
+    }
+    out
 }

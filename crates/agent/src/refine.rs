@@ -26,7 +26,7 @@ use twindrive_log::RangeSensorInfo;
 use twindrive_sim::World;
 
 use crate::localize::beams;
-use crate::navigator::initial_estimate;
+use crate::navigator::{covariance_block, initial_estimate};
 
 /// How a hand-back pose is refined.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -114,13 +114,9 @@ pub fn refine(
     settings: &RefineSettings,
 ) -> RefinedPose {
     let prior = initial_estimate(h.pose, Some(&h.pose_covariance), params);
-    let covariance = |e: &twindrive_estimation::StateAndCovariance| {
-        let c = &e.covariance;
-        [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|k| c[(k / 3, k % 3)])
-    };
     let mut refined = RefinedPose {
         pose: h.pose,
-        covariance: covariance(&prior),
+        covariance: covariance_block(&prior, 0),
         reported: h.pose,
         points: 0,
         inliers: 0,
@@ -155,7 +151,7 @@ pub fn refine(
     };
     let e = filter.estimate();
     refined.pose = [e.state[0], e.state[1], e.state[2]];
-    refined.covariance = covariance(e);
+    refined.covariance = covariance_block(e, 0);
     refined.directions = outcome.accepted;
     refined
 }

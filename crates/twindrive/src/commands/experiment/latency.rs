@@ -20,8 +20,6 @@
 
 use std::io::Write;
 use std::path::Path;
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, bail};
 use serde::Serialize;
@@ -203,7 +201,7 @@ impl Mission0 {
         })
     }
 
-    fn route(&self) -> Vec<[f64; 2]> {
+    pub(super) fn route(&self) -> Vec<[f64; 2]> {
         self.plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect()
     }
 }
@@ -244,7 +242,7 @@ fn site_for(site: &Scenario, seed: u64) -> Scenario {
 /// Coverage (percent of the route's points within the radius of the path)
 /// and path error (mean and largest distance from the path to the route, m)
 /// of a true path.
-fn score(route: &mut Route, path: &[(f64, Pose)]) -> (f64, f64, f64) {
+pub(super) fn score(route: &mut Route, path: &[(f64, Pose)]) -> (f64, f64, f64) {
     let (mut sum, mut max, mut n) = (0.0, 0.0f64, 0usize);
     for (k, (_, p)) in path.iter().enumerate() {
         route.visit([p.x_m, p.y_m]);
@@ -401,43 +399,17 @@ pub fn run_grid(m: &Mission0, settings: &Settings, scratch: &Path) -> anyhow::Re
             }
         }
     }
-    let bar = crate::progress::bar(jobs.len() as u64, "runs");
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<anyhow::Result<RunRow>>>> =
-        Mutex::new((0..jobs.len()).map(|_| None).collect());
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(jobs.len().max(1));
-    std::thread::scope(|scope| {
-        for _ in 0..workers {
-            scope.spawn(|| {
-                loop {
-                    let k = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&job) = jobs.get(k) else {
-                        break;
-                    };
-                    let r = run_one(m, settings, job, &key, scratch).with_context(|| {
-                        format!(
-                            "{} at latency {} s, loss {}, seed {}",
-                            job.method.name(),
-                            job.latency_s,
-                            job.loss,
-                            job.seed
-                        )
-                    });
-                    results.lock().expect("no worker panicked")[k] = Some(r);
-                    bar.inc(1);
-                }
-            });
-        }
-    });
-    bar.finish_and_clear();
-    results
-        .into_inner()
-        .expect("no worker panicked")
-        .into_iter()
-        .map(|r| r.expect("every job ran"))
-        .collect()
+    super::pool::run_all(&jobs, |&job| {
+        run_one(m, settings, job, &key, scratch).with_context(|| {
+            format!(
+                "{} at latency {} s, loss {}, seed {}",
+                job.method.name(),
+                job.latency_s,
+                job.loss,
+                job.seed
+            )
+        })
+    })
 }
 
 /// The mean of the rows of one method in one cell.

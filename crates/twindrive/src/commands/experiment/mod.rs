@@ -11,6 +11,7 @@
 pub mod fleet;
 pub mod latency;
 pub mod mismatch;
+mod pool;
 mod route;
 pub mod upload;
 
