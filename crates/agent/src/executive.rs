@@ -24,7 +24,16 @@
 //!   robot is lost. A reading that ends past a block the twin learnt but
 //!   not past what stands behind it is no departure: the twin guesses a
 //!   block's extent from a contact, and a smaller obstacle endangers
-//!   nothing. These are hand-backs: control returns to the operator;
+//!   nothing;
+//! - on an obstacle on the path ahead: a range reading well shorter than
+//!   anything the map explains (at every pose the residual tries, by more
+//!   than the estimate's uncertainty could make it) whose end lies in the
+//!   corridor the plan sweeps over its next metre, in several fresh
+//!   readings of that sensor in a row. The mean residual over a lidar's
+//!   beams barely moves for a box in a few of them; this stops the robot
+//!   before it touches what its sensors could see.
+//!   These (bump, deviation, residual, obstacle ahead) are hand-backs:
+//!   control returns to the operator;
 //! - when a supervised plan has heard nothing from the master for longer
 //!   than its dead-man timeout.
 //!
@@ -41,6 +50,7 @@ use twindrive_mission::verify::{Tracker, TrackerSettings};
 use twindrive_sim::RangeModel;
 
 use crate::backend::Reading;
+use crate::localize::{Beam, beams};
 pub use twindrive_link::envelope::Tolerances;
 
 /// Why the robot stopped.
@@ -56,6 +66,9 @@ pub enum Stop {
     /// Hand-back: range readings this far (the median over the window)
     /// from the predicted.
     RangeResidual { median_residual_m: f64 },
+    /// Hand-back: something the map lacks on the plan's path ahead, seen
+    /// this far off, its end at (`x_m`, `y_m`) in the site's frame.
+    ObstacleAhead { range_m: f64, x_m: f64, y_m: f64 },
     /// Nothing heard from the master for this long.
     DeadMan { silent_s: f64 },
     /// Hand-back: the robot lost a sensor it steers by (a silent
@@ -64,10 +77,11 @@ pub enum Stop {
 }
 
 /// The reasons (as [`Stop::reason`] names them) that hand control back.
-pub const HANDBACK_REASONS: [&str; 4] = [
+pub const HANDBACK_REASONS: [&str; 5] = [
     "unexpected_bump",
     "deviation",
     "range_residual",
+    "obstacle_ahead",
     "sensor_fault",
 ];
 
@@ -85,6 +99,7 @@ impl Stop {
             Stop::UnexpectedBump => "unexpected_bump",
             Stop::Deviation { .. } => "deviation",
             Stop::RangeResidual { .. } => "range_residual",
+            Stop::ObstacleAhead { .. } => "obstacle_ahead",
             Stop::DeadMan { .. } => "dead_man",
             Stop::SensorFault { .. } => "sensor_fault",
         }
@@ -116,6 +131,13 @@ pub struct Executive {
     /// predictions.
     behind: Option<RangeModel>,
     predicted_behind: Vec<f64>,
+    /// The shortest prediction of each beam over the poses tried.
+    nearest: Vec<f64>,
+    /// The robot's beams, for where a reading ends.
+    beams: Vec<Beam>,
+    /// Per sensor, its fresh readings in a row that saw something on the
+    /// path ahead.
+    ahead_count: Vec<usize>,
     /// The residual of the latest fresh readings (repeated until the next).
     last_residual: Option<f64>,
     /// Time of the first tick (the plan's time zero).
@@ -145,6 +167,9 @@ impl Executive {
         let behind = plan.range_model_without_boxes();
         Ok(Self {
             predicted: vec![0.0; model.beams()],
+            nearest: vec![0.0; model.beams()],
+            beams: beams(&plan.header.robot.range_sensors),
+            ahead_count: vec![0; plan.header.robot.range_sensors.len()],
             predicted_behind: vec![0.0; behind.as_ref().map_or(0, |m| m.beams())],
             behind,
             model,
@@ -291,8 +316,12 @@ impl Executive {
                 )
             });
             let mut best: Option<f64> = None;
+            self.nearest.fill(f64::INFINITY);
             for pose in near_estimate.chain(along_plan) {
                 self.model.read(&pose, &mut self.predicted);
+                for (n, e) in self.nearest.iter_mut().zip(&self.predicted) {
+                    *n = n.min(*e);
+                }
                 if let Some(behind) = &mut self.behind {
                     behind.read(&pose, &mut self.predicted_behind);
                 }
@@ -324,6 +353,9 @@ impl Executive {
             if best.is_some() {
                 self.last_residual = best;
             }
+            if let Some(seen) = self.ahead(reading, belief, k) {
+                return Some(seen);
+            }
         }
         let best = self.last_residual;
         if let Some(residual) = best {
@@ -347,5 +379,78 @@ impl Executive {
             }
         }
         None
+    }
+
+    /// An obstacle on the path ahead: a sensor whose last
+    /// `obstacle_confirm` fresh readings each had a reading well shorter
+    /// than anything the map explains (`self.nearest`, over the poses the
+    /// residual tried) ending in the corridor the plan sweeps from sample
+    /// `k` over its next `obstacle_ahead_m`. The nearest such reading is
+    /// reported.
+    fn ahead(&mut self, reading: &Reading, belief: &Belief, k: usize) -> Option<Stop> {
+        let tol = &self.tolerances;
+        let estimate = &belief.pose;
+        // Shorter than the map explains by more than the estimate's
+        // uncertainty could make it (three standard deviations of the
+        // position, and of the heading at the reading's range).
+        let [sx, sy, sh] = belief.pose_std;
+        let position_3std = 3.0 * sx.max(sy);
+        let samples = &self.plan.samples[k..];
+        let mut travel_m = 0.0;
+        let ahead = samples
+            .windows(2)
+            .take_while(|w| {
+                travel_m += (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m);
+                travel_m <= tol.obstacle_ahead_m
+            })
+            .count();
+        let corridor = &samples[..=ahead];
+        let reach = self.plan.header.robot.footprint_radius_m + tol.obstacle_margin_m;
+        let (s, c) = estimate.heading_rad.sin_cos();
+        let mut fresh = vec![false; self.ahead_count.len()];
+        let mut seen = vec![false; self.ahead_count.len()];
+        let mut nearest: Option<Stop> = None;
+        for ((m, n), beam) in reading
+            .fresh_ranges_m
+            .iter()
+            .zip(&self.nearest)
+            .zip(&self.beams)
+        {
+            if !m.is_finite() {
+                continue;
+            }
+            fresh[beam.sensor] = true;
+            let shorter_by = tol.obstacle_shorter_by_m.max(position_3std + 3.0 * sh * m);
+            if *m <= beam.min_m || *m >= beam.max_m || *m > n - shorter_by {
+                continue;
+            }
+            let local = [
+                beam.origin[0] + m * beam.dir[0],
+                beam.origin[1] + m * beam.dir[1],
+            ];
+            let x_m = estimate.x_m + c * local[0] - s * local[1];
+            let y_m = estimate.y_m + s * local[0] + c * local[1];
+            if corridor
+                .iter()
+                .any(|p| (p.x_m - x_m).hypot(p.y_m - y_m) < reach)
+            {
+                seen[beam.sensor] = true;
+                if !matches!(nearest, Some(Stop::ObstacleAhead { range_m, .. }) if range_m <= *m) {
+                    nearest = Some(Stop::ObstacleAhead {
+                        range_m: *m,
+                        x_m,
+                        y_m,
+                    });
+                }
+            }
+        }
+        let mut confirmed = false;
+        for (i, count) in self.ahead_count.iter_mut().enumerate() {
+            if fresh[i] {
+                *count = if seen[i] { *count + 1 } else { 0 };
+            }
+            confirmed |= *count >= tol.obstacle_confirm;
+        }
+        if confirmed { nearest } else { None }
     }
 }

@@ -84,6 +84,8 @@ pub enum Mode {
 /// One beam: its origin and direction in the robot frame and its limits.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Beam {
+    /// Which of the robot's sensors it belongs to.
+    pub sensor: usize,
     pub origin: [f64; 2],
     pub dir: [f64; 2],
     pub min_m: f64,
@@ -251,10 +253,12 @@ impl Localizer {
 pub(crate) fn beams(sensors: &[RangeSensorInfo]) -> Vec<Beam> {
     sensors
         .iter()
-        .flat_map(|s| {
+        .enumerate()
+        .flat_map(|(sensor, s)| {
             (0..s.beams).map(move |b| {
                 let a = s.mount.heading_rad + s.beam_angle_rad(b);
                 Beam {
+                    sensor,
                     origin: [s.mount.x_m, s.mount.y_m],
                     dir: [a.cos(), a.sin()],
                     min_m: s.min_range_m,

@@ -52,6 +52,32 @@ pub fn initial_estimate(
     }
 }
 
+/// `estimate` with the wheel parameters the robot learnt driving earlier
+/// plans (diameters and wheelbase, m, and their 3 x 3 covariance, row
+/// major) instead of the plan's: calibration carries on across plans. Kept
+/// as they are when not finite or not positive.
+pub fn with_learnt_params(
+    mut estimate: StateAndCovariance,
+    params: [f64; 3],
+    covariance: &[f64; 9],
+) -> StateAndCovariance {
+    let usable = params.iter().all(|p| p.is_finite() && *p > 0.0)
+        && covariance.iter().all(|v| v.is_finite())
+        && (0..3).all(|i| covariance[4 * i] > 0.0);
+    if usable {
+        for i in 0..3 {
+            estimate.state[3 + i] = params[i];
+            for j in 0..3 {
+                estimate.covariance[(3 + i, 3 + j)] = covariance[3 * i + j];
+                // The pose's start is not known jointly with them.
+                estimate.covariance[(i, 3 + j)] = 0.0;
+                estimate.covariance[(3 + i, j)] = 0.0;
+            }
+        }
+    }
+    estimate
+}
+
 /// The robot's estimate over one plan.
 pub struct Navigator {
     ekf: Option<OnlineCalibrator>,

@@ -45,7 +45,7 @@ use twindrive_mission::plan::{MissionPlan, hex};
 use crate::backend::RobotBackend;
 use crate::executive::{Executive, Stop};
 use crate::localize::{LocalizeSettings, Mode};
-use crate::navigator::{Navigator, initial_estimate};
+use crate::navigator::{Navigator, initial_estimate, with_learnt_params};
 
 /// How the agent runs.
 #[derive(Debug, Clone)]
@@ -185,6 +185,7 @@ pub struct RobotAgent<B: RobotBackend> {
     /// Latest EKF estimate (params and their standard deviations).
     params: [f64; 3],
     params_std: [f64; 3],
+    params_covariance: [f64; 9],
     pose: [f64; 3],
     /// The pose's 3 x 3 covariance (row major; infinite before any estimate).
     pose_covariance: [f64; 9],
@@ -261,6 +262,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             last_progress_journaled: 0,
             params: [f64::NAN; 3],
             params_std: [f64::NAN; 3],
+            params_covariance: [f64::NAN; 9],
             pose: [f64::NAN; 3],
             pose_covariance: [f64::INFINITY; 9],
             bumps: 0,
@@ -737,10 +739,24 @@ impl<B: RobotBackend> RobotAgent<B> {
             json!({ "transfer": hex(&transfer), "plan_sha256": plan.sha256 }),
         );
         self.set_phase(transfer, PlanPhase::Executing);
-        let initial = initial_estimate(
-            self.believed_pose(),
-            Some(&self.pose_covariance),
-            &plan.header.calibrated,
+        // A continuation starts from where the twin refined the robot's
+        // pose against its map (from the robot's own estimate and its
+        // readings): the robot stands there (`at_start` held) and takes it.
+        let (pose, covariance, start) = match plan.header.start_covariance {
+            Some(c) => (pose3(&plan.header.start), c, "refined by the twin"),
+            None => (
+                self.believed_pose(),
+                self.pose_covariance,
+                "the robot's own",
+            ),
+        };
+        self.pose = pose;
+        self.pose_covariance = covariance;
+        // The wheel parameters it learnt on earlier plans, when it has.
+        let initial = with_learnt_params(
+            initial_estimate(pose, Some(&covariance), &plan.header.calibrated),
+            self.params,
+            &self.params_covariance,
         );
         let nav = Navigator::new(
             &plan,
@@ -765,7 +781,7 @@ impl<B: RobotBackend> RobotAgent<B> {
         self.record(
             now_ns,
             "localization",
-            json!({ "transfer": hex(&transfer), "how": how }),
+            json!({ "transfer": hex(&transfer), "how": how, "start": start, "start_pose": pose }),
         );
         self.running = Some(Running {
             transfer,
@@ -847,6 +863,7 @@ impl<B: RobotBackend> RobotAgent<B> {
         let pc = r.nav.params_covariance();
         self.params = r.nav.params();
         self.params_std = [pc[0].sqrt(), pc[4].sqrt(), pc[8].sqrt()];
+        self.params_covariance = pc;
         self.pose = pose;
         self.pose_covariance = covariance;
         if reading.bump && !self.last_bump {

@@ -334,6 +334,7 @@ impl Twin {
         let required_m = 3.0 * self.refined.map_or(0.0, |r| r.position_std_m());
         let mut detour = settings.detour;
         detour.clearance_m = detour.clearance_m.max(required_m);
+        detour.min_clearance_m = detour.min_clearance_m.max(required_m);
         let plan = continuation_plan(
             interrupted,
             plan_t_s,
@@ -343,6 +344,10 @@ impl Twin {
             &detour,
             settings.pace,
         )?;
+        let plan = match &self.refined {
+            Some(r) => plan.with_start_covariance(r.covariance),
+            None => plan,
+        };
         self.check_clearance(&plan, interrupted, plan_t_s)?;
         let closed = verify::closed_loop(
             &plan.samples,
@@ -362,17 +367,19 @@ impl Twin {
 
     /// Whether `plan`, the continuation of `interrupted` from `plan_t_s`,
     /// keeps its footprint three standard deviations of the robot's
-    /// position clear of everything the twin knows wherever it leaves the
-    /// interrupted plan's path (its back-off, its way back onto the plan,
-    /// its detours: the geometry the twin made for a robot it knows only
-    /// that well; the rest is the plan the robot was driving, localizing as
-    /// it went, verified before), or nearer than that plan keeps where
-    /// the leg leaves or joins it. The deviation is taken towards the
-    /// nearest wall or block: a robot that followed a wall knows its
-    /// distance from it well and its place along it less. Where the robot
-    /// stands it may be nearer (it handed back against an obstacle, or
-    /// close to a wall): from there the continuation may only move away
-    /// until it is clear, on the plan's path or off it.
+    /// position clear of everything the twin knows until the robot can have
+    /// localized again: wherever it leaves the interrupted plan's path (its
+    /// back-off, its way back onto the plan, its detours: the geometry the
+    /// twin made for a robot it knows only that well), and on the plan's
+    /// path within its first [`SETTLE_M`] of driving (after that the robot
+    /// has localized again, and the plan was verified for a robot that
+    /// does). A leg off the plan
+    /// never needs more than the plan keeps where the leg leaves or joins
+    /// it. The deviation is taken towards the nearest wall or block: a robot
+    /// that followed a wall knows its distance from it well and its place
+    /// along it less. Where the robot stands it may be nearer (it handed
+    /// back against an obstacle): from there the continuation may only move
+    /// away, and must be clear within [`LEAVE_M`] of driving.
     fn check_clearance(
         &self,
         plan: &MissionPlan,
@@ -401,9 +408,14 @@ impl Twin {
         // the position's deviation towards what is nearest.
         let mut samples = Vec::with_capacity(plan.samples.len());
         for s in &plan.samples {
-            let on_plan = remaining[next..]
-                .iter()
-                .position(|r| (r.x_m - s.x_m).hypot(r.y_m - s.y_m) < 1e-6);
+            // On the plan's path: at one of its samples or between two
+            // (re-timing puts samples between the plan's own).
+            let at = [s.x_m, s.y_m];
+            let on_plan = remaining[next..].iter().enumerate().position(|(j, r)| {
+                let a = [r.x_m, r.y_m];
+                let b = remaining.get(next + j + 1).map_or(a, |r| [r.x_m, r.y_m]);
+                distance_to_segment(at, a, b) < 1e-4
+            });
             if let Some(j) = on_plan {
                 next += j;
             }
@@ -443,16 +455,22 @@ impl Twin {
         }
         let mut leaving = true;
         let mut last = f64::NEG_INFINITY;
+        // Driven so far (m).
+        let mut travel_m = 0.0;
         let t0 = plan.samples.first().map_or(0.0, |s| s.t_s);
         for (k, (s, &(on_plan, clear, sigma))) in plan.samples.iter().zip(&samples).enumerate() {
+            if k > 0 {
+                let p = &plan.samples[k - 1];
+                travel_m += (s.x_m - p.x_m).hypot(s.y_m - p.y_m);
+            }
             let required_m = join[k].map_or(3.0 * sigma, |j| (3.0 * sigma).min(j));
             if leaving && clear >= required_m {
                 leaving = false;
             }
             let closing = if leaving {
-                clear < last - 1e-3
+                clear < last - 1e-3 || travel_m > LEAVE_M
             } else {
-                !on_plan && clear < required_m - 1e-6
+                !(on_plan && travel_m >= SETTLE_M) && clear < required_m - 1e-6
             };
             if closing {
                 let what =
@@ -474,6 +492,15 @@ impl Twin {
         Ok(())
     }
 }
+
+/// A continuation's first metre of driving keeps three standard deviations
+/// of the hand-back pose on the plan's path too: by then the robot has
+/// localized again.
+pub const SETTLE_M: f64 = 1.0;
+
+/// A continuation that starts nearer than that to something is clear of it
+/// within this much driving (m).
+pub const LEAVE_M: f64 = 0.3;
 
 /// How continuations are made.
 #[derive(Debug, Clone, Copy, PartialEq)]

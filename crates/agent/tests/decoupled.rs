@@ -253,6 +253,21 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
             r.uploads.len()
         );
         assert_eq!(events(dir.path(), "handback").len(), r.handbacks.len());
+        // The first plan starts from the robot's own estimate; every
+        // continuation from the pose the twin refined, as its header says.
+        let starts = events(dir.path(), "localization");
+        assert_eq!(starts.len(), r.uploads.len());
+        assert_eq!(starts[0]["start"], "the robot's own");
+        for (start, (plan, _, _)) in starts[1..].iter().zip(&h.op.new_plans) {
+            assert_eq!(start["start"], "refined by the twin", "seed {seed}");
+            let p = plan.header.start;
+            assert_eq!(
+                start["start_pose"],
+                serde_json::json!([p.x_m, p.y_m, p.heading_rad]),
+                "seed {seed}"
+            );
+            assert!(plan.header.start_covariance.is_some());
+        }
     }
 }
 

@@ -48,6 +48,8 @@ fn site(twin: &Scenario, error: f64, rng: &mut ChaCha8Rng) -> Scenario {
 
 struct Trial {
     stop: Option<Stop>,
+    /// Whether the bumper was ever pressed.
+    bumped: bool,
     /// Largest distance from the true position to the plan's path (m).
     path_error_m: f64,
     collisions: u32,
@@ -73,10 +75,19 @@ fn distance_to_path(plan: &MissionPlan, x: f64, y: f64) -> f64 {
 }
 
 fn drive(plan: &Arc<MissionPlan>, site: Scenario, localize: bool) -> Trial {
+    drive_with(plan, site, localize, Tolerances::default())
+}
+
+fn drive_with(
+    plan: &Arc<MissionPlan>,
+    site: Scenario,
+    localize: bool,
+    tolerances: Tolerances,
+) -> Trial {
     let max_wheel = site.robot.max_wheel_speed_rad_s;
     let duration = plan.duration_s();
     let mut backend = SimBackend::new(site, plan.samples[0].pose(), duration + 30.0).unwrap();
-    let mut exec = Executive::new(plan.clone(), Tolerances::default(), None, max_wheel).unwrap();
+    let mut exec = Executive::new(plan.clone(), tolerances, None, max_wheel).unwrap();
     let start = plan.samples[0].pose();
     let initial = initial_estimate(
         [start.x_m, start.y_m, start.heading_rad],
@@ -91,10 +102,12 @@ fn drive(plan: &Arc<MissionPlan>, site: Scenario, localize: bool) -> Trial {
     let mut nav = Navigator::new(plan, initial, plan.header.robot.ticks_per_rev, settings);
     let mut wheels = [0.0, 0.0];
     let (mut path_error_m, mut collisions, mut k) = (0.0f64, 0, 0u64);
+    let mut bumped = false;
     while let Some(reading) = backend.step(wheels) {
         if backend.blocked() {
             collisions += 1;
         }
+        bumped |= reading.bump;
         let belief = nav.update(&reading);
         wheels = exec.tick(&reading, &belief);
         k += 1;
@@ -108,6 +121,7 @@ fn drive(plan: &Arc<MissionPlan>, site: Scenario, localize: bool) -> Trial {
     }
     Trial {
         stop: exec.stopped().map(|(_, s)| s.clone()),
+        bumped,
         path_error_m,
         collisions,
         localized_fixes: nav.localizer().fixes,
@@ -140,6 +154,63 @@ fn a_lidar_robot_with_up_to_two_percent_kinematic_error_stays_on_its_plan() {
                 "error {error}: odometry alone finished"
             );
         }
+    }
+}
+
+/// A box the twin lacks, dropped on the plan's path at a random moment on
+/// sites with random kinematic errors: the lidar robot, localizing, hands
+/// back before it touches it (the range residual may see it first, a box
+/// shadowing far walls). With the residual out of the way, the
+/// obstacle-ahead stop alone does it and says where the box is.
+#[test]
+fn a_lidar_robot_stops_before_a_box_it_can_see_on_its_path() {
+    let plan = office_plan();
+    let twin = office();
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let footprint = twin.robot.footprint_radius_m;
+    let without_residual = Tolerances {
+        max_range_residual_m: f64::INFINITY,
+        ..Tolerances::default()
+    };
+    let mut trials = 0;
+    while trials < 4 {
+        // A plan sample well inside the mission, away from the walls.
+        let k = rng.random_range(plan.samples.len() / 5..4 * plan.samples.len() / 5);
+        let s = &plan.samples[k];
+        if twin.world.clearance_m(s.x_m, s.y_m, 1.0) < 0.6 {
+            continue;
+        }
+        let half = [rng.random_range(0.08..0.2), rng.random_range(0.08..0.2)];
+        let block = (
+            [s.x_m - half[0], s.y_m - half[1]],
+            [s.x_m + half[0], s.y_m + half[1]],
+        );
+        let mut site = site(&twin, rng.random_range(0.0..0.02), &mut rng);
+        site.world = site.world.with_blocks(&[block]);
+        let t = drive(plan, site.clone(), true);
+        assert!(
+            matches!(
+                t.stop,
+                Some(Stop::ObstacleAhead { .. } | Stop::RangeResidual { .. })
+            ),
+            "{block:?}: stopped {:?}",
+            t.stop
+        );
+        assert!(!t.bumped && t.collisions == 0, "{block:?}: touched it");
+        let t = drive_with(plan, site, true, without_residual);
+        let Some(Stop::ObstacleAhead { x_m, y_m, range_m }) = t.stop else {
+            panic!("{block:?}: stopped {:?}", t.stop);
+        };
+        assert!(!t.bumped && t.collisions == 0, "{block:?}: touched it");
+        // What it saw is on the box (within the lidar's noise and the
+        // estimate's error), and farther than the footprint.
+        let out = (block.0[0] - x_m)
+            .max(x_m - block.1[0])
+            .max(block.0[1] - y_m)
+            .max(y_m - block.1[1]);
+        assert!(out < 0.05, "{block:?}: saw ({x_m}, {y_m})");
+        assert!(range_m > footprint, "{range_m} m");
+        trials += 1;
     }
 }
 

@@ -62,7 +62,7 @@ pub struct Envelope {
 /// How far reality may depart from the twin's prediction before the robot
 /// stops and hands control back; carried, and signed, with the plan.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct Tolerances {
     /// Odometry this far from the plan's pose at that time (m).
     pub max_deviation_m: f64,
@@ -74,6 +74,15 @@ pub struct Tolerances {
     /// A reading is compared with the plan's predictions this long (s)
     /// either side of now, and the best match counts.
     pub range_match_s: f64,
+    /// A range reading at least `obstacle_shorter_by_m` shorter than the
+    /// map explains, ending inside the corridor the plan sweeps over its
+    /// next `obstacle_ahead_m` of travel (its footprint and `obstacle_margin_m`
+    /// either side), in `obstacle_confirm` fresh readings in a row, is an
+    /// obstacle on the path: the robot stops before it touches it.
+    pub obstacle_ahead_m: f64,
+    pub obstacle_shorter_by_m: f64,
+    pub obstacle_margin_m: f64,
+    pub obstacle_confirm: usize,
 }
 
 impl Default for Tolerances {
@@ -83,6 +92,10 @@ impl Default for Tolerances {
             max_range_residual_m: 0.10,
             residual_window: 50,
             range_match_s: 0.5,
+            obstacle_ahead_m: 1.0,
+            obstacle_shorter_by_m: 0.10,
+            obstacle_margin_m: 0.05,
+            obstacle_confirm: 3,
         }
     }
 }

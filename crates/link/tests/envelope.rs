@@ -40,6 +40,7 @@ fn plan_json() -> Vec<u8> {
             },
             time_step_s: 0.01,
             start: Pose::new(0.0, 0.0, 0.0),
+            start_covariance: None,
             site_map: Default::default(),
             source_log_sha256: "0".repeat(64),
             settings: serde_json::json!({}),

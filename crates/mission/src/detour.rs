@@ -29,6 +29,12 @@ use crate::path::PathSample;
 pub struct DetourSettings {
     /// Wanted clearance between the footprint and any wall or block (m).
     pub clearance_m: f64,
+    /// Clearance a detour keeps wherever it can (m): a hard floor, not a
+    /// cost, except near where it starts and ends (a robot against what it
+    /// touched has to leave it). Where no way keeps it (a narrow passage),
+    /// the search takes the way that costs least below the wanted
+    /// clearance, and the caller judges it.
+    pub min_clearance_m: f64,
     /// Grid cell size (m).
     pub resolution_m: f64,
     /// Spacing of the emitted samples along straight legs (m) and turns (rad).
@@ -40,6 +46,7 @@ impl Default for DetourSettings {
     fn default() -> Self {
         Self {
             clearance_m: 0.10,
+            min_clearance_m: 0.0,
             resolution_m: 0.04,
             step_m: 0.01,
             step_rad: 0.05,
@@ -121,6 +128,8 @@ struct Grid<'w> {
     clearance: Vec<f64>,
     footprint_m: f64,
     wanted_m: f64,
+    /// `DetourSettings::min_clearance_m`.
+    floor_m: f64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -193,6 +202,7 @@ impl<'w> Grid<'w> {
             clearance: Vec::new(),
             footprint_m,
             wanted_m,
+            floor_m: settings.min_clearance_m,
         };
         grid.clearance = (0..size[0] * size[1])
             .map(|c| {
@@ -233,8 +243,22 @@ impl<'w> Grid<'w> {
         })
     }
 
-    /// A* from `from` to `to`; the cells along the way.
+    /// A* from `from` to `to`; the cells along the way. Keeps the floor
+    /// clearance away from the ends when any way does.
     fn search(&self, from: [f64; 2], to: [f64; 2]) -> Option<Vec<usize>> {
+        if self.floor_m > 0.0
+            && let Some(path) = self.search_above(from, to, self.floor_m)
+        {
+            return Some(path);
+        }
+        self.search_above(from, to, 0.0)
+    }
+
+    /// A* through cells that keep `floor_m` of clearance, or are within
+    /// the wanted clearance and a cell of either end.
+    fn search_above(&self, from: [f64; 2], to: [f64; 2], floor_m: f64) -> Option<Vec<usize>> {
+        let near_end = self.wanted_m + self.cell_m;
+        let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) <= near_end;
         let (start, goal) = (self.cell_of(from), self.cell_of(to));
         let n = self.clearance.len();
         let mut cost = vec![f64::INFINITY; n];
@@ -287,6 +311,13 @@ impl<'w> Grid<'w> {
                 // The goal and the start are where the robot must be; every
                 // other cell must keep the footprint off the walls.
                 let factor = match self.factor(self.clearance[next]) {
+                    Some(_)
+                        if self.clearance[next] < floor_m
+                            && !near(self.centre(next), from)
+                            && !near(self.centre(next), to) =>
+                    {
+                        continue;
+                    }
                     Some(f) => f,
                     None if next == goal => 1.0,
                     None => continue,
@@ -538,6 +569,67 @@ mod tests {
                 assert!(path.iter().any(|p| p.pose == s.pose));
             }
         }
+    }
+
+    /// A floor on the clearance holds everywhere away from the ends where
+    /// a way keeps it (a block across the route with room either side);
+    /// where none does (a gap narrower than the floor), the detour still
+    /// goes through with the footprint clear.
+    #[test]
+    fn a_clearance_floor_is_kept_where_any_way_keeps_it() {
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        let r = 0.15;
+        for _ in 0..10 {
+            let floor = rng.random_range(0.12..0.3);
+            let settings = DetourSettings {
+                clearance_m: floor,
+                min_clearance_m: floor,
+                ..DetourSettings::default()
+            };
+            let cx = rng.random_range(2.5..3.5);
+            let half = [rng.random_range(0.05..0.2), rng.random_range(0.1..0.4)];
+            let block = ([cx - half[0], 2.0 - half[1]], [cx + half[0], 2.0 + half[1]]);
+            let world = room_with(&[block]);
+            let route = straight([0.6, 2.0], [5.4, 2.0], 480);
+            let start = Pose::new(block.0[0] - r - 0.002, 2.0, 0.0);
+            let k = route.iter().position(|s| s.pose.x_m > start.x_m).unwrap();
+            let path =
+                continuation_path(&world, r, start, &route[k..], &[block], &settings).unwrap();
+            let end = path.last().unwrap().pose;
+            for s in &path {
+                let c = world.clearance_m(s.pose.x_m, s.pose.y_m, 1.0) - r;
+                let near_end = s.pose.distance_to(&start).min(s.pose.distance_to(&end))
+                    < r + floor + 2.0 * settings.resolution_m;
+                assert!(c > 0.0, "touches at {:?}", s.pose);
+                if !near_end {
+                    assert!(c >= floor - 1e-9, "{c} m < {floor} m at {:?}", s.pose);
+                }
+            }
+        }
+        // A gap of 0.4 m between two blocks (a robot 0.3 m across): no way
+        // keeps 0.2 m either side, the one through the gap is taken.
+        let settings = DetourSettings {
+            clearance_m: 0.2,
+            min_clearance_m: 0.2,
+            ..DetourSettings::default()
+        };
+        let blocks = [([2.8, 0.0], [3.0, 1.8]), ([2.8, 2.2], [3.0, 4.0])];
+        let world = room_with(&blocks);
+        let route = straight([0.6, 1.0], [5.4, 1.0], 480);
+        let path = continuation_path(
+            &world,
+            0.15,
+            Pose::new(0.6, 1.0, 0.0),
+            &route[1..],
+            &blocks,
+            &settings,
+        )
+        .unwrap();
+        assert!(
+            path.iter()
+                .all(|s| world.clearance_m(s.pose.x_m, s.pose.y_m, 1.0) > 0.15)
+        );
+        assert!(path.iter().any(|s| (s.pose.x_m - 2.9).abs() < 0.05));
     }
 
     #[test]

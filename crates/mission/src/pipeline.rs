@@ -237,6 +237,7 @@ pub fn plan_from_log(
             limits,
             time_step_s: stages.period_s,
             start: header.start,
+            start_covariance: None,
             site_map: SiteMap::default(),
             source_log_sha256: log_sha256.to_owned(),
             settings: serde_json::json!({
@@ -333,6 +334,7 @@ pub fn continuation_plan(
             limits: h.limits,
             time_step_s: h.time_step_s,
             start,
+            start_covariance: None,
             site_map: SiteMap::default(),
             source_log_sha256: h.source_log_sha256.clone(),
             settings: serde_json::json!({

@@ -53,6 +53,12 @@ pub struct PlanHeader {
     /// period); sample times may be further apart where the plan slows down.
     pub time_step_s: f64,
     pub start: Pose,
+    /// The covariance of `start` (x, y, heading; row-major 3 x 3) when the
+    /// twin refined where the robot stands against its map (a
+    /// continuation): a robot that stands at `start` takes it, with this,
+    /// as its estimate, since it already holds the robot's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_covariance: Option<[f64; 9]>,
     /// The site as the twin knows it: what the robot localizes against and
     /// predicts its readings from.
     pub site_map: SiteMap,
@@ -219,6 +225,14 @@ impl MissionPlan {
         plan
     }
 
+    /// This plan starting from a pose known to `covariance` (its hash
+    /// renewed).
+    pub fn with_start_covariance(mut self, covariance: [f64; 9]) -> Self {
+        self.header.start_covariance = Some(covariance);
+        self.sha256 = self.content_hash();
+        self
+    }
+
     /// The SHA-256 of the canonical content (this plan with `sha256` empty).
     pub fn content_hash(&self) -> String {
         let mut hasher = Sha256::new();
@@ -258,6 +272,24 @@ impl MissionPlan {
                 what: "header.start",
                 index: 0,
             });
+        }
+        if let Some(c) = &h.start_covariance {
+            // Finite, symmetric, with a positive variance on the diagonal
+            // and correlations within one.
+            let fine = c.iter().all(|v| v.is_finite())
+                && (0..3).all(|i| c[4 * i] > 0.0)
+                && (0..3).all(|i| {
+                    (0..3).all(|j| {
+                        let (a, b) = (c[3 * i + j], c[3 * j + i]);
+                        (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-12)
+                            && a * a <= c[4 * i] * c[4 * j] * (1.0 + 1e-9)
+                    })
+                });
+            if !fine {
+                return Err(PipelineError::Infeasible(format!(
+                    "header.start_covariance: expected a 3 x 3 covariance (finite, symmetric, positive variances), got {c:?}"
+                )));
+            }
         }
         h.site_map.validate()?;
         let mut previous = f64::NEG_INFINITY;
@@ -395,6 +427,7 @@ mod tests {
             },
             time_step_s: 0.01,
             start: Pose::new(3.0, 1.05, std::f64::consts::PI),
+            start_covariance: None,
             site_map: SiteMap {
                 segments: vec![[0.0, 0.0, 6.0, 0.0], [1.5, 1.5, 4.5, 1.5]],
                 boxes: vec![],
@@ -446,6 +479,29 @@ mod tests {
                 assert_ne!(b.content_hash(), a.sha256, "sample {k} field {field}");
                 assert!(b.validate().is_err(), "a changed plan fails validation");
             }
+        }
+    }
+
+    #[test]
+    fn a_start_covariance_is_carried_hashed_and_checked() {
+        let a = plan();
+        let json = serde_json::to_string(&a).unwrap();
+        assert!(!json.contains("start_covariance"), "absent when unknown");
+        let c = [4e-4, 1e-5, 0.0, 1e-5, 9e-4, 2e-5, 0.0, 2e-5, 1e-4];
+        let b = a.clone().with_start_covariance(c);
+        assert_ne!(a.sha256, b.sha256);
+        assert_eq!(b.sha256, b.content_hash());
+        b.validate().unwrap();
+        let back: MissionPlan = serde_json::from_str(&serde_json::to_string(&b).unwrap()).unwrap();
+        assert_eq!(back, b);
+        for bad in [
+            [-4e-4, 0.0, 0.0, 0.0, 9e-4, 0.0, 0.0, 0.0, 1e-4],
+            [4e-4, 1e-5, 0.0, 0.0, 9e-4, 0.0, 0.0, 0.0, 1e-4],
+            [4e-4, 0.0, 0.0, 0.0, 9e-4, 0.0, 0.0, 0.0, f64::NAN],
+            [1e-4, 1e-3, 0.0, 1e-3, 1e-4, 0.0, 0.0, 0.0, 1e-4],
+        ] {
+            let err = a.clone().with_start_covariance(bad).validate().unwrap_err();
+            assert!(err.to_string().contains("header.start_covariance"), "{err}");
         }
     }
 

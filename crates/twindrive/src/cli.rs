@@ -225,8 +225,8 @@ pub enum ExperimentCommand {
     /// the figures completion_time, collisions and paths (SVG and PNG) into
     /// --out.
     Latency(LatencyExperimentArgs),
-    /// Upload the case-study plan (140 kB signed) and a one-hour plan
-    /// (7.5 MB) over each named profile at 0, 1, 10 and 30 % loss, and
+    /// Upload the office drive's lidar plan (52 kB signed), the case-study
+    /// plan (110 kB) and a one-hour plan (5.8 MB) over each named profile at 0, 1, 10 and 30 % loss, and
     /// through a 60 s outage mid-upload, in virtual time; print the time
     /// until the robot holds the file against the ideal
     /// `D + S(1+h)/(B(1-p))`. The target: within 1.1x at loss up to 10 %.

@@ -301,5 +301,13 @@ fn the_mismatch_experiment_keeps_a_localizing_lidar_robot_on_its_plan() {
         if r["obstacle"] == "false" && r["localization"] == "false" {
             assert!(num(r, "handbacks") >= 1.0, "{r:?}");
         }
+        // The box the twin lacks: seen on the path ahead and never
+        // touched, learnt, gone around.
+        if r["obstacle"] == "true" && r["localization"] == "true" {
+            assert_eq!(num(r, "contacts_unknown"), 0.0, "{r:?}");
+            assert_eq!(r["completed"], "true", "{r:?}");
+            assert!(num(r, "handbacks") <= 2.0, "{r:?}");
+            assert!(r["handback_reasons"].starts_with("obstacle_ahead"), "{r:?}");
+        }
     }
 }

@@ -297,7 +297,7 @@ fn measure(
                 l["event"] == "stopped"
                     && matches!(
                         l["reason"].as_str(),
-                        Some("unexpected_bump" | "deviation" | "range_residual")
+                        Some(r) if twindrive_agent::executive::HANDBACK_REASONS.contains(&r)
                     )
             })
             .filter_map(|l| l["unix_s"].as_f64())

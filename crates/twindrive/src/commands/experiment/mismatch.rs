@@ -101,6 +101,8 @@ pub struct Row {
     pub completed: bool,
     pub completion_s: Option<f64>,
     pub handbacks: usize,
+    /// Why, in order, `;`-separated.
+    pub handback_reasons: String,
     pub contacts_known: u32,
     pub contacts_unknown: u32,
     pub path_error_max_m: f64,
@@ -232,6 +234,12 @@ pub fn run_one(
             })
             .flatten(),
         handbacks: report.handbacks.len(),
+        handback_reasons: report
+            .handbacks
+            .iter()
+            .map(|h| h.reason.as_str())
+            .collect::<Vec<_>>()
+            .join(";"),
         contacts_known: rec.known_contacts,
         contacts_unknown: rec.unknown_contacts,
         path_error_max_m,
@@ -267,11 +275,11 @@ fn run_all(
 /// results.csv: one row per run.
 pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
-        "sensors,kinematic_error,obstacle,localization,seed,completed,completion_s,handbacks,contacts_known,contacts_unknown,path_error_max_m,failure\n",
+        "sensors,kinematic_error,obstacle,localization,seed,completed,completion_s,handbacks,handback_reasons,contacts_known,contacts_unknown,path_error_max_m,failure\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{:.4},\"{}\"\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{:.4},\"{}\"\n",
             r.sensors,
             r.kinematic_error,
             r.obstacle,
@@ -280,6 +288,7 @@ pub fn csv(rows: &[Row]) -> String {
             r.completed,
             r.completion_s.map_or(String::new(), |t| format!("{t:.1}")),
             r.handbacks,
+            r.handback_reasons,
             r.contacts_known,
             r.contacts_unknown,
             r.path_error_max_m,

@@ -12,9 +12,11 @@ use crate::cli::UploadExperimentArgs;
 use crate::output::Staging;
 
 /// The signed case-study plan (bytes), as `twindrive demo` makes it.
-pub const CASE_STUDY_BYTES: usize = 140_339;
-/// A one-hour plan at the case study's rate (2.07 kB per second of mission).
-pub const ONE_HOUR_BYTES: usize = 7_452_000;
+pub const CASE_STUDY_BYTES: usize = 109_950;
+/// The signed office-drive plan (a 181-beam lidar robot, 40.5 s).
+pub const OFFICE_LIDAR_BYTES: usize = 52_000;
+/// A one-hour plan at the case study's rate (1.62 kB per second of mission).
+pub const ONE_HOUR_BYTES: usize = 5_832_000;
 const PROFILES: [&str; 5] = ["lan", "wifi", "satellite-lossy", "lunar", "mars-relay"];
 const LOSSES: [f64; 4] = [0.0, 0.01, 0.1, 0.3];
 /// The target: within this factor of the ideal at loss up to 10 %.
@@ -39,8 +41,9 @@ pub fn run(args: &UploadExperimentArgs) -> anyhow::Result<()> {
         vec![(20_000, "20 kB")]
     } else {
         vec![
-            (CASE_STUDY_BYTES, "case study 140 kB"),
-            (ONE_HOUR_BYTES, "one hour 7.5 MB"),
+            (OFFICE_LIDAR_BYTES, "office lidar 52 kB"),
+            (CASE_STUDY_BYTES, "case study 110 kB"),
+            (ONE_HOUR_BYTES, "one hour 5.8 MB"),
         ]
     };
     let profiles: &[&str] = if args.smoke {
@@ -86,7 +89,12 @@ pub fn run(args: &UploadExperimentArgs) -> anyhow::Result<()> {
     // Through a 60 s outage in the middle of a lunar upload at 10 % loss.
     let mut lunar = LinkProfile::named("lunar").expect("a named profile");
     lunar.loss = 0.1;
-    let size = sizes[0].0;
+    // The case-study plan (the smoke run's only file otherwise).
+    let size = sizes
+        .iter()
+        .find(|(s, _)| *s == CASE_STUDY_BYTES)
+        .unwrap_or(&sizes[0])
+        .0;
     let ideal = efficiency::ideal_s(&lunar, size, &efficiency::sender_config(&lunar));
     let start_s = 0.5 * ideal;
     lunar.outages.push(Outage {
