@@ -395,59 +395,69 @@ impl Executive {
         // position, and of the heading at the reading's range).
         let [sx, sy, sh] = belief.pose_std;
         let position_3std = 3.0 * sx.max(sy);
-        let samples = &self.plan.samples[k..];
-        let mut travel_m = 0.0;
-        let ahead = samples
-            .windows(2)
-            .take_while(|w| {
-                travel_m += (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m);
-                travel_m <= tol.obstacle_ahead_m
-            })
-            .count();
-        let corridor = &samples[..=ahead];
         let reach = self.plan.header.robot.footprint_radius_m + tol.obstacle_margin_m;
-        let (s, c) = estimate.heading_rad.sin_cos();
-        let mut fresh = vec![false; self.ahead_count.len()];
-        let mut seen = vec![false; self.ahead_count.len()];
-        let mut nearest: Option<Stop> = None;
-        for ((m, n), beam) in reading
-            .fresh_ranges_m
-            .iter()
-            .zip(&self.nearest)
-            .zip(&self.beams)
-        {
-            if !m.is_finite() {
-                continue;
-            }
-            fresh[beam.sensor] = true;
-            let shorter_by = tol.obstacle_shorter_by_m.max(position_3std + 3.0 * sh * m);
-            if *m <= beam.min_m || *m >= beam.max_m || *m > n - shorter_by {
-                continue;
-            }
-            let local = [
-                beam.origin[0] + m * beam.dir[0],
-                beam.origin[1] + m * beam.dir[1],
-            ];
-            let x_m = estimate.x_m + c * local[0] - s * local[1];
-            let y_m = estimate.y_m + s * local[0] + c * local[1];
-            if corridor
+        // The plan's samples over its next `obstacle_ahead_m`, found when a
+        // reading first needs them.
+        let samples = &self.plan.samples[k..];
+        let mut corridor: Option<&[_]> = None;
+        let mut in_corridor = |x_m: f64, y_m: f64| {
+            let corridor = corridor.get_or_insert_with(|| {
+                let mut travel_m = 0.0;
+                let ahead = samples
+                    .windows(2)
+                    .take_while(|w| {
+                        travel_m += (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m);
+                        travel_m <= tol.obstacle_ahead_m
+                    })
+                    .count();
+                &samples[..=ahead]
+            });
+            corridor
                 .iter()
                 .any(|p| (p.x_m - x_m).hypot(p.y_m - y_m) < reach)
-            {
-                seen[beam.sensor] = true;
-                if !matches!(nearest, Some(Stop::ObstacleAhead { range_m, .. }) if range_m <= *m) {
-                    nearest = Some(Stop::ObstacleAhead {
-                        range_m: *m,
-                        x_m,
-                        y_m,
-                    });
+        };
+        let mut nearest: Option<Stop> = None;
+        let mut confirmed = false;
+        // Sensor by sensor (a sensor's beams come together).
+        let mut first = 0;
+        for beams in self.beams.chunk_by(|a, b| a.sensor == b.sensor) {
+            let these = first..first + beams.len();
+            first = these.end;
+            // A reading with fewer ranges than beams has none of the rest.
+            let (Some(ranges), Some(nearest_predicted)) = (
+                reading.fresh_ranges_m.get(these.clone()),
+                self.nearest.get(these),
+            ) else {
+                break;
+            };
+            let mut fresh = false;
+            let mut seen = false;
+            for ((m, n), beam) in ranges.iter().zip(nearest_predicted).zip(beams) {
+                if !m.is_finite() {
+                    continue;
+                }
+                fresh = true;
+                let shorter_by = tol.obstacle_shorter_by_m.max(position_3std + 3.0 * sh * m);
+                if *m <= beam.min_m || *m >= beam.max_m || *m > n - shorter_by {
+                    continue;
+                }
+                let (bx, by) = beam.endpoint(*m);
+                let (x_m, y_m) = estimate.transform_point(bx, by);
+                if in_corridor(x_m, y_m) {
+                    seen = true;
+                    if !matches!(nearest, Some(Stop::ObstacleAhead { range_m, .. }) if range_m <= *m)
+                    {
+                        nearest = Some(Stop::ObstacleAhead {
+                            range_m: *m,
+                            x_m,
+                            y_m,
+                        });
+                    }
                 }
             }
-        }
-        let mut confirmed = false;
-        for (i, count) in self.ahead_count.iter_mut().enumerate() {
-            if fresh[i] {
-                *count = if seen[i] { *count + 1 } else { 0 };
+            let count = &mut self.ahead_count[beams[0].sensor];
+            if fresh {
+                *count = if seen { *count + 1 } else { 0 };
             }
             confirmed |= *count >= tol.obstacle_confirm;
         }

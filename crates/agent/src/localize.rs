@@ -92,6 +92,16 @@ pub(crate) struct Beam {
     pub max_m: f64,
 }
 
+impl Beam {
+    /// Where a reading of `range_m` ends, in the robot's frame.
+    pub fn endpoint(&self, range_m: f64) -> (f64, f64) {
+        (
+            self.origin[0] + range_m * self.dir[0],
+            self.origin[1] + range_m * self.dir[1],
+        )
+    }
+}
+
 /// A match the filter should fuse.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fix {
@@ -203,10 +213,7 @@ impl Localizer {
             if !(r.is_finite() && r > beam.min_m && r < beam.max_m) {
                 continue;
             }
-            let (bx, by) = (
-                beam.origin[0] + r * beam.dir[0],
-                beam.origin[1] + r * beam.dir[1],
-            );
+            let (bx, by) = beam.endpoint(r);
             let (x, y) = odom.transform_point(bx, by);
             self.window.push([x, y]);
         }

@@ -170,10 +170,8 @@ fn window_points(sensors: &[RangeSensorInfo], h: &Handback) -> Vec<[f64; 2]> {
             if !(r.is_finite() && r > beam.min_m && r < beam.max_m - 0.02) {
                 continue;
             }
-            let (x, y) = at.transform_point(
-                beam.origin[0] + r * beam.dir[0],
-                beam.origin[1] + r * beam.dir[1],
-            );
+            let (bx, by) = beam.endpoint(r);
+            let (x, y) = at.transform_point(bx, by);
             let (dx, dy) = (x - last.x_m, y - last.y_m);
             points.push([c * dx + s * dy, -s * dx + c * dy]);
         }

@@ -182,9 +182,9 @@ pub struct RobotAgent<B: RobotBackend> {
     unwritten: VecDeque<(String, MissionLog)>,
     outbox: VecDeque<Body>,
     last_progress_journaled: u32,
-    /// Latest EKF estimate (params and their standard deviations).
+    /// Latest EKF estimate of the wheel parameters and their 3 x 3
+    /// covariance (row major; NaN before any).
     params: [f64; 3],
-    params_std: [f64; 3],
     params_covariance: [f64; 9],
     pose: [f64; 3],
     /// The pose's 3 x 3 covariance (row major; infinite before any estimate).
@@ -261,7 +261,6 @@ impl<B: RobotBackend> RobotAgent<B> {
             outbox: VecDeque::new(),
             last_progress_journaled: 0,
             params: [f64::NAN; 3],
-            params_std: [f64::NAN; 3],
             params_covariance: [f64::NAN; 9],
             pose: [f64::NAN; 3],
             pose_covariance: [f64::INFINITY; 9],
@@ -860,10 +859,8 @@ impl<B: RobotBackend> RobotAgent<B> {
                 r.window.pop_front();
             }
         }
-        let pc = r.nav.params_covariance();
         self.params = r.nav.params();
-        self.params_std = [pc[0].sqrt(), pc[4].sqrt(), pc[8].sqrt()];
-        self.params_covariance = pc;
+        self.params_covariance = r.nav.params_covariance();
         self.pose = pose;
         self.pose_covariance = covariance;
         if reading.bump && !self.last_bump {
@@ -1046,7 +1043,7 @@ impl<B: RobotBackend> RobotAgent<B> {
             plan_t_s,
             pose: self.believed_pose(),
             params: self.params,
-            params_std: self.params_std,
+            params_std: [0, 4, 8].map(|i| self.params_covariance[i].sqrt()),
             deviation_m,
             range_residual_m,
             wheel_travel_rad: self.backend.wheel_travel_rad(),

@@ -25,6 +25,24 @@ fn read_csv(path: &Path) -> Vec<HashMap<String, String>> {
         .collect()
 }
 
+/// Runs `twindrive experiment ARGS --out DIR`, which must succeed, and
+/// reads the `results.csv` it wrote.
+fn results(args: &[&str], dir: &Path) -> Vec<HashMap<String, String>> {
+    let out = twindrive()
+        .arg("experiment")
+        .args(args)
+        .arg("--out")
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    read_csv(&dir.join("results.csv"))
+}
+
 fn num(row: &HashMap<String, String>, column: &str) -> f64 {
     row[column]
         .parse()
@@ -34,9 +52,8 @@ fn num(row: &HashMap<String, String>, column: &str) -> f64 {
 #[test]
 fn the_latency_experiment_fills_every_cell_and_decoupled_operation_never_collides() {
     let dir = tempfile::tempdir().unwrap();
-    let out = twindrive()
-        .args([
-            "experiment",
+    let rows = results(
+        &[
             "latency",
             "--latencies",
             "0,2",
@@ -46,17 +63,9 @@ fn the_latency_experiment_fills_every_cell_and_decoupled_operation_never_collide
             "1",
             "--max-duration",
             "900",
-            "--out",
-        ])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        dir.path(),
     );
-    let rows = read_csv(&dir.path().join("results.csv"));
     let methods = [
         "direct (a) hold-last",
         "direct (b) watchdog",
@@ -276,18 +285,18 @@ fn the_mismatch_experiment_keeps_a_localizing_lidar_robot_on_its_plan() {
         0.01 + 0.02 * (std::process::id() % 97) as f64 / 97.0,
         0.005 + 0.015 * (std::process::id() % 89) as f64 / 89.0
     );
-    let out = twindrive()
-        .args(["experiment", "mismatch", "--errors", &errors])
-        .args(["--sensors", "lidar", "--seeds", "2", "--out"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let rows = results(
+        &[
+            "mismatch",
+            "--errors",
+            &errors,
+            "--sensors",
+            "lidar",
+            "--seeds",
+            "2",
+        ],
+        dir.path(),
     );
-    let rows = read_csv(&dir.path().join("results.csv"));
     assert_eq!(rows.len(), 2 * 2 * 2 * 2, "{rows:?}");
     for r in &rows {
         if r["localization"] == "true" {
