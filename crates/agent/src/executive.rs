@@ -45,13 +45,21 @@ use std::sync::Arc;
 use serde::Serialize;
 use twindrive_kinematics::Pose;
 use twindrive_mission::PipelineError;
-use twindrive_mission::plan::MissionPlan;
-use twindrive_mission::verify::{Tracker, TrackerSettings};
+use twindrive_mission::plan::{MissionPlan, PlanGeometry};
+use twindrive_mission::verify::{Criteria, Tracker, TrackerSettings};
 use twindrive_sim::RangeModel;
 
 use crate::backend::Reading;
 use crate::localize::{Beam, beams};
 pub use twindrive_link::envelope::Tolerances;
+
+/// What a plan must meet on the twin before it is sent to a robot that
+/// hands back on `tolerances`.
+pub fn criteria(tolerances: &Tolerances) -> Criteria {
+    Criteria {
+        max_deviation_m: tolerances.max_deviation_m,
+    }
+}
 
 /// Why the robot stopped.
 #[derive(Debug, Clone, PartialEq, Serialize)]

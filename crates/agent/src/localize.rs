@@ -134,7 +134,7 @@ impl Localizer {
         let reach = settings.matching.outlier_m + settings.resolution_m;
         // The walls only: a learnt block's extent is partly a guess, no
         // landmark.
-        let walls = plan.header.site_map.without_boxes().walls();
+        let walls = plan.header.site_map.walls_without_boxes();
         let map = SegmentMap::new(&walls, settings.resolution_m, reach);
         let beams = beams(sensors);
         let mode =

@@ -601,7 +601,7 @@ impl<S: ChunkStore> Operator<S> {
             interrupted,
             plan_t_s,
             &self.config.continuation,
-            &self.config.tolerances.criteria(),
+            &crate::executive::criteria(&self.config.tolerances),
         )?;
         let learnt = serde_json::to_string(&twin.learnt)?;
         let plan_json = serde_json::to_vec_pretty(&plan)?;

@@ -124,7 +124,7 @@ fn a_continuation_from_an_uncertain_pose_near_a_wall_is_refused() {
     let plan = common::plan();
     let twin_site = common::twin();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let criteria = Tolerances::default().criteria();
+    let criteria = twindrive_agent::executive::criteria(&Tolerances::default());
     let t0 = plan.samples[0].t_s;
     let footprint = twin_site.robot.footprint_radius_m;
     let (mut tried, mut checked) = (0, 0);

@@ -14,7 +14,7 @@ use twindrive_agent::backend::{RobotBackend, SimBackend};
 use twindrive_agent::executive::{Executive, Stop, Tolerances};
 use twindrive_agent::localize::{LocalizeSettings, Mode};
 use twindrive_agent::navigator::{Navigator, initial_estimate};
-use twindrive_mission::plan::MissionPlan;
+use twindrive_mission::plan::{MissionPlan, SiteMapGeometry};
 use twindrive_sim::Scenario;
 
 fn office() -> Scenario {

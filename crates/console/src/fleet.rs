@@ -21,7 +21,7 @@ use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, si
 use twindrive_link::upload::{DirStore, write_durably};
 use twindrive_link::vtime::Endpoint;
 use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Status, TransferId};
-use twindrive_mission::plan::{MissionPlan, hex};
+use twindrive_mission::plan::{MissionPlan, PlanGeometry, hex};
 use twindrive_sim::Scenario;
 
 use crate::planning::columns;

@@ -188,7 +188,7 @@ pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> Result<(Verification, 
         &plan.samples,
         scenario,
         &plan.header.calibrated,
-        &Tolerances::default().criteria(),
+        &twindrive_agent::executive::criteria(&Tolerances::default()),
     )
     .map_err(|e| format!("the replays: {e}"))?;
     let verdict = Verification {

@@ -10,6 +10,7 @@ mod arc;
 mod inverse;
 mod jacobian;
 mod params;
+mod sensor;
 
 pub use arc::{
     WheelOdometry, arc_step, arc_step_wheels, body_increment, encoder_increment, sinc,
@@ -21,6 +22,7 @@ pub use jacobian::{
     step_jacobians, step_with_jacobian, step_with_jacobians,
 };
 pub use params::{DiffDriveParams, EncoderSpec, ParamError};
+pub use sensor::RangeSensorInfo;
 
 use serde::{Deserialize, Serialize};
 

@@ -16,8 +16,8 @@ use ed25519_dalek::pkcs8::{DecodePrivateKey, DecodePublicKey, EncodePrivateKey, 
 use ed25519_dalek::{Signature, Signer};
 pub use ed25519_dalek::{SigningKey, VerifyingKey};
 use serde::{Deserialize, Serialize};
-use twindrive_mission::plan::MissionPlan;
-pub use twindrive_mission::plan::sha256_hex;
+use twindrive_plan::MissionPlan;
+pub use twindrive_plan::sha256_hex;
 
 /// The first bytes of a signed plan.
 pub const MAGIC: &[u8; 8] = b"TWDSIGN1";
@@ -96,16 +96,6 @@ impl Default for Tolerances {
             obstacle_shorter_by_m: 0.10,
             obstacle_margin_m: 0.05,
             obstacle_confirm: 3,
-        }
-    }
-}
-
-impl Tolerances {
-    /// What a plan must meet on the twin before it is sent to a robot that
-    /// hands back on these tolerances.
-    pub fn criteria(&self) -> twindrive_mission::verify::Criteria {
-        twindrive_mission::verify::Criteria {
-            max_deviation_m: self.max_deviation_m,
         }
     }
 }

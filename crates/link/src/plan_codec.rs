@@ -18,7 +18,7 @@
 
 use serde::{Deserialize, Serialize};
 use twindrive_kinematics::{Pose, arc_step, wheel_speeds};
-use twindrive_mission::plan::{MissionPlan, PlanHeader, PlanSample};
+use twindrive_plan::{MissionPlan, PlanHeader, PlanSample};
 
 /// First bytes of an encoded plan.
 pub const MAGIC: &[u8; 8] = b"TWDPLAN2";

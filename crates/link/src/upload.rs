@@ -1167,7 +1167,7 @@ impl DirStore {
     }
 
     fn transfer_dir(&self, offer: &Offer) -> std::path::PathBuf {
-        self.dir.join(twindrive_mission::plan::hex(&offer.transfer))
+        self.dir.join(twindrive_plan::hex(&offer.transfer))
     }
 }
 

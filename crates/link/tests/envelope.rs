@@ -7,8 +7,8 @@ use twindrive_link::envelope::{
     CounterFile, Envelope, PlanGate, Rejection, Supervision, generate_key, private_key_pem,
     public_key_pem, read_private_key_pem, read_public_key_pem, sign_plan,
 };
-use twindrive_mission::plan::{MissionPlan, PlanHeader, PlanSample, RobotInfo};
-use twindrive_mission::retime::WheelLimits;
+use twindrive_plan::WheelLimits;
+use twindrive_plan::{MissionPlan, PlanHeader, PlanSample, RobotInfo};
 
 /// A short straight plan, as `plan.json` bytes.
 fn plan_json() -> Vec<u8> {

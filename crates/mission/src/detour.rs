@@ -166,10 +166,12 @@ impl<'w> Grid<'w> {
     ) -> Result<Self, PipelineError> {
         let cell_m = settings.resolution_m;
         if !(cell_m.is_finite() && cell_m > 0.0) {
-            return Err(PipelineError::BadSetting {
-                field: "detour resolution_m",
-                value: cell_m,
-            });
+            return Err(PipelineError::Value(
+                twindrive_plan::PlanError::BadSetting {
+                    field: "detour resolution_m",
+                    value: cell_m,
+                },
+            ));
         }
         // The world's box, grown to hold the robot and the plan.
         let (mut lo, mut hi) = ([start.x_m, start.y_m], [start.x_m, start.y_m]);

@@ -8,7 +8,8 @@
 //! - [`control`]: body and wheel speeds along a path (inverse kinematics);
 //! - [`spikes`]: control spikes, their removal by re-interpolation, and
 //!   time-optimal re-timing;
-//! - [`plan`]: the versioned, hashed mission plan and its CSV/TUM exports;
+//! - [`plan`]: the mission plan (`twindrive-plan`, data only) with what needs
+//!   the simulator: its range model, its map as a world, the TUM export;
 //! - [`retime`]: the fastest timing of a path under wheel speed and acceleration limits;
 //! - [`verify`]: replaying a plan on the twin, open and closed loop;
 //! - [`pipeline`]: the whole chain on one mission log.

@@ -9,7 +9,7 @@ use twindrive_log::MissionLog;
 use crate::control::{WheelCommand, recompute};
 use crate::error::PipelineError;
 use crate::path::{PathSample, path_length_m};
-use crate::plan::SiteMap;
+use crate::plan::{SiteMap, SiteMapGeometry};
 use crate::planner::{PlannerSettings, executed_path};
 use crate::redundancy::{
     Deletion, DeletionReason, Pruned, RedundancyConfig, RefusedCut, RouteCoverage,
@@ -261,12 +261,12 @@ fn plan_document(
     mut header: crate::plan::PlanHeader,
     scenario: &twindrive_sim::Scenario,
 ) -> crate::plan::MissionPlan {
-    use crate::plan::{MissionPlan, PlanSample};
+    use crate::plan::{MissionPlan, PlanSample, plan_sample};
     let model = twindrive_sim::SensorModel::new(scenario);
     let samples: Vec<PlanSample> = path
         .iter()
         .zip(commands)
-        .map(|(p, c)| PlanSample::new(p, c, model.bump(&p.pose)))
+        .map(|(p, c)| plan_sample(p, c, model.bump(&p.pose)))
         .collect();
     header.robot.range_sensors = scenario
         .range_sensors

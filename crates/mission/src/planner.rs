@@ -94,18 +94,22 @@ pub fn executed_path(
         return Err(PipelineError::NoEncoderData(encoders.len()));
     }
     if !(settings.smoothing_window_s.is_finite() && settings.smoothing_window_s >= 0.0) {
-        return Err(PipelineError::BadSetting {
-            field: "smoothing_window_s",
-            value: settings.smoothing_window_s,
-        });
+        return Err(PipelineError::Value(
+            twindrive_plan::PlanError::BadSetting {
+                field: "smoothing_window_s",
+                value: settings.smoothing_window_s,
+            },
+        ));
     }
     for (k, w) in encoders.windows(2).enumerate() {
         if w[1].0 <= w[0].0 || !w[1].0.is_finite() {
-            return Err(PipelineError::TimeNotIncreasing {
-                index: k + 1,
-                t_s: w[1].0,
-                previous_s: w[0].0,
-            });
+            return Err(PipelineError::Value(
+                twindrive_plan::PlanError::TimeNotIncreasing {
+                    index: k + 1,
+                    t_s: w[1].0,
+                    previous_s: w[0].0,
+                },
+            ));
         }
     }
     let span = encoders.last().expect("two at least").0 - encoders[0].0;

@@ -21,34 +21,7 @@
 
 use crate::error::PipelineError;
 
-/// Wheel limits of the robot.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct WheelLimits {
-    pub max_speed_rad_s: f64,
-    pub max_accel_rad_s2: f64,
-}
-
-impl WheelLimits {
-    pub fn validate(&self) -> Result<(), PipelineError> {
-        for (field, value) in [
-            ("max_wheel_speed_rad_s", self.max_speed_rad_s),
-            ("max_wheel_accel_rad_s2", self.max_accel_rad_s2),
-        ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(PipelineError::BadSetting { field, value });
-            }
-        }
-        Ok(())
-    }
-
-    /// These limits scaled by `factor` (a planning margin).
-    pub fn scaled(&self, factor: f64) -> WheelLimits {
-        WheelLimits {
-            max_speed_rad_s: self.max_speed_rad_s * factor,
-            max_accel_rad_s2: self.max_accel_rad_s2 * factor,
-        }
-    }
-}
+pub use twindrive_plan::WheelLimits;
 
 /// The interval of `u_k+1` that keeps the change from segment `k` within
 /// the acceleration limit given `u_k`, intersected with `[floor, hi]`;
@@ -282,10 +255,12 @@ mod tests {
         };
         assert!(matches!(
             fastest_durations(&[[0.1, 0.1]], &[0.0], &bad),
-            Err(PipelineError::BadSetting {
-                field: "max_wheel_speed_rad_s",
-                ..
-            })
+            Err(PipelineError::Value(
+                twindrive_plan::PlanError::BadSetting {
+                    field: "max_wheel_speed_rad_s",
+                    ..
+                }
+            ))
         ));
         assert!(matches!(
             fastest_durations(&[[0.1, 0.1], [0.0, 0.0], [0.0, 0.0]], &[0.0; 3], &LIMITS),

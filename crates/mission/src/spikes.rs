@@ -344,10 +344,12 @@ pub fn filter_spikes(
 ) -> Result<Filtered, PipelineError> {
     limits.validate()?;
     if !(period_s.is_finite() && period_s > 0.0) {
-        return Err(PipelineError::BadSetting {
-            field: "period_s",
-            value: period_s,
-        });
+        return Err(PipelineError::Value(
+            twindrive_plan::PlanError::BadSetting {
+                field: "period_s",
+                value: period_s,
+            },
+        ));
     }
     let mut samples = input.to_vec();
     let mut commands = recompute(&mut samples, params);

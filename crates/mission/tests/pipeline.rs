@@ -200,7 +200,7 @@ fn plan_samples() -> Vec<twindrive_mission::plan::PlanSample> {
     f.samples
         .iter()
         .zip(&f.commands)
-        .map(|(p, c)| twindrive_mission::plan::PlanSample::new(p, c, false))
+        .map(|(p, c)| twindrive_mission::plan::plan_sample(p, c, false))
         .collect()
 }
 
@@ -317,7 +317,7 @@ fn the_case_study_plan_keeps_the_explored_route_and_drops_the_second_lap() {
         .samples
         .iter()
         .zip(&stages.filtered.commands)
-        .map(|(p, c)| twindrive_mission::plan::PlanSample::new(p, c, false))
+        .map(|(p, c)| twindrive_mission::plan::plan_sample(p, c, false))
         .collect();
     let open = twindrive_mission::verify::open_loop(&samples, scenario(), None).unwrap();
     let closed = twindrive_mission::verify::closed_loop(

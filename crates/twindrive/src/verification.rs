@@ -38,7 +38,7 @@ pub fn check_before_sending(
         &plan.samples,
         twin,
         &plan.header.calibrated,
-        &Tolerances::default().criteria(),
+        &twindrive_agent::executive::criteria(&Tolerances::default()),
     )?;
     let verdict = checked.verdict;
     if !verdict.passed {

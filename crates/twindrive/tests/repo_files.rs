@@ -90,3 +90,49 @@ fn every_toml_in_the_repository_loads_and_runs() {
     // The built-in scenarios, the two ir-sim setups and the example definition.
     assert!(scenarios >= 5 && definitions >= 1, "{files:?}");
 }
+
+/// The workspace's layers, lowest first: a crate depends only on crates of
+/// lower layers. Data-only crates sit under the ones that compute with them;
+/// the protocol (`link`) reads plans through `plan` alone, never through the
+/// pipeline or the simulator.
+const LAYERS: [&[&str]; 8] = [
+    &["twindrive-kinematics", "twindrive-plot"],
+    &["twindrive-plan", "twindrive-log"],
+    &[
+        "twindrive-sim",
+        "twindrive-estimation",
+        "twindrive-ros",
+        "twindrive-link",
+    ],
+    &["twindrive-mission"],
+    &["twindrive-agent"],
+    &["twindrive-net"],
+    &["twindrive-console"],
+    &["twindrive"],
+];
+
+#[test]
+fn no_crate_depends_on_one_of_its_own_layer_or_above() {
+    let layer = |name: &str| LAYERS.iter().position(|l| l.contains(&name));
+    let mut crates = 0;
+    for entry in std::fs::read_dir(repo().join("crates")).unwrap() {
+        let manifest = entry.unwrap().path().join("Cargo.toml");
+        let Ok(text) = std::fs::read_to_string(&manifest) else {
+            continue;
+        };
+        let table: toml::Table = toml::from_str(&text).unwrap();
+        let name = table["package"]["name"].as_str().unwrap().to_owned();
+        let own = layer(&name).unwrap_or_else(|| panic!("{name} is in no layer of LAYERS"));
+        let deps = table.get("dependencies").and_then(|d| d.as_table());
+        for dep in deps.into_iter().flat_map(|d| d.keys()) {
+            if let Some(theirs) = layer(dep) {
+                assert!(
+                    theirs < own,
+                    "{name} (layer {own}) depends on {dep} (layer {theirs})"
+                );
+            }
+        }
+        crates += 1;
+    }
+    assert_eq!(crates, LAYERS.iter().map(|l| l.len()).sum::<usize>());
+}

@@ -21,7 +21,7 @@ use twindrive_link::envelope::{
     sha256_hex, sign_plan,
 };
 use twindrive_link::upload::{DirStore, write_durably};
-use twindrive_mission::plan::MissionPlan;
+use twindrive_mission::plan::{MissionPlan, PlanGeometry};
 use twindrive_net::{Emulation, SessionOptions, down_key, open_session, up_key};
 use twindrive_sim::Scenario;
 

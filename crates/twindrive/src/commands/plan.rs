@@ -10,7 +10,7 @@ use serde::Deserialize;
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_log::MissionLog;
 use twindrive_mission::pipeline::{PipelineSettings, StageSummary, Stages};
-use twindrive_mission::plan::{MissionPlan, sha256_hex};
+use twindrive_mission::plan::{MissionPlan, PlanGeometry, sha256_hex};
 use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_mission::{PathSample, pipeline};
 use twindrive_sim::Scenario;

@@ -72,7 +72,7 @@ pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> anyhow::Result<Verific
     let samples = &plan.samples;
     let calibrated = plan.header.calibrated;
     let nominal = scenario.robot.nominal_params;
-    let criteria = Tolerances::default().criteria();
+    let criteria = twindrive_agent::executive::criteria(&Tolerances::default());
     let (checked, open_loop_nominal) = std::thread::scope(|s| {
         let nominal_run = s.spawn(|| verify::open_loop(samples, scenario.clone(), Some(&nominal)));
         let checked = verify::verify(samples, scenario, &calibrated, &criteria);
