@@ -527,6 +527,22 @@ mod tests {
     /// footprint clear of the world by the wanted clearance (where the robot
     /// does not start against a block), ends on the route past the blocks and
     /// keeps the route's samples that were clear.
+    /// A room with `block` on a straight route along y = 2 m, and the
+    /// robot (footprint `r`) stopped against the block's west face: the
+    /// world, the route, where it stands and the continuation from there.
+    fn around(
+        block: Block,
+        r: f64,
+        settings: &DetourSettings,
+    ) -> (World, Vec<PathSample>, Pose, Vec<PathSample>) {
+        let world = room_with(&[block]);
+        let route = straight([0.6, 2.0], [5.4, 2.0], 480);
+        let start = Pose::new(block.0[0] - r - 0.002, 2.0, 0.0);
+        let k = route.iter().position(|s| s.pose.x_m > start.x_m).unwrap();
+        let path = continuation_path(&world, r, start, &route[k..], &[block], settings).unwrap();
+        (world, route, start, path)
+    }
+
     #[test]
     fn detours_go_around_random_blocks_and_rejoin_the_route() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
@@ -537,13 +553,7 @@ mod tests {
             let half = [rng.random_range(0.05..0.3), rng.random_range(0.05..0.4)];
             let cy = 2.0 + rng.random_range(-0.2..0.2);
             let block = ([cx - half[0], cy - half[1]], [cx + half[0], cy + half[1]]);
-            let world = room_with(&[block]);
-            let route = straight([0.6, 2.0], [5.4, 2.0], 480);
-            // The robot stopped against the block's west face.
-            let start = Pose::new(block.0[0] - r - 0.002, 2.0, 0.0);
-            let k = route.iter().position(|s| s.pose.x_m > start.x_m).unwrap();
-            let path =
-                continuation_path(&world, r, start, &route[k..], &[block], &settings).unwrap();
+            let (world, route, start, path) = around(block, r, &settings);
             assert_eq!(path[0].pose, start);
             let last = path.last().unwrap().pose;
             assert!((last.x_m - 5.4).abs() < 1e-9 && (last.y_m - 2.0).abs() < 1e-9);
@@ -591,12 +601,7 @@ mod tests {
             let cx = rng.random_range(2.5..3.5);
             let half = [rng.random_range(0.05..0.2), rng.random_range(0.1..0.4)];
             let block = ([cx - half[0], 2.0 - half[1]], [cx + half[0], 2.0 + half[1]]);
-            let world = room_with(&[block]);
-            let route = straight([0.6, 2.0], [5.4, 2.0], 480);
-            let start = Pose::new(block.0[0] - r - 0.002, 2.0, 0.0);
-            let k = route.iter().position(|s| s.pose.x_m > start.x_m).unwrap();
-            let path =
-                continuation_path(&world, r, start, &route[k..], &[block], &settings).unwrap();
+            let (world, _, start, path) = around(block, r, &settings);
             let end = path.last().unwrap().pose;
             for s in &path {
                 let c = world.clearance_m(s.pose.x_m, s.pose.y_m, 1.0) - r;
