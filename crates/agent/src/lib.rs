@@ -27,13 +27,14 @@ pub mod operator;
 pub mod refine;
 pub mod robot;
 pub mod ros;
+pub mod store;
 pub mod twin;
 
 use twindrive_link::upload::ChunkStore;
 use twindrive_link::vtime::Endpoint;
 use twindrive_link::wire::Message;
 
-impl<B: backend::RobotBackend> Endpoint for robot::RobotAgent<B> {
+impl<B: backend::RobotBackend, S: store::RobotStore> Endpoint for robot::RobotAgent<B, S> {
     fn poll_transmit(&mut self, now_ns: u64) -> Option<Message> {
         robot::RobotAgent::poll_transmit(self, now_ns)
     }

@@ -10,10 +10,11 @@ use ed25519_dalek::SigningKey;
 use twindrive_agent::backend::{RobotBackend, SimBackend};
 use twindrive_agent::master::{Master, MasterConfig};
 use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
-use twindrive_agent::robot::{AgentConfig, Journal, RobotAgent};
+use twindrive_agent::robot::{AgentConfig, RobotAgent};
+use twindrive_agent::store::MemoryRobotStore;
 use twindrive_agent::twin::Twin;
 use twindrive_link::emulator::{LinkEmulator, LinkProfile};
-use twindrive_link::envelope::{Envelope, Supervision, generate_key, sign_plan};
+use twindrive_link::envelope::{Envelope, Supervision, sign_plan};
 use twindrive_link::upload::{MemoryStore, SenderConfig};
 use twindrive_link::vtime::VirtualLink;
 
@@ -48,21 +49,32 @@ fn plan_json() -> Vec<u8> {
 struct Harness {
     link: VirtualLink,
     op: Operator<MemoryStore>,
-    agent: RobotAgent<SimBackend>,
+    agent: RobotAgent<SimBackend, MemoryRobotStore>,
 }
 
 fn site_backend(extra: &str) -> SimBackend {
     SimBackend::new(common::site(extra), common::plan().samples[0].pose(), 400.0).unwrap()
 }
 
-fn agent(dir: &Path, trusted: &SigningKey, extra: &str) -> RobotAgent<SimBackend> {
-    let mut config = AgentConfig::new("rover", dir, vec![trusted.verifying_key()]);
+/// A robot on `store` (a clone of one that an earlier agent used is that
+/// robot restarted).
+fn agent(
+    store: &MemoryRobotStore,
+    trusted: &SigningKey,
+    extra: &str,
+) -> RobotAgent<SimBackend, MemoryRobotStore> {
+    let mut config = AgentConfig::new("rover", vec![trusted.verifying_key()]);
     config.unix_time_at_zero_s = UNIX0;
-    RobotAgent::new(config, site_backend(extra)).unwrap()
+    RobotAgent::new(config, site_backend(extra), store.clone()).unwrap()
+}
+
+/// A key of its own for each seed (tests need no randomness).
+fn test_key(seed: u8) -> SigningKey {
+    SigningKey::from_bytes(&[seed; 32])
 }
 
 fn harness(
-    dir: &Path,
+    store: &MemoryRobotStore,
     profile: &str,
     seed: u64,
     master_key: &SigningKey,
@@ -71,7 +83,7 @@ fn harness(
     on_handback: OnHandback,
 ) -> Harness {
     harness_with_budget(
-        dir,
+        store,
         profile,
         seed,
         master_key,
@@ -84,7 +96,7 @@ fn harness(
 
 #[allow(clippy::too_many_arguments)]
 fn harness_with_budget(
-    dir: &Path,
+    store: &MemoryRobotStore,
     profile: &str,
     seed: u64,
     master_key: &SigningKey,
@@ -136,7 +148,7 @@ fn harness_with_budget(
     Harness {
         link,
         op,
-        agent: agent(dir, robot_trusts, extra),
+        agent: agent(store, robot_trusts, extra),
     }
 }
 
@@ -158,12 +170,12 @@ impl Harness {
     }
 }
 
-fn journal(dir: &Path) -> Vec<serde_json::Value> {
-    Journal::read(&dir.join("journal.jsonl")).unwrap()
+fn journal(store: &MemoryRobotStore) -> Vec<serde_json::Value> {
+    store.journal_lines()
 }
 
-fn events(dir: &Path, event: &str) -> Vec<serde_json::Value> {
-    journal(dir)
+fn events(store: &MemoryRobotStore, event: &str) -> Vec<serde_json::Value> {
+    journal(store)
         .into_iter()
         .filter(|l| l["event"] == event)
         .collect()
@@ -172,10 +184,10 @@ fn events(dir: &Path, event: &str) -> Vec<serde_json::Value> {
 #[test]
 fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
     for seed in [1, 2, 3] {
-        let dir = tempfile::tempdir().unwrap();
-        let key = generate_key().unwrap();
+        let store = MemoryRobotStore::default();
+        let key = test_key(1);
         let mut h = harness(
-            dir.path(),
+            &store,
             "lunar,loss=0.1",
             seed,
             &key,
@@ -221,19 +233,9 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
         );
         // Every plan the robot accepted is stored byte for byte as signed.
         assert_eq!(r.uploads.len(), r.handbacks.len() + 1);
-        let stored = std::fs::read(
-            dir.path()
-                .join("plans")
-                .join(format!("{}.json", common::plan().sha256)),
-        )
-        .unwrap();
-        assert_eq!(stored, plan_json());
+        assert_eq!(store.plan(&common::plan().sha256), Some(plan_json()));
         for (plan, json, _) in &h.op.new_plans {
-            let path = dir
-                .path()
-                .join("plans")
-                .join(format!("{}.json", plan.sha256));
-            assert_eq!(&std::fs::read(path).unwrap(), json);
+            assert_eq!(store.plan(&plan.sha256).as_ref(), Some(json));
         }
         // The robot's logs came back, one per plan driven, and read as logs.
         assert_eq!(
@@ -243,19 +245,14 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
             r.timeline
         );
         for (_, mcap) in &h.op.new_logs {
-            let path = dir.path().join("received.mcap");
-            std::fs::write(&path, mcap).unwrap();
-            let log = twindrive_log::read_mcap(&path).unwrap();
+            let log = twindrive_log::read_mcap_bytes(mcap, Path::new("received.mcap")).unwrap();
             assert!(log.steps.len() > 100);
         }
-        assert_eq!(
-            events(dir.path(), "execution_started").len(),
-            r.uploads.len()
-        );
-        assert_eq!(events(dir.path(), "handback").len(), r.handbacks.len());
+        assert_eq!(events(&store, "execution_started").len(), r.uploads.len());
+        assert_eq!(events(&store, "handback").len(), r.handbacks.len());
         // The first plan starts from the robot's own estimate; every
         // continuation from the pose the twin refined, as its header says.
-        let starts = events(dir.path(), "localization");
+        let starts = events(&store, "localization");
         assert_eq!(starts.len(), r.uploads.len());
         assert_eq!(starts[0]["start"], "the robot's own");
         for (start, (plan, _, _)) in starts[1..].iter().zip(&h.op.new_plans) {
@@ -273,10 +270,10 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
 
 #[test]
 fn on_handback_ask_waits_for_the_operator_who_continues_or_ends() {
-    let key = generate_key().unwrap();
+    let key = test_key(2);
     for continue_it in [true, false] {
-        let dir = tempfile::tempdir().unwrap();
-        let mut h = harness(dir.path(), "lan", 5, &key, &key, BOX, OnHandback::Ask);
+        let store = MemoryRobotStore::default();
+        let mut h = harness(&store, "lan", 5, &key, &key, BOX, OnHandback::Ask);
         let signed = sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap();
         h.send(signed, 1);
         let limit = (600.0 * 1e9) as u64;
@@ -331,10 +328,10 @@ fn on_handback_ask_waits_for_the_operator_who_continues_or_ends() {
 
 #[test]
 fn on_handback_stop_ends_the_mission_handed_back_with_the_twin_updated() {
-    let dir = tempfile::tempdir().unwrap();
-    let key = generate_key().unwrap();
+    let store = MemoryRobotStore::default();
+    let key = test_key(3);
     let mut h = harness(
-        dir.path(),
+        &store,
         "satellite-lossy",
         7,
         &key,
@@ -356,13 +353,17 @@ fn on_handback_stop_ends_the_mission_handed_back_with_the_twin_updated() {
 
 /// A plan the gate must refuse: it crosses the link whole, is rejected with
 /// its reason, and no wheel moves.
-fn refused(signed: impl Fn(&SigningKey) -> Vec<u8>, prepare: impl Fn(&Path), expect: &str) {
+fn refused(
+    signed: impl Fn(&SigningKey) -> Vec<u8>,
+    prepare: impl Fn(&MemoryRobotStore),
+    expect: &str,
+) {
     for seed in [11, 12, 13] {
-        let dir = tempfile::tempdir().unwrap();
-        prepare(dir.path());
-        let key = generate_key().unwrap();
+        let store = MemoryRobotStore::default();
+        prepare(&store);
+        let key = test_key(4);
         let mut h = harness(
-            dir.path(),
+            &store,
             "lunar,loss=0.1",
             seed,
             &key,
@@ -373,14 +374,14 @@ fn refused(signed: impl Fn(&SigningKey) -> Vec<u8>, prepare: impl Fn(&Path), exp
         h.send(signed(&key), 1);
         assert!(h.run_until(600.0), "seed {seed}");
         assert_eq!(h.op.report.outcome, Some(Outcome::Rejected), "seed {seed}");
-        let rejected = events(dir.path(), "plan_rejected");
+        let rejected = events(&store, "plan_rejected");
         assert_eq!(rejected.len(), 1, "seed {seed}");
         let reason = rejected[0]["reason"].as_str().unwrap();
         assert!(reason.contains(expect), "seed {seed}: {reason}");
         assert_eq!(h.agent.backend().wheel_travel_rad(), 0.0);
-        assert!(events(dir.path(), "execution_started").is_empty());
+        assert!(events(&store, "execution_started").is_empty());
         assert!(
-            journal(dir.path())
+            journal(&store)
                 .iter()
                 .all(|l| l["wheel_travel_rad"].as_f64() == Some(0.0))
         );
@@ -391,7 +392,7 @@ fn refused(signed: impl Fn(&SigningKey) -> Vec<u8>, prepare: impl Fn(&Path), exp
 fn a_plan_signed_by_an_unknown_key_is_refused_and_no_wheel_moves() {
     refused(
         |_| {
-            let forger = generate_key().unwrap();
+            let forger = test_key(5);
             sign_plan(&forger, &plan_json(), envelope(5, u64::MAX, None)).unwrap()
         },
         |_| {},
@@ -404,12 +405,7 @@ fn a_replayed_plan_is_refused_even_after_a_restart() {
     refused(
         |key| sign_plan(key, &plan_json(), envelope(5, u64::MAX, None)).unwrap(),
         // The robot accepted counter 9 before it restarted.
-        |dir| {
-            std::fs::create_dir_all(dir).unwrap();
-            twindrive_link::envelope::CounterFile::new(dir.join("counter"))
-                .store(9)
-                .unwrap();
-        },
+        |store| store.set_counter(9),
         "replay",
     );
 }
@@ -439,10 +435,10 @@ fn a_plan_corrupted_after_signing_is_refused() {
 
 #[test]
 fn chunks_corrupted_in_flight_are_asked_again_and_the_plan_arrives_whole() {
-    let dir = tempfile::tempdir().unwrap();
-    let key = generate_key().unwrap();
+    let store = MemoryRobotStore::default();
+    let key = test_key(6);
     let mut h = harness(
-        dir.path(),
+        &store,
         "lunar,loss=0.05",
         5,
         &key,
@@ -464,17 +460,17 @@ fn chunks_corrupted_in_flight_are_asked_again_and_the_plan_arrives_whole() {
     );
     assert!(h.run_until(900.0));
     assert_eq!(h.op.report.outcome, Some(Outcome::Completed));
-    assert!(!events(dir.path(), "chunk_corrupted").is_empty());
+    assert!(!events(&store, "chunk_corrupted").is_empty());
     assert!(h.op.report.uploads[0].chunks_resent > 0);
 }
 
 #[test]
 fn a_robot_restarted_mid_upload_resumes_and_the_plan_arrives_byte_identical() {
     for seed in [21, 22, 23] {
-        let dir = tempfile::tempdir().unwrap();
-        let key = generate_key().unwrap();
+        let store = MemoryRobotStore::default();
+        let key = test_key(7);
         let mut h = harness(
-            dir.path(),
+            &store,
             "lunar,loss=0.1",
             seed,
             &key,
@@ -489,31 +485,25 @@ fn a_robot_restarted_mid_upload_resumes_and_the_plan_arrives_byte_identical() {
         // Part of the way (the first progress the robot journals), then the
         // robot's process dies and comes back.
         let mut t = 0.0;
-        while events(dir.path(), "upload_progress").is_empty() {
+        while events(&store, "upload_progress").is_empty() {
             t += 0.05;
             assert!(!h.run_until(t));
             assert!(t < 60.0, "no upload progress in a minute");
         }
         assert!(
-            events(dir.path(), "execution_started").is_empty(),
+            events(&store, "execution_started").is_empty(),
             "still uploading"
         );
-        let before = events(dir.path(), "upload_progress");
+        let before = events(&store, "upload_progress");
         let held = before.last().unwrap()["received"].as_u64().unwrap();
         assert!(held > 0);
         h.link.drop_in_flight();
-        h.agent = agent(dir.path(), &key, "");
+        h.agent = agent(&store, &key, "");
         assert!(h.run_until(900.0), "seed {seed}");
         assert_eq!(h.op.report.outcome, Some(Outcome::Completed), "seed {seed}");
-        let stored = std::fs::read(
-            dir.path()
-                .join("plans")
-                .join(format!("{}.json", common::plan().sha256)),
-        )
-        .unwrap();
-        assert_eq!(stored, plan_json());
+        assert_eq!(store.plan(&common::plan().sha256), Some(plan_json()));
         // Resumed: the restarted robot still held what it had, and said so.
-        let lines = journal(dir.path());
+        let lines = journal(&store);
         let restart = lines
             .iter()
             .rposition(|l| l["event"] == "agent_started")
@@ -529,9 +519,9 @@ fn a_robot_restarted_mid_upload_resumes_and_the_plan_arrives_byte_identical() {
 #[test]
 fn a_robot_restarted_mid_execution_stays_stopped_and_never_drives_the_plan_again() {
     for seed in [31, 32, 33] {
-        let dir = tempfile::tempdir().unwrap();
-        let key = generate_key().unwrap();
-        let mut h = harness(dir.path(), "lan", seed, &key, &key, "", OnHandback::Replan);
+        let store = MemoryRobotStore::default();
+        let key = test_key(8);
+        let mut h = harness(&store, "lan", seed, &key, &key, "", OnHandback::Replan);
         h.send(
             sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
             1,
@@ -543,12 +533,12 @@ fn a_robot_restarted_mid_execution_stays_stopped_and_never_drives_the_plan_again
             h.op.report.timeline
         );
         h.link.drop_in_flight();
-        h.agent = agent(dir.path(), &key, "");
+        h.agent = agent(&store, &key, "");
         assert!(h.run_until(300.0), "seed {seed}");
         assert_eq!(h.op.report.outcome, Some(Outcome::Failed), "seed {seed}");
         assert_eq!(h.agent.backend().wheel_travel_rad(), 0.0);
-        assert_eq!(events(dir.path(), "execution_started").len(), 1);
-        let stopped = events(dir.path(), "stopped");
+        assert_eq!(events(&store, "execution_started").len(), 1);
+        let stopped = events(&store, "stopped");
         assert_eq!(stopped[0]["reason"], "restarted_mid_execution");
     }
 }
@@ -558,9 +548,9 @@ fn a_robot_restarted_mid_execution_stays_stopped_and_never_drives_the_plan_again
 #[test]
 fn when_the_master_dies_the_plans_policy_decides() {
     for (dead_man, expect) in [(Some(3.0), "dead_man"), (None, "finished")] {
-        let dir = tempfile::tempdir().unwrap();
-        let key = generate_key().unwrap();
-        let mut h = harness(dir.path(), "wifi", 41, &key, &key, "", OnHandback::Stop);
+        let store = MemoryRobotStore::default();
+        let key = test_key(9);
+        let mut h = harness(&store, "wifi", 41, &key, &key, "", OnHandback::Stop);
         h.send(
             sign_plan(&key, &plan_json(), envelope(1, u64::MAX, dead_man)).unwrap(),
             1,
@@ -573,7 +563,7 @@ fn when_the_master_dies_the_plans_policy_decides() {
         let agent = &mut h.agent;
         h.link
             .run(&mut silent, agent, 200 * S, |_, a| !a.is_executing());
-        let ended: Vec<_> = journal(dir.path())
+        let ended: Vec<_> = journal(&store)
             .into_iter()
             .filter(|l| l["event"] == "stopped" || l["event"] == "execution_finished")
             .collect();
@@ -606,10 +596,10 @@ impl twindrive_link::vtime::Endpoint for Silent {
 #[test]
 fn telemetry_keeps_to_its_budget_and_every_log_arrives() {
     for budget in [1_000.0, 4_000.0] {
-        let dir = tempfile::tempdir().unwrap();
-        let key = generate_key().unwrap();
+        let store = MemoryRobotStore::default();
+        let key = test_key(10);
         let mut h = harness_with_budget(
-            dir.path(),
+            &store,
             "lunar",
             51,
             &key,
@@ -638,23 +628,23 @@ fn telemetry_keeps_to_its_budget_and_every_log_arrives() {
 /// checks, and no wheel moves.
 #[test]
 fn a_plan_for_another_site_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let key = generate_key().unwrap();
-    let mut h = harness(dir.path(), "lan", 61, &key, &key, "", OnHandback::Stop);
+    let store = MemoryRobotStore::default();
+    let key = test_key(11);
+    let mut h = harness(&store, "lan", 61, &key, &key, "", OnHandback::Stop);
     let text = twindrive_sim::builtin::WALL_FOLLOWING
         .replace("name = \"wall_following\"", "name = \"quarry\"");
     let site = twindrive_sim::Scenario::from_toml(&text, Path::new("<quarry>.toml")).unwrap();
     let backend = SimBackend::new(site, common::plan().samples[0].pose(), 100.0).unwrap();
-    let mut config = AgentConfig::new("rover", dir.path(), vec![key.verifying_key()]);
+    let mut config = AgentConfig::new("rover", vec![key.verifying_key()]);
     config.unix_time_at_zero_s = UNIX0;
-    h.agent = RobotAgent::new(config, backend).unwrap();
+    h.agent = RobotAgent::new(config, backend, store.clone()).unwrap();
     h.send(
         sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
         1,
     );
     assert!(h.run_until(600.0));
     assert_eq!(h.op.report.outcome, Some(Outcome::Rejected));
-    let reason = events(dir.path(), "plan_rejected")[0]["reason"]
+    let reason = events(&store, "plan_rejected")[0]["reason"]
         .as_str()
         .unwrap()
         .to_string();

@@ -384,19 +384,16 @@ impl Core {
         self.job = None;
         match result {
             JobResult::Plan(Ok((p, verified))) => {
-                let dir = self.settings.out.join("plans");
+                // Plans made here, laid out as the master's: the document
+                // and the twin's run it was made from.
+                let archive = twindrive_store::MasterArchive::new(&self.settings.out);
                 let stem = p.plan.sha256[..12].to_owned();
-                let files = [
-                    (format!("{stem}.rehearsal.mcap"), &p.rehearsal_mcap),
-                    (format!("{stem}.json"), &p.plan_json),
-                ];
-                for (name, bytes) in files {
-                    std::fs::create_dir_all(&dir)
-                        .and_then(|()| {
-                            twindrive_link::upload::write_durably(&dir.join(&name), bytes)
-                        })
-                        .map_err(|e| format!("writing {}: {e}", dir.join(&name).display()))?;
-                }
+                let written = archive
+                    .write_rehearsal(&p.plan.sha256, &p.rehearsal_mcap)
+                    .and_then(|_| archive.write_plan(&p.plan, &p.plan_json, None));
+                let plan_path = written.map_err(|e| {
+                    format!("writing plan {stem} into {}: {e}", archive.dir().display())
+                })?;
                 let s = &p.view["summary"];
                 let line = format!(
                     "plan {stem}: {:.2} m in {:.1} s from {:.2} m rehearsed, {:.2} % covered; {}; verification {}",
@@ -404,7 +401,7 @@ impl Core {
                     s["plan_duration_s"].as_f64().unwrap_or(0.0),
                     s["executed_length_m"].as_f64().unwrap_or(0.0),
                     s["coverage_percent"].as_f64().unwrap_or(0.0),
-                    dir.join(format!("{stem}.json")).display(),
+                    plan_path.display(),
                     verified.0.verdict.summary(),
                 );
                 self.plan = Some(p);
@@ -588,7 +585,7 @@ mod tests {
             Workspace::new(crate::twin_model(scenario, calibrated.then_some(params))),
             Vec::new(),
             Settings {
-                key: key.then(|| twindrive_link::envelope::generate_key().unwrap()),
+                key: key.then(|| twindrive_store::generate_key().unwrap()),
                 params,
                 calibrated,
                 world_sha256: "00".repeat(32),

@@ -10,7 +10,7 @@
 //! console's clock.
 
 use std::collections::VecDeque;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use serde_json::{Value, json};
@@ -18,11 +18,11 @@ use twindrive_agent::master::{Master, MasterConfig, MasterEvent};
 use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome, TimelineEntry};
 use twindrive_agent::twin::Twin;
 use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, sign_plan};
-use twindrive_link::upload::{DirStore, write_durably};
 use twindrive_link::vtime::Endpoint;
 use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Status, TransferId};
 use twindrive_mission::plan::{MissionPlan, PlanGeometry, hex};
 use twindrive_sim::Scenario;
+use twindrive_store::{DirStore, MasterArchive};
 
 use crate::planning::columns;
 
@@ -52,7 +52,8 @@ enum Link {
 /// One robot.
 pub struct RobotSlot {
     pub id: String,
-    out: PathBuf,
+    /// Its files: plans, robot logs, the report.
+    archive: MasterArchive,
     link: Option<Link>,
     /// Console time of the last message from the robot.
     last_rx_ns: Option<u64>,
@@ -107,17 +108,14 @@ impl Endpoint for SharedSlot {
 }
 
 impl RobotSlot {
-    /// A robot `id` whose files go to `out` (`out/plans`, `out/robot_logs`,
-    /// `out/report.json`).
+    /// A robot `id` whose files go to `out`, laid out as the master's
+    /// ([`MasterArchive`]).
     pub fn new(id: &str, out: &Path, config: MasterConfig) -> Self {
-        let master = Master::new(
-            id,
-            config,
-            DirStore::new(out.join("state").join("log_chunks")),
-        );
+        let archive = MasterArchive::new(out);
+        let master = Master::new(id, config, archive.log_chunks());
         Self {
             id: id.into(),
-            out: out.to_path_buf(),
+            archive,
             link: Some(Link::Idle(Box::new(master))),
             last_rx_ns: None,
             last_status_ns: None,
@@ -253,67 +251,48 @@ impl RobotSlot {
             }
         }
         self.timeline_told = op.report.timeline.len();
-        let mut files: Vec<(PathBuf, Vec<u8>)> = Vec::new();
-        let mut logs = Vec::new();
-        while let Some((plan, json, signed)) = op.new_plans.pop_front() {
-            let stem = &plan.sha256[..12];
-            files.push((self.out.join("plans").join(format!("{stem}.json")), json));
-            files.push((
-                self.out.join("plans").join(format!("{stem}.signed")),
-                signed,
-            ));
-        }
-        while let Some((plan, mcap)) = op.new_logs.pop_front() {
-            logs.push((plan, mcap));
-        }
+        let plans: Vec<_> = op.new_plans.drain(..).collect();
+        let logs: Vec<_> = op.new_logs.drain(..).collect();
         let report = (op.is_done() && !self.report_written).then(|| {
             op.finish_report();
             serde_json::to_vec_pretty(&op.report).unwrap_or_default()
         });
-        let changed = !files.is_empty() || !logs.is_empty() || report.is_some();
-        for (path, bytes) in files {
-            self.write(&path, &bytes);
+        let changed = !plans.is_empty() || !logs.is_empty() || report.is_some();
+        for (plan, json, signed) in plans {
+            let written = self.archive.write_plan(&plan, &json, Some(&signed));
+            self.noted("writing a plan", written);
         }
         for (plan, mcap) in logs {
-            let n = self.logs.len() + 1;
-            let name = match &plan {
-                Some(p) => format!("{n:02}_{}.mcap", &p.sha256[..12]),
-                None => format!("{n:02}.mcap"),
-            };
-            let path = self.out.join("robot_logs").join(name);
-            if self.write(&path, &mcap) {
-                match twindrive_log::read_mcap(&path) {
-                    Ok(log) => {
-                        let every = (log.steps.len() / 20_000).max(1);
-                        self.logs
-                            .push(columns(log.steps.iter().step_by(every).map(|s| {
-                                (s.t_ns as f64 * 1e-9, s.ground_truth.x_m, s.ground_truth.y_m)
-                            })));
-                    }
-                    Err(e) => self.notice(format!("the robot's log {}: {e}", path.display())),
+            match self.archive.write_robot_log(plan.as_deref(), &mcap) {
+                Ok(written) => {
+                    let log = written.log;
+                    let every = (log.steps.len() / 20_000).max(1);
+                    self.logs
+                        .push(columns(log.steps.iter().step_by(every).map(|s| {
+                            (s.t_ns as f64 * 1e-9, s.ground_truth.x_m, s.ground_truth.y_m)
+                        })));
                 }
+                Err(e) => self.notice(format!("the robot's log: {e:#}")),
             }
         }
         if let Some(report) = report {
             self.report_written = true;
-            let path = self.out.join("report.json");
-            self.write(&path, &report);
+            let written = self.archive.write_report(&report);
+            self.noted("writing report.json", written);
         }
         if changed {
             self.mission_rev += 1;
         }
     }
 
-    fn write(&mut self, path: &Path, bytes: &[u8]) -> bool {
-        let result = path
-            .parent()
-            .map_or(Ok(()), std::fs::create_dir_all)
-            .and_then(|()| write_durably(path, bytes));
+    /// A write's result: a failure becomes a notice for the operator.
+    fn noted<T>(&mut self, what: &str, result: std::io::Result<T>) -> Option<T> {
         match result {
-            Ok(()) => true,
+            Ok(t) => Some(t),
             Err(e) => {
-                self.notice(format!("writing {}: {e}", path.display()));
-                false
+                let dir = self.archive.dir().display().to_string();
+                self.notice(format!("{what} into {dir}: {e}"));
+                None
             }
         }
     }
@@ -383,9 +362,8 @@ impl RobotSlot {
             },
         );
         let stem = plan.sha256[..12].to_owned();
-        let plans = self.out.join("plans");
-        self.write(&plans.join(format!("{stem}.json")), plan_json);
-        self.write(&plans.join(format!("{stem}.signed")), &signed);
+        let written = self.archive.write_plan(&plan, plan_json, Some(&signed));
+        self.noted("writing the plan", written);
         let bytes = signed.len();
         op.start(plan, signed, counter, false, now_ns);
         self.link = Some(Link::Operating(Box::new(op)));
@@ -440,8 +418,8 @@ impl RobotSlot {
         if let Some(Link::Operating(op)) = self.link.as_mut() {
             op.finish_report();
             if let Ok(bytes) = serde_json::to_vec_pretty(&op.report) {
-                let path = self.out.join("report.json");
-                self.write(&path, &bytes);
+                let written = self.archive.write_report(&bytes);
+                self.noted("writing report.json", written);
             }
         }
     }

@@ -163,13 +163,6 @@ pub enum Rejection {
     PlanInvalid(String),
 }
 
-/// A fresh key pair from the operating system's randomness.
-pub fn generate_key() -> Result<SigningKey, getrandom::Error> {
-    let mut secret = [0u8; 32];
-    getrandom::fill(&mut secret)?;
-    Ok(SigningKey::from_bytes(&secret))
-}
-
 /// The private key as PKCS#8 v1 PEM (RFC 8410: the seed alone, which every
 /// OpenSSL reads).
 pub fn private_key_pem(key: &SigningKey) -> String {
@@ -415,33 +408,5 @@ impl PlanGate {
             plan_json,
             plan,
         })
-    }
-}
-
-/// The last plan counter a robot accepted, kept in one file (written to a
-/// temporary file, synced, renamed): a restart does not reopen replays.
-#[derive(Debug, Clone)]
-pub struct CounterFile {
-    path: std::path::PathBuf,
-}
-
-impl CounterFile {
-    pub fn new(path: impl Into<std::path::PathBuf>) -> Self {
-        Self { path: path.into() }
-    }
-
-    /// 0 when the file does not exist yet.
-    pub fn load(&self) -> std::io::Result<u64> {
-        match std::fs::read_to_string(&self.path) {
-            Ok(text) => text.trim().parse().map_err(|e| {
-                std::io::Error::other(format!("{}: not a counter: {e}", self.path.display()))
-            }),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(0),
-            Err(e) => Err(e),
-        }
-    }
-
-    pub fn store(&self, counter: u64) -> std::io::Result<()> {
-        crate::upload::write_durably(&self.path, format!("{counter}\n").as_bytes())
     }
 }

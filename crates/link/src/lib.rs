@@ -9,7 +9,7 @@
 //! - [`wire`]: the versioned messages and their bytes (any bytes decode to a
 //!   message or an error, never a panic);
 //! - [`upload`]: chunked, resumable upload with NAKs (sender and receiver
-//!   state machines, durable chunk stores);
+//!   state machines, repair shards, the chunk-store trait);
 //! - [`vtime`]: two endpoints joined by emulated links in virtual time;
 //! - [`efficiency`]: an upload's time against the ideal the link allows.
 

@@ -6,8 +6,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use twindrive_link::emulator::{LinkEmulator, LinkProfile, Outage};
 use twindrive_link::upload::{
-    ChunkStore, DirStore, MemoryStore, Receiver, ReceiverConfig, ReceiverEvent, Sender,
-    SenderConfig,
+    ChunkStore, MemoryStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
 };
 use twindrive_link::vtime::VirtualLink;
 use twindrive_link::wire::{self, Body, Stamper};
@@ -82,8 +81,9 @@ fn a_lossy_upload_with_an_outage_arrives_byte_identical() {
 fn restarts_of_either_side_resume_without_losing_or_repeating() {
     let profile: LinkProfile = "satellite-lossy,loss=0.1".parse().unwrap();
     let data = file(150_000, 9);
-    let tmp = tempfile::tempdir().unwrap();
-    let store = || DirStore::new(tmp.path().join("chunks"));
+    // Clones share what the store holds: a restarted receiver finds it.
+    let kept = MemoryStore::default();
+    let store = || kept.clone();
     let mut net = link(&profile, 3);
     let mut got = None;
 
@@ -91,11 +91,8 @@ fn restarts_of_either_side_resume_without_losing_or_repeating() {
     let mut receiver = Receiver::new("rover", store(), ReceiverConfig::default());
     // Part of the way, then the robot process dies and comes back.
     assert!(!net.run(&mut sender, &mut receiver, S / 2, |s, _| s.is_finished()));
-    let held_before = std::fs::read_dir(tmp.path().join("chunks"))
-        .unwrap()
-        .next()
-        .map(|d| std::fs::read_dir(d.unwrap().path()).unwrap().count())
-        .unwrap_or(0);
+    let offer = store().pending().unwrap().expect("a transfer in progress");
+    let held_before = store().open(&offer).unwrap().iter().filter(|&&h| h).count();
     assert!(
         held_before > 10,
         "{held_before} chunks held before the restart"
@@ -120,12 +117,7 @@ fn restarts_of_either_side_resume_without_losing_or_repeating() {
         sender.stats.chunks_sent
     );
     // The store is cleaned up once the file is complete.
-    assert_eq!(
-        std::fs::read_dir(tmp.path().join("chunks"))
-            .unwrap()
-            .count(),
-        0
-    );
+    assert_eq!(store().pending().unwrap(), None);
 }
 
 #[test]

@@ -514,8 +514,14 @@ mod erased {
 /// Reads a log written by [`write_mcap`].
 pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
     let bytes = std::fs::read(path).map_err(|e| LogError::io(path, e))?;
+    read_mcap_bytes(&bytes, path)
+}
+
+/// Reads a log written by [`write_mcap`] from its bytes; `path` names them
+/// in errors.
+pub fn read_mcap_bytes(bytes: &[u8], path: &Path) -> Result<MissionLog, LogError> {
     let bad = |m: String| LogError::format(path, m);
-    let summary = mcap::Summary::read(&bytes)
+    let summary = mcap::Summary::read(bytes)
         .map_err(|e| bad(format!("not a readable MCAP file: {e}")))?
         .ok_or_else(|| bad("MCAP file has no summary section".into()))?;
     let index = summary
@@ -523,7 +529,7 @@ pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
         .iter()
         .find(|m| m.name == HEADER_METADATA)
         .ok_or_else(|| bad(format!("no `{HEADER_METADATA}` metadata record")))?;
-    let meta = mcap::read::metadata(&bytes, index).map_err(|e| bad(e.to_string()))?;
+    let meta = mcap::read::metadata(bytes, index).map_err(|e| bad(e.to_string()))?;
     let header: LogHeader = meta
         .metadata
         .get("json")
@@ -541,7 +547,7 @@ pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
         .map(|(i, s)| (format!("/range/{}", s.name), i))
         .collect();
     let mut step_of_time: HashMap<u64, usize> = HashMap::new();
-    let stream = mcap::MessageStream::new(&bytes).map_err(|e| bad(e.to_string()))?;
+    let stream = mcap::MessageStream::new(bytes).map_err(|e| bad(e.to_string()))?;
     for message in stream {
         let message = message.map_err(|e| bad(e.to_string()))?;
         let topic = message.channel.topic.as_str();

@@ -510,7 +510,7 @@ async fn a_rehearsal_becomes_a_plan_with_its_stages_drawn_and_verified() {
     // The plan document is on disk under its hash.
     let sha = js(c, "return window.twindrive.S.plan.sha256").await;
     let sha = sha.as_str().unwrap();
-    let doc = tmp.path().join(format!("plans/{}.json", &sha[..12]));
+    let doc = tmp.path().join(format!("plans/{sha}.json"));
     let plan: Value = serde_json::from_slice(&std::fs::read(&doc).unwrap()).unwrap();
     assert_eq!(plan["sha256"], sha);
     shot(c, "05_plan_stages").await;
@@ -724,7 +724,7 @@ async fn a_plan_uploaded_over_a_lossy_link_reaches_100_percent_and_runs() {
     }
     shot(c, "08_completed").await;
     // The robot holds the plan byte for byte.
-    let ours = std::fs::read(m.out.join(format!("rover/plans/{}.json", &sha[..12]))).unwrap();
+    let ours = std::fs::read(m.out.join(format!("rover/plans/{sha}.json"))).unwrap();
     let theirs = std::fs::read(m.robot_state.join(format!("plans/{sha}.json"))).unwrap();
     assert!(ours == theirs, "the robot's copy differs");
     c.clone().close().await.unwrap();

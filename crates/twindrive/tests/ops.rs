@@ -332,7 +332,7 @@ fn a_replayed_or_expired_plan_is_rejected_and_no_wheel_moves() {
     let m = Mission::new("", "keys", 10.0);
     // The robot once accepted counter 10 (its state survives restarts).
     std::fs::create_dir_all(m.robot_dir()).unwrap();
-    twindrive_link::envelope::CounterFile::new(m.robot_dir().join("counter"))
+    twindrive_store::CounterFile::new(m.robot_dir().join("counter"))
         .store(10)
         .unwrap();
     let _robot = m.robot();

@@ -106,7 +106,7 @@ const LAYERS: [&[&str]; 8] = [
     ],
     &["twindrive-mission"],
     &["twindrive-agent"],
-    &["twindrive-net"],
+    &["twindrive-store", "twindrive-net"],
     &["twindrive-console"],
     &["twindrive"],
 ];
@@ -135,4 +135,85 @@ fn no_crate_depends_on_one_of_its_own_layer_or_above() {
         crates += 1;
     }
     assert_eq!(crates, LAYERS.iter().map(|l| l.len()).sum::<usize>());
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// The protocol and the agents do no I/O: no files, sockets, clocks or
+/// operating-system randomness, in their code, tests and benchmarks alike.
+/// What they keep goes through their store traits (`twindrive-store` keeps
+/// it on disk, memory stores serve tests and in-process missions), what
+/// they send leaves through `poll_transmit`, and time is an argument.
+#[test]
+fn link_and_agent_touch_no_file_system_socket_clock_or_randomness() {
+    const FORBIDDEN: [&str; 14] = [
+        "std::fs",
+        "fs::",
+        "File::",
+        "OpenOptions",
+        "read_dir",
+        "tempfile",
+        "std::net",
+        "TcpStream",
+        "UdpSocket",
+        "Instant::now",
+        "SystemTime",
+        "getrandom",
+        "thread_rng",
+        "std::env::var",
+    ];
+    const IO_CRATES: [&str; 7] = [
+        "tempfile",
+        "getrandom",
+        "tokio",
+        "zenoh",
+        "twindrive-store",
+        "twindrive-net",
+        "rusqlite",
+    ];
+    let mut found = Vec::new();
+    for krate in ["link", "agent"] {
+        let dir = repo().join("crates").join(krate);
+        let mut files = Vec::new();
+        for sub in ["src", "tests", "benches", "examples"] {
+            rust_files(&dir.join(sub), &mut files);
+        }
+        assert!(files.len() > 5, "{krate}: {files:?}");
+        for file in files {
+            let text = std::fs::read_to_string(&file).unwrap();
+            for (k, line) in text.lines().enumerate() {
+                let code = line.trim_start();
+                if code.starts_with("//") {
+                    continue;
+                }
+                for word in FORBIDDEN.iter().filter(|w| code.contains(*w)) {
+                    found.push(format!("{}:{}: `{word}`", file.display(), k + 1));
+                }
+            }
+        }
+        let manifest: toml::Table =
+            toml::from_str(&std::fs::read_to_string(dir.join("Cargo.toml")).unwrap()).unwrap();
+        for table in ["dependencies", "dev-dependencies"] {
+            let deps = manifest.get(table).and_then(|d| d.as_table());
+            for dep in deps.into_iter().flat_map(|d| d.keys()) {
+                if IO_CRATES.contains(&dep.as_str()) {
+                    found.push(format!("crates/{krate}/Cargo.toml [{table}]: `{dep}`"));
+                }
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "I/O in link or agent:\n{}",
+        found.join("\n")
+    );
 }

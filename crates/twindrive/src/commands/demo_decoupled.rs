@@ -13,6 +13,7 @@ use twindrive_agent::backend::{RobotBackend, SimBackend};
 use twindrive_agent::master::{Master, MasterConfig};
 use twindrive_agent::operator::{Operator, OperatorConfig, Outcome, Report};
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
+use twindrive_agent::store::MemoryRobotStore;
 use twindrive_agent::twin::Twin;
 use twindrive_link::emulator::{LinkEmulator, LinkProfile};
 use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, sign_plan};
@@ -21,6 +22,7 @@ use twindrive_link::vtime::VirtualLink;
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
 use twindrive_plot::{Lane, LaneFigure, Markers, Outline, Series, WorldFigure, palette};
 use twindrive_sim::Scenario;
+use twindrive_store::MasterArchive;
 
 use crate::figures::walls;
 use crate::output::Staging;
@@ -60,15 +62,7 @@ pub fn run(
         .map_err(|e| anyhow::anyhow!("the demo site: {e}"))?;
     std::fs::create_dir_all(out.parent().unwrap_or(Path::new(".")))?;
     let mut mission = Mission::new(
-        plan,
-        plan_json,
-        twin,
-        world_toml,
-        &key,
-        &profile,
-        1,
-        backend,
-        out.parent().unwrap_or(Path::new(".")),
+        plan, plan_json, twin, world_toml, &key, &profile, 1, backend,
     )?;
     mission.op.config_mut().max_continuations = 8;
     mission.op.config_mut().log_wait_s = 1_200.0;
@@ -77,7 +71,6 @@ pub fn run(
         mut op,
         mut robot,
         mut link,
-        state,
         ..
     } = mission;
     let done = link.run(&mut op, &mut robot, 3_600 * 1_000_000_000, |op, _| {
@@ -94,17 +87,15 @@ pub fn run(
     let staging = Staging::new(out, "demo-decoupled")?;
     let dir = staging.dir();
     let mut real_paths: Vec<Vec<(f64, f64)>> = Vec::new();
-    let mut k = 0;
+    // The master's output folder, as `twindrive master` lays it out.
+    let mut archive = MasterArchive::new(dir);
     while let Some((p, mcap)) = op.new_logs.pop_front() {
-        k += 1;
-        let log_dir = super::ops::write_robot_log(dir, k, p.as_deref(), &mcap)?;
-        op.report.robot_logs.push(format!(
-            "robot_logs/{}",
-            log_dir.file_name().unwrap_or_default().to_string_lossy()
-        ));
-        let log = twindrive_log::read_mcap(&log_dir.join("log.mcap"))?;
+        let written = archive.write_robot_log(p.as_deref(), &mcap)?;
+        op.report.robot_logs.push(written.name);
         real_paths.push(
-            log.steps
+            written
+                .log
+                .steps
                 .iter()
                 .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m))
                 .collect(),
@@ -115,18 +106,13 @@ pub fn run(
     std::fs::create_dir_all(dir.join("plans"))?;
     while let Some((p, json, signed)) = op.new_plans.pop_front() {
         plans.push(p.samples.iter().map(|s| (s.x_m, s.y_m)).collect());
-        staging.write_with(&format!("plans/{}.json", p.sha256), |w| {
-            Ok(w.write_all(&json)?)
-        })?;
-        staging.write_with(&format!("plans/{}.signed", p.sha256), |w| {
-            Ok(w.write_all(&signed)?)
-        })?;
+        archive.write_plan(&p, &json, Some(&signed))?;
     }
     op.finish_report();
     staging.write_with("report.json", |w| {
         serde_json::to_writer_pretty(w, &op.report).map_err(Into::into)
     })?;
-    let journal = std::fs::read(state.path().join("journal.jsonl")).unwrap_or_default();
+    let journal = robot.store().journal();
     staging.write_with("robot_journal.jsonl", |w| Ok(w.write_all(&journal)?))?;
 
     // The twin after the mission, with what it learnt, against the site.
@@ -208,10 +194,8 @@ pub fn run(
 /// signed and its upload started.
 pub struct Mission<B: RobotBackend> {
     pub op: Operator<MemoryStore>,
-    pub robot: RobotAgent<B>,
+    pub robot: RobotAgent<B, MemoryRobotStore>,
     pub link: VirtualLink,
-    /// The robot's state directory (removed on drop).
-    pub state: tempfile::TempDir,
     pub signed_bytes: usize,
 }
 
@@ -219,8 +203,8 @@ impl<B: RobotBackend> Mission<B> {
     /// `plan` (its JSON `plan_json`), rehearsed on `twin` whose world file
     /// is `world_toml`, signed with `key` for robot `rover` and on its way
     /// over `profile` (seeded with `seed`) to a robot driving `backend`,
-    /// whose state directory is made in `state_parent`. The operator
-    /// replans on a hand-back.
+    /// which keeps its state in memory. The operator replans on a
+    /// hand-back.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         plan: &MissionPlan,
@@ -231,7 +215,6 @@ impl<B: RobotBackend> Mission<B> {
         profile: &LinkProfile,
         seed: u64,
         backend: B,
-        state_parent: &Path,
     ) -> anyhow::Result<Self> {
         let robot_id = "rover";
         let world_sha256 = sha256_hex(world_toml);
@@ -263,19 +246,15 @@ impl<B: RobotBackend> Mission<B> {
             Some(key.clone()),
             OperatorConfig::replanning(robot_id, 1, world_sha256, UNIX_AT_ZERO_S),
         );
-        let state = tempfile::Builder::new()
-            .prefix(".twindrive-robot-")
-            .tempdir_in(state_parent)
-            .context("the robot's state directory")?;
-        let mut config = AgentConfig::new(robot_id, state.path(), vec![key.verifying_key()]);
+        let mut config = AgentConfig::new(robot_id, vec![key.verifying_key()]);
         config.unix_time_at_zero_s = UNIX_AT_ZERO_S;
-        let robot = RobotAgent::new(config, backend).context("the robot agent")?;
+        let robot = RobotAgent::new(config, backend, MemoryRobotStore::default())
+            .context("the robot agent")?;
         op.start(Arc::new(plan.clone()), signed, 1, false, 0);
         Ok(Self {
             op,
             robot,
             link,
-            state,
             signed_bytes,
         })
     }

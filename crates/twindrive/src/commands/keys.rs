@@ -6,8 +6,8 @@ use std::path::Path;
 
 use anyhow::{Context, bail};
 use twindrive_link::envelope::{
-    Envelope, Supervision, generate_key, private_key_pem, public_key_pem, read_private_key_pem,
-    sha256_hex, sign_plan,
+    Envelope, Supervision, private_key_pem, public_key_pem, read_private_key_pem, sha256_hex,
+    sign_plan,
 };
 
 use crate::cli::SignArgs;
@@ -24,7 +24,8 @@ pub fn keygen(dir: &Path) -> anyhow::Result<()> {
         }
     }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let key = generate_key().map_err(|e| anyhow::anyhow!("no randomness for a key: {e}"))?;
+    let key = twindrive_store::generate_key()
+        .map_err(|e| anyhow::anyhow!("no randomness for a key: {e}"))?;
     write_new(&private, private_key_pem(&key).as_bytes(), 0o600)?;
     if let Err(e) = write_new(
         &public,
@@ -117,7 +118,7 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
     // plans in the directory are left alone).
     let (dir, _, _) = crate::output::split_out_path(&args.out, "plan")?;
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    twindrive_link::upload::write_durably(&args.out, &signed)
+    twindrive_store::write_durably(&args.out, &signed)
         .with_context(|| format!("writing {}", args.out.display()))?;
     let env = twindrive_link::envelope::peek_envelope(&signed).expect("just signed");
     writeln!(

@@ -20,10 +20,10 @@ use twindrive_link::envelope::{
     Envelope, Supervision, Tolerances, peek_envelope, read_private_key_pem, read_public_key_pem,
     sha256_hex, sign_plan,
 };
-use twindrive_link::upload::{DirStore, write_durably};
-use twindrive_mission::plan::{MissionPlan, PlanGeometry};
+use twindrive_mission::plan::MissionPlan;
 use twindrive_net::{Emulation, SessionOptions, down_key, open_session, up_key};
 use twindrive_sim::Scenario;
+use twindrive_store::{DirStore, MasterArchive, RobotDir, write_durably};
 
 use crate::cli::{MasterArgs, OnHandbackArg, RobotArgs, ZenohArgs};
 use crate::usage::usage;
@@ -62,7 +62,7 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
     }
     let site = Scenario::load(&args.site).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
     let ros = read_ros_section(&args.site)?;
-    let mut config = AgentConfig::new(&args.id, &args.state_dir, trusted);
+    let mut config = AgentConfig::new(&args.id, trusted);
     // The agent's clock: zero now, in Unix time and for the driver alike.
     let zero = std::time::Instant::now();
     config.unix_time_at_zero_s = unix_now_s()?;
@@ -145,7 +145,8 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
     zero: std::time::Instant,
     rt: &tokio::runtime::Runtime,
 ) -> anyhow::Result<()> {
-    let mut agent = RobotAgent::new(config, backend)
+    let mut agent = RobotDir::open(&args.state_dir)
+        .and_then(|store| RobotAgent::new(config, backend, store))
         .with_context(|| format!("--state-dir {}", args.state_dir.display()))?;
     let options = session_options(&args.zenoh, None);
     let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
@@ -226,13 +227,13 @@ struct FirstPlan {
 fn first_plan(
     args: &MasterArgs,
     robot: &str,
-    out: &Path,
+    archive: &MasterArchive,
     key: Option<&twindrive_link::envelope::SigningKey>,
 ) -> anyhow::Result<FirstPlan> {
     // An upload this master began and did not finish is resumed when it
     // carries the same plan (a self-signed plan signs to new bytes each run).
-    let pending = out.join("state").join("uploading.signed");
-    let unfinished = std::fs::read(&pending).ok();
+    let pending = archive.upload_path();
+    let unfinished = archive.unfinished_upload();
     let (signed, resume) = if let Some(path) = &args.signed {
         let bytes =
             std::fs::read(path).with_context(|| format!("--signed: reading {}", path.display()))?;
@@ -336,7 +337,7 @@ pub(super) fn signing_key(
 struct Supervised {
     robot: String,
     /// Its output directory (`--out`, or `--out/<id>` in a fleet).
-    out: PathBuf,
+    archive: MasterArchive,
     op: Operator<DirStore>,
     stats: twindrive_net::DriveStats,
 }
@@ -374,9 +375,8 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         } else {
             args.out.clone()
         };
-        std::fs::create_dir_all(out.join("state"))
-            .with_context(|| format!("creating {}", out.display()))?;
-        let first = first_plan(args, robot, &out, key.as_ref())?;
+        let archive = MasterArchive::new(out);
+        let first = first_plan(args, robot, &archive, key.as_ref())?;
         // The twin: the scenario the plan was rehearsed in.
         let twin_scenario = match crate::verification::twin_of(
             &first.plan,
@@ -406,13 +406,16 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             )?;
         }
         // Keep what is being uploaded, so a restarted master resumes it.
-        write_durably(&out.join("state").join("uploading.signed"), &first.signed)
-            .context("keeping the upload's state")?;
-        write_plan_files(&out, &first.plan, &first.plan_json, &first.signed)?;
+        archive.keep_upload(&first.signed).with_context(|| {
+            format!("keeping the upload's state in {}", archive.dir().display())
+        })?;
+        archive
+            .write_plan(&first.plan, &first.plan_json, Some(&first.signed))
+            .with_context(|| format!("writing the plan into {}", archive.dir().display()))?;
         let master = Master::new(
             robot,
             MasterConfig::for_link(profile.as_ref(), args.telemetry_budget),
-            DirStore::new(out.join("state").join("log_chunks")),
+            archive.log_chunks(),
         );
         let calibrated = first.plan.header.calibrated;
         let mut op = Operator::new(
@@ -454,7 +457,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         }
         members.push(Supervised {
             robot: robot.clone(),
-            out,
+            archive,
             op,
             stats: Default::default(),
         });
@@ -514,7 +517,9 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     for m in &mut members {
         m.op.finish_report();
         let report = serde_json::to_vec_pretty(&m.op.report)?;
-        write_durably(&m.out.join("report.json"), &report).context("writing report.json")?;
+        m.archive
+            .write_report(&report)
+            .context("writing report.json")?;
         let outcome = m.op.report.outcome.unwrap_or(Outcome::Failed);
         worst = worse(worst, outcome);
         writeln!(
@@ -532,7 +537,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             m.op.report.uploads.len(),
             m.op.report.handbacks.len(),
             m.op.report.robot_logs.len(),
-            m.out.join("report.json").display()
+            m.archive.report_path().display()
         )?;
         summary.push(serde_json::json!({
             "robot": m.robot,
@@ -682,9 +687,8 @@ async fn supervise(
     show_progress: bool,
     verbosity: Verbosity,
 ) -> anyhow::Result<()> {
-    let out = m.out.clone();
     let robot = m.robot.clone();
-    let mut logs_written = 0usize;
+    let archive = &mut m.archive;
     let mut speaker = Speaker::new(&robot, verbosity, show_progress);
     let mut write_error: Option<anyhow::Error> = None;
     let r = twindrive_net::drive_counting(
@@ -700,19 +704,22 @@ async fn supervise(
         |op| {
             let now_ns = zero.elapsed().as_nanos() as u64;
             if op.master.upload_finished() {
-                let _ = std::fs::remove_file(out.join("state").join("uploading.signed"));
+                archive.upload_finished();
             }
             while let Some((plan, json, signed)) = op.new_plans.pop_front() {
-                if let Err(e) = write_plan_files(&out, &plan, &json, &signed) {
-                    write_error.get_or_insert(e);
+                if let Err(e) = archive.write_plan(&plan, &json, Some(&signed)) {
+                    write_error.get_or_insert(
+                        anyhow::Error::new(e)
+                            .context(format!("writing a plan into {}", archive.dir().display())),
+                    );
                 }
             }
             while let Some((plan, mcap)) = op.new_logs.pop_front() {
-                logs_written += 1;
-                match write_robot_log(&out, logs_written, plan.as_deref(), &mcap) {
-                    Ok(dir) => {
-                        speaker.say(&format!("{robot}: robot log written to {}", dir.display()));
-                        op.report.robot_logs.push(dir.display().to_string());
+                match archive.write_robot_log(plan.as_deref(), &mcap) {
+                    Ok(written) => {
+                        let dir = written.dir.display().to_string();
+                        speaker.say(&format!("{robot}: robot log written to {dir}"));
+                        op.report.robot_logs.push(dir);
                     }
                     Err(e) => {
                         write_error.get_or_insert(e);
@@ -728,142 +735,4 @@ async fn supervise(
         return Err(WriteError(e).into());
     }
     r
-}
-
-/// `plans/<sha256>.json` (the document, byte for byte what was signed) and
-/// `plans/<sha256>.signed`.
-fn write_plan_files(
-    out: &Path,
-    plan: &MissionPlan,
-    json: &[u8],
-    signed: &[u8],
-) -> anyhow::Result<()> {
-    let dir = out.join("plans");
-    std::fs::create_dir_all(&dir)?;
-    write_durably(&dir.join(format!("{}.json", plan.sha256)), json)?;
-    write_durably(&dir.join(format!("{}.signed", plan.sha256)), signed)?;
-    Ok(())
-}
-
-/// A robot log as received: the MCAP, the CSV and header, the real track
-/// (TUM), the plan's (TUM), and range residuals against the plan over time.
-pub(super) fn write_robot_log(
-    out: &Path,
-    n: usize,
-    plan: Option<&MissionPlan>,
-    mcap: &[u8],
-) -> anyhow::Result<PathBuf> {
-    let name = match plan {
-        Some(p) => format!("{n:02}_{}", &p.sha256[..12]),
-        None => format!("{n:02}"),
-    };
-    let dir = out.join("robot_logs").join(name);
-    std::fs::create_dir_all(&dir)?;
-    let mcap_path = dir.join("log.mcap");
-    write_durably(&mcap_path, mcap)?;
-    let log = twindrive_log::read_mcap(&mcap_path)
-        .with_context(|| format!("reading the robot's log {}", mcap_path.display()))?;
-    let mut csv = Vec::new();
-    twindrive_log::write_csv(&log, &mut csv)?;
-    write_durably(&dir.join("log.csv"), &csv)?;
-    write_durably(
-        &dir.join("log.meta.json"),
-        &serde_json::to_vec_pretty(&log.header)?,
-    )?;
-    let mut tum = Vec::new();
-    twindrive_log::write_tum(log.steps.iter().map(|s| (s.t_ns, s.ground_truth)), &mut tum)?;
-    write_durably(&dir.join("real.tum"), &tum)?;
-    if let Some(plan) = plan {
-        let mut predicted = Vec::new();
-        plan.write_tum(&mut predicted)?;
-        write_durably(&dir.join("predicted.tum"), &predicted)?;
-        // Range readings against what the plan's map predicts at the pose
-        // the log records (the truth on a simulated site, the robot's
-        // estimate on a real one).
-        let mut rows = String::from("t_s,beam,measured_m,predicted_m,residual_m\n");
-        let beams = log.beams_per_step();
-        let mut model = plan.range_model();
-        let mut predicted = vec![0.0; model.beams()];
-        let mut residuals: Vec<(f64, f64)> = Vec::new();
-        for (i, step) in log.steps.iter().enumerate() {
-            let fresh = &log.ranges[i * beams..(i + 1) * beams];
-            if !fresh.iter().any(|m| m.is_finite()) {
-                continue;
-            }
-            model.read(&step.ground_truth, &mut predicted);
-            for b in 0..beams {
-                let m = log.ranges[i * beams + b];
-                let Some(&p) = predicted.get(b) else {
-                    continue;
-                };
-                if m.is_finite() {
-                    residuals.push((step.t_s(), m - p));
-                    rows.push_str(&format!(
-                        "{:.3},{b},{m:.4},{p:.4},{:.4}\n",
-                        step.t_s(),
-                        m - p
-                    ));
-                }
-            }
-        }
-        write_durably(&dir.join("range_residuals.csv"), rows.as_bytes())?;
-        comparison_figures(&log, plan, &residuals, &dir)?;
-    }
-    Ok(dir)
-}
-
-/// `comparison.svg|png`: the plan's path against the robot's true one;
-/// `range_residuals.svg|png`: measured minus predicted range over time
-/// (when the log has range readings).
-fn comparison_figures(
-    log: &twindrive_log::MissionLog,
-    plan: &MissionPlan,
-    residuals: &[(f64, f64)],
-    dir: &Path,
-) -> anyhow::Result<()> {
-    use twindrive_plot::{Series, TimeFigure, WorldFigure, palette};
-    let predicted: Vec<(f64, f64)> = plan.samples.iter().map(|s| (s.x_m, s.y_m)).collect();
-    let real: Vec<(f64, f64)> = log
-        .steps
-        .iter()
-        .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m))
-        .collect();
-    WorldFigure {
-        title: "predicted (the plan) against real (the robot)",
-        walls: &[],
-        paths: &[
-            Series {
-                label: "predicted",
-                points: &predicted,
-                color: palette::ALT,
-            },
-            Series {
-                label: "real",
-                points: &real,
-                color: palette::TRUTH,
-            },
-        ],
-        markers: &[],
-        outlines: &[],
-    }
-    .write(&dir.join("comparison"))?;
-    if residuals.is_empty() {
-        // A log that ended before any range reading (a fault at the start).
-        return Ok(());
-    }
-    let thin = twindrive_plot::decimate(residuals, 0.0);
-    TimeFigure {
-        title: "range readings: measured minus the twin's prediction",
-        x_label: "time since the plan started (s)",
-        y_label: "residual (m)",
-        series: &[Series {
-            label: "residual",
-            points: &thin,
-            color: palette::BAD,
-        }],
-        markers: &[],
-        bands: &[],
-    }
-    .write(&dir.join("range_residuals"))?;
-    Ok(())
 }

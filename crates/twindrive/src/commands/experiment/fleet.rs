@@ -288,9 +288,7 @@ fn measure(
             .unwrap_or(1.0);
         // The robot's journal: stops (hand-backs) and log back-fills, on
         // the same Unix clock.
-        let journal = twindrive_agent::robot::Journal::read(
-            &dir.join("robots").join(id).join("journal.jsonl"),
-        )?;
+        let journal = twindrive_store::RobotDir::journal(&dir.join("robots").join(id))?;
         let stops: Vec<f64> = journal
             .iter()
             .filter(|l| {
@@ -424,7 +422,6 @@ pub fn master_cost(
     mission: &Mission0,
     ns: &[usize],
     profile: &LinkProfile,
-    scratch: &Path,
 ) -> anyhow::Result<Vec<CostRow>> {
     let key = SigningKey::from_bytes(&[7; 32]);
     let total: usize = ns.iter().sum();
@@ -447,7 +444,6 @@ pub fn master_cost(
                 profile,
                 k as u64,
                 backend,
-                scratch,
             )?;
             let Mission {
                 op, robot, link, ..
@@ -538,10 +534,7 @@ pub fn run(args: &FleetExperimentArgs) -> anyhow::Result<()> {
             .unwrap_or("lan")
             .parse()
             .map_err(|e| anyhow::anyhow!("--link: {e}"))?;
-        let scratch = tempfile::Builder::new()
-            .prefix(".twindrive-cost-")
-            .tempdir_in(&args.out)?;
-        let rows = master_cost(&mission, &args.cost, &profile, scratch.path())?;
+        let rows = master_cost(&mission, &args.cost, &profile)?;
         for r in &rows {
             writeln!(
                 stdout,

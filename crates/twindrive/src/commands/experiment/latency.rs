@@ -272,7 +272,6 @@ pub fn run_one(
     settings: &Settings,
     job: Job,
     key: &SigningKey,
-    scratch: &Path,
 ) -> anyhow::Result<RunRow> {
     let Job {
         method,
@@ -346,7 +345,6 @@ pub fn run_one(
                 &profile,
                 seed,
                 recorder,
-                scratch,
             )?;
             let until = (settings.max_duration_s * 1e9) as u64;
             let Mission {
@@ -382,7 +380,7 @@ pub fn run_one(
 }
 
 /// Every run of the grid, on every core, in a fixed order of results.
-pub fn run_grid(m: &Mission0, settings: &Settings, scratch: &Path) -> anyhow::Result<Vec<RunRow>> {
+pub fn run_grid(m: &Mission0, settings: &Settings) -> anyhow::Result<Vec<RunRow>> {
     let key = SigningKey::from_bytes(&[7; 32]);
     let mut jobs = Vec::new();
     for &latency in &settings.latencies_s {
@@ -400,7 +398,7 @@ pub fn run_grid(m: &Mission0, settings: &Settings, scratch: &Path) -> anyhow::Re
         }
     }
     super::pool::run_all(&jobs, |&job| {
-        run_one(m, settings, job, &key, scratch).with_context(|| {
+        run_one(m, settings, job, &key).with_context(|| {
             format!(
                 "{} at latency {} s, loss {}, seed {}",
                 job.method.name(),
@@ -804,12 +802,7 @@ pub fn site_like(twin: &Scenario) -> Scenario {
 pub fn demo_section(mission: &Mission0, out: &Path) -> anyhow::Result<(Settings, Vec<Cell>)> {
     let settings = Settings::demo();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let scratch = tempfile::Builder::new()
-        .prefix(".twindrive-experiment-")
-        .tempdir_in(out)
-        .context("a scratch directory for the robots' state")?;
-    let rows = run_grid(mission, &settings, scratch.path())?;
-    drop(scratch);
+    let rows = run_grid(mission, &settings)?;
     let cells = cells(&rows, &settings);
     let md = markdown(&cells, &settings, &intro(mission, &settings));
     let staging = Staging::new(out, "demo-experiment")?;
@@ -903,11 +896,7 @@ pub fn run(args: &LatencyExperimentArgs) -> anyhow::Result<()> {
     )?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let scratch = tempfile::Builder::new()
-        .prefix(".twindrive-experiment-")
-        .tempdir_in(&args.out)
-        .context("a scratch directory for the robots' state")?;
-    let rows = run_grid(&mission, &settings, scratch.path())?;
+    let rows = run_grid(&mission, &settings)?;
     let cells = cells(&rows, &settings);
     let intro = intro(&mission, &settings);
     let md = markdown(&cells, &settings, &intro);
@@ -925,7 +914,6 @@ pub fn run(args: &LatencyExperimentArgs) -> anyhow::Result<()> {
         &staging.dir().join("paths"),
     )?;
     staging.commit()?;
-    drop(scratch);
     out.write_all(md.as_bytes())?;
     writeln!(
         out,

@@ -175,7 +175,6 @@ pub fn run_one(
     profile: &LinkProfile,
     max_duration_s: f64,
     key: &SigningKey,
-    scratch: &std::path::Path,
 ) -> anyhow::Result<Row> {
     let twin = &mission.twin;
     let site = site(twin, &job);
@@ -200,7 +199,6 @@ pub fn run_one(
         profile,
         job.seed,
         recorder,
-        scratch,
     )?;
     m.op.config_mut().max_continuations = 8;
     if !job.localization {
@@ -258,7 +256,6 @@ fn run_all(
     jobs: &[Job],
     profile: &LinkProfile,
     max_duration_s: f64,
-    scratch: &std::path::Path,
 ) -> anyhow::Result<Vec<Row>> {
     let key = SigningKey::from_bytes(&[7; 32]);
     super::pool::run_all(jobs, |job| {
@@ -267,8 +264,7 @@ fn run_all(
             .find(|(s, _)| *s == job.sensors)
             .expect("a mission per sensor set")
             .1;
-        run_one(mission, *job, profile, max_duration_s, &key, scratch)
-            .with_context(|| format!("{job:?}"))
+        run_one(mission, *job, profile, max_duration_s, &key).with_context(|| format!("{job:?}"))
     })
 }
 
@@ -399,18 +395,7 @@ pub fn run(args: &MismatchExperimentArgs) -> anyhow::Result<()> {
     writeln!(out, "{} runs over {}", jobs.len(), args.profile)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let scratch = tempfile::Builder::new()
-        .prefix(".twindrive-experiment-")
-        .tempdir_in(&args.out)
-        .context("a scratch directory for the robots' state")?;
-    let rows = run_all(
-        &missions,
-        &jobs,
-        &profile,
-        args.max_duration,
-        scratch.path(),
-    )?;
-    drop(scratch);
+    let rows = run_all(&missions, &jobs, &profile, args.max_duration)?;
     let md = markdown(&rows, &args.profile);
     let staging = Staging::new(&args.out, "experiment-mismatch")?;
     staging.write_with("results.csv", |w| Ok(w.write_all(csv(&rows).as_bytes())?))?;

@@ -1,0 +1,116 @@
+//! Robot logs home: each plan's log kept in the store once the hand-back
+//! has gone, then uploaded to the master (oldest first, paced to what the
+//! telemetry budget leaves) until it acknowledges it.
+
+use serde_json::json;
+use twindrive_link::upload::{Sender, SenderConfig};
+use twindrive_link::wire::Message;
+use twindrive_log::MissionLog;
+
+use super::RobotAgent;
+use crate::backend::RobotBackend;
+use crate::store::{LogFiles, RobotStore};
+
+/// A robot log on its way to the master.
+pub(super) struct Backfill {
+    pub(super) plan_sha256: String,
+    pub(super) sender: Sender,
+}
+
+impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
+    /// Writes the logs of plans that ended, then the next message of the
+    /// oldest log on its way (one at a time).
+    pub(super) fn poll_backfill(&mut self, now_ns: u64) -> Option<Message> {
+        while let Some((sha, log)) = self.unwritten.pop_front() {
+            self.write_log(&sha, &log, now_ns);
+        }
+        while let Some(b) = self.backfills.front_mut() {
+            if b.sender.is_finished() || b.sender.refused().is_some() {
+                let b = self.backfills.pop_front().expect("front");
+                let event = if b.sender.is_finished() {
+                    "log_acknowledged"
+                } else {
+                    "log_refused"
+                };
+                self.record(now_ns, event, json!({ "plan_sha256": b.plan_sha256 }));
+                continue;
+            }
+            return b.sender.poll_transmit(now_ns);
+        }
+        None
+    }
+
+    pub(super) fn backfill_timeout(&self) -> Option<u64> {
+        self.backfills.front().and_then(|b| {
+            if b.sender.is_finished() || b.sender.refused().is_some() {
+                Some(0)
+            } else {
+                b.sender.poll_timeout()
+            }
+        })
+    }
+
+    fn write_log(&mut self, plan_sha256: &str, log: &MissionLog, now_ns: u64) {
+        let result = (|| -> anyhow::Result<()> {
+            let mut mcap = std::io::Cursor::new(Vec::new());
+            let map = self.backend.map();
+            twindrive_log::write_mcap_with_map(log, map.as_ref(), &mut mcap)?;
+            let mut csv = Vec::new();
+            twindrive_log::write_csv(log, &mut csv)?;
+            let files = LogFiles {
+                mcap: mcap.into_inner(),
+                csv,
+                meta_json: serde_json::to_vec_pretty(&log.header)?,
+            };
+            self.store.store_log(plan_sha256, &files)?;
+            Ok(())
+        })();
+        match result {
+            Ok(()) => {
+                self.record(
+                    now_ns,
+                    "log_written",
+                    json!({
+                        "plan_sha256": plan_sha256,
+                        "steps": log.steps.len(),
+                        "dir": format!("logs/{plan_sha256}"),
+                    }),
+                );
+                self.queue_backfill(plan_sha256);
+            }
+            Err(e) => {
+                self.record(
+                    now_ns,
+                    "log_error",
+                    json!({ "plan_sha256": plan_sha256, "error": e.to_string() }),
+                );
+            }
+        }
+    }
+
+    pub(super) fn queue_backfill(&mut self, plan_sha256: &str) {
+        if self.backfills.iter().any(|b| b.plan_sha256 == plan_sha256) {
+            return;
+        }
+        match self.store.log_mcap(plan_sha256) {
+            Ok(file) => {
+                let pace = 8.0 * 0.7 * self.budget_bytes_s;
+                let sender = Sender::resume(
+                    &self.config.robot_id,
+                    file,
+                    SenderConfig {
+                        pace_bit_s: Some(pace.max(800.0)),
+                        ..SenderConfig::default()
+                    },
+                );
+                self.backfills.push_back(Backfill {
+                    plan_sha256: plan_sha256.into(),
+                    sender,
+                });
+            }
+            Err(e) => {
+                tracing::error!(plan_sha256, error = %e, "a robot log to back-fill")
+            }
+        }
+    }
+}

@@ -1,0 +1,290 @@
+//! Driving an accepted plan: the executive at the backend's control rate,
+//! the navigator's estimate, the robot's log, and the hand-back when
+//! reality departs from the plan.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use serde_json::json;
+use twindrive_link::wire::{Handback, PlanPhase, TransferId, WindowSample};
+use twindrive_log::{MissionLog, StepRecord};
+use twindrive_mission::plan::{MissionPlan, hex};
+
+use super::{RobotAgent, WINDOW_EVERY, WINDOW_TICKS, pose3};
+use crate::backend::RobotBackend;
+use crate::executive::{Executive, Stop};
+use crate::localize::Mode;
+use crate::navigator::{Navigator, initial_estimate, with_learnt_params};
+use crate::store::RobotStore;
+
+/// A plan being driven.
+pub(super) struct Running {
+    pub(super) transfer: TransferId,
+    pub(super) exec: Executive,
+    /// The augmented EKF and the localizer.
+    pub(super) nav: Navigator,
+    /// Whether the localizer has a recent fix (as last journaled).
+    pub(super) localized: bool,
+    pub(super) log: MissionLog,
+    /// Backend time of the plan's first tick.
+    pub(super) t0_s: Option<f64>,
+    pub(super) wheels: [f64; 2],
+    pub(super) max_deviation_m: f64,
+    pub(super) window: VecDeque<WindowSample>,
+    pub(super) tick: u64,
+}
+
+impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
+    pub(super) fn start(
+        &mut self,
+        transfer: TransferId,
+        plan: Arc<MissionPlan>,
+        envelope: &twindrive_link::envelope::Envelope,
+        now_ns: u64,
+    ) {
+        let max_wheel = self.backend.log_header().max_wheel_speed_rad_s;
+        let exec = match Executive::new(
+            plan.clone(),
+            envelope.tolerances,
+            envelope.supervision.dead_man_timeout_s,
+            max_wheel,
+        ) {
+            Ok(e) => e,
+            Err(e) => {
+                let reason = format!("the plan cannot be driven: {e}");
+                self.record(
+                    now_ns,
+                    "stopped",
+                    json!({ "transfer": hex(&transfer), "reason": reason }),
+                );
+                self.set_phase(transfer, PlanPhase::Stopped { reason });
+                return;
+            }
+        };
+        let mut header = self.backend.log_header();
+        header.nominal = plan.header.calibrated;
+        self.record(
+            now_ns,
+            "execution_started",
+            json!({ "transfer": hex(&transfer), "plan_sha256": plan.sha256 }),
+        );
+        self.set_phase(transfer, PlanPhase::Executing);
+        // A continuation starts from where the twin refined the robot's
+        // pose against its map (from the robot's own estimate and its
+        // readings): the robot stands there (`at_start` held) and takes it.
+        let (pose, covariance, start) = match plan.header.start_covariance {
+            Some(c) => (pose3(&plan.header.start), c, "refined by the twin"),
+            None => (
+                self.believed_pose(),
+                self.pose_covariance,
+                "the robot's own",
+            ),
+        };
+        self.pose = pose;
+        self.pose_covariance = covariance;
+        // The wheel parameters it learnt on earlier plans, when it has.
+        let initial = with_learnt_params(
+            initial_estimate(pose, Some(&covariance), &plan.header.calibrated),
+            self.params,
+            &self.params_covariance,
+        );
+        let nav = Navigator::new(
+            &plan,
+            initial,
+            header.ticks_per_rev,
+            self.config.localization,
+        );
+        let localizer = nav.localizer();
+        let how = match localizer.mode() {
+            Mode::Scan => format!(
+                "matching each scan ({} beams) against the plan's map",
+                localizer.beams()
+            ),
+            Mode::Window => format!(
+                "matching {} beam(s) against the plan's map over windows of driving",
+                localizer.beams()
+            ),
+            Mode::None => {
+                "no range sensor or no map: odometry only, as without localization".into()
+            }
+        };
+        self.record(
+            now_ns,
+            "localization",
+            json!({ "transfer": hex(&transfer), "how": how, "start": start, "start_pose": pose }),
+        );
+        self.running = Some(Running {
+            transfer,
+            exec,
+            nav,
+            localized: false,
+            log: MissionLog::new(header),
+            t0_s: None,
+            wheels: [0.0, 0.0],
+            max_deviation_m: 0.0,
+            window: VecDeque::new(),
+            tick: 0,
+        });
+        self.next_tick_ns = now_ns;
+    }
+
+    fn tick_period_ns(&self) -> u64 {
+        ((self.backend.period_s() / self.config.time_scale.max(1e-6)) * 1e9).max(1.0) as u64
+    }
+
+    /// Runs every control tick due by `now_ns` (a process that fell behind
+    /// catches up, a bounded number of ticks at a time).
+    pub(super) fn run_ticks(&mut self, now_ns: u64) {
+        let period = self.tick_period_ns();
+        let mut budget = 1_000;
+        while self.running.is_some() && self.next_tick_ns <= now_ns && budget > 0 {
+            budget -= 1;
+            self.next_tick_ns += period;
+            self.tick(now_ns);
+        }
+    }
+
+    fn tick(&mut self, now_ns: u64) {
+        let Some(r) = &mut self.running else {
+            return;
+        };
+        let Some(reading) = self.backend.step(r.wheels) else {
+            let reason = "the robot's backend stopped".to_string();
+            self.end(Some(Stop::DeadMan { silent_s: 0.0 }), Some(reason), now_ns);
+            return;
+        };
+        self.backend_t_s = reading.t_s;
+        let r = self.running.as_mut().expect("running");
+        let t0 = *r.t0_s.get_or_insert(reading.t_s - self.backend.period_s());
+        // Where the robot is: encoders, any absolute pose, and its range
+        // readings matched against the plan's map.
+        let belief = r.nav.update(&reading);
+        let pose = pose3(&r.nav.pose());
+        let covariance = r.nav.pose_covariance();
+        r.wheels = r.exec.tick(&reading, &belief);
+        r.tick += 1;
+        // The robot's own log of this period.
+        let mut record: StepRecord = reading.record;
+        record.t_ns = ((reading.t_s - t0).max(0.0) * 1e9).round() as u64;
+        r.log.steps.push(record);
+        r.log.ranges.extend_from_slice(&reading.fresh_ranges_m);
+        let reference = r.exec.reference();
+        let deviation = (pose[0] - reference.x_m).hypot(pose[1] - reference.y_m);
+        r.max_deviation_m = r.max_deviation_m.max(deviation);
+        let localizer = r.nav.localizer();
+        let localized = localizer.localized(reading.t_s);
+        let localization_changed = (localized != r.localized && localizer.mode() != Mode::None)
+            .then(|| {
+                r.localized = localized;
+                (hex(&r.transfer), localizer.fixes, localizer.failures)
+            });
+        // Every few ticks, and every tick with a contact or a stop.
+        if r.tick % WINDOW_EVERY == 0 || reading.bump || r.exec.stopped().is_some() {
+            r.window.push_back(WindowSample {
+                plan_t_s: reading.t_s - t0,
+                pose,
+                ranges_m: reading.ranges_m.iter().map(|&v| v as f32).collect(),
+                bump: reading.bump,
+            });
+            if r.window.len() > WINDOW_TICKS / WINDOW_EVERY as usize {
+                r.window.pop_front();
+            }
+        }
+        self.params = r.nav.params();
+        self.params_covariance = r.nav.params_covariance();
+        self.pose = pose;
+        self.pose_covariance = covariance;
+        if reading.bump && !self.last_bump {
+            self.bumps += 1;
+        }
+        self.last_bump = reading.bump;
+        if reading.blocked {
+            self.collisions += 1;
+        }
+        let stopped = r.exec.stopped().cloned();
+        if let Some((transfer, fixes, failures)) = localization_changed {
+            let event = if localized {
+                "localized"
+            } else {
+                "not_localized"
+            };
+            let note = if localized {
+                "the range readings match the plan's map: tracking in the site's frame"
+            } else {
+                "no match with the plan's map for a while: going on by odometry, as without a map"
+            };
+            self.record(
+                now_ns,
+                event,
+                json!({ "transfer": transfer, "fixes": fixes, "failed_matches": failures, "note": note }),
+            );
+        }
+        if let Some((_, stop)) = stopped {
+            self.end(Some(stop), None, now_ns);
+        }
+    }
+
+    /// The plan ended (or the backend did): record it, write the log, hand
+    /// back if reality departed from the plan.
+    fn end(&mut self, stop: Option<Stop>, note: Option<String>, now_ns: u64) {
+        let Some(r) = self.running.take() else {
+            return;
+        };
+        let plan = r.exec.plan().clone();
+        let t = hex(&r.transfer);
+        let plan_t_s = r.window.back().map_or(0.0, |w| w.plan_t_s);
+        let reason = match (&stop, &note) {
+            (_, Some(n)) => n.clone(),
+            (Some(s), None) => s.reason().to_string(),
+            (None, None) => "stopped".into(),
+        };
+        if matches!(stop, Some(Stop::Finished)) && note.is_none() {
+            self.record(
+                now_ns,
+                "execution_finished",
+                json!({ "transfer": t, "plan_t_s": plan_t_s, "max_deviation_m": r.max_deviation_m }),
+            );
+            self.set_phase(r.transfer, PlanPhase::Finished);
+        } else {
+            self.record(
+                now_ns,
+                "stopped",
+                json!({ "transfer": t, "reason": reason, "plan_t_s": plan_t_s, "stop": stop }),
+            );
+            self.set_phase(
+                r.transfer,
+                PlanPhase::Stopped {
+                    reason: reason.clone(),
+                },
+            );
+        }
+        if let Some(s) = stop.as_ref().filter(|s| s.is_handback()) {
+            let (params, covariance) = (r.nav.params(), r.nav.params_covariance());
+            let handback = Handback {
+                plan: r.transfer,
+                reason: s.reason().to_string(),
+                plan_t_s,
+                progress: r.exec.progress() as u32,
+                pose: self.pose,
+                pose_covariance: self.pose_covariance,
+                params,
+                params_covariance: covariance,
+                window: r.window.iter().cloned().collect(),
+            };
+            self.record(
+                now_ns,
+                "handback",
+                json!({
+                    "transfer": t,
+                    "reason": handback.reason,
+                    "plan_t_s": plan_t_s,
+                    "pose": handback.pose,
+                    "params": handback.params,
+                }),
+            );
+            self.handback = Some((handback, 0));
+        }
+        self.unwritten.push_back((plan.sha256.clone(), r.log));
+        self.next_status_ns = now_ns;
+    }
+}

@@ -1,0 +1,30 @@
+//! Durable files at the edge of the processes. The protocol (`twindrive-link`)
+//! and the agents (`twindrive-agent`) touch no file system: what they must
+//! keep goes through their store traits, and this crate keeps it on disk.
+//!
+//! - [`durable`]: a file written whole or not at all (temporary file, sync,
+//!   rename, directory sync), and a line appended and synced;
+//! - [`chunks`]: upload chunks on disk ([`DirStore`], a
+//!   `twindrive_link::upload::ChunkStore`);
+//! - [`counter`]: the last plan counter a robot accepted ([`CounterFile`]);
+//! - [`robot_dir`]: the robot's state directory ([`RobotDir`], a
+//!   `twindrive_agent::store::RobotStore`);
+//! - [`keys`]: fresh ed25519 keys from the operating system's randomness;
+//! - [`archive`]: the master's output folder ([`MasterArchive`]), one
+//!   layout for the master process, the console and in-process missions;
+//! - [`robot_log`]: what the master makes of a robot log it received.
+
+pub mod archive;
+pub mod chunks;
+pub mod counter;
+pub mod durable;
+pub mod keys;
+pub mod robot_dir;
+pub mod robot_log;
+
+pub use archive::{ArchivedLog, MasterArchive};
+pub use chunks::DirStore;
+pub use counter::CounterFile;
+pub use durable::{append_synced, write_durably};
+pub use keys::generate_key;
+pub use robot_dir::RobotDir;
