@@ -42,6 +42,14 @@ pub trait RobotStore {
     fn log_mcap(&mut self, plan_sha256: &str) -> std::io::Result<Vec<u8>>;
 }
 
+/// The journal's lines: every line that parses (a torn last line from a power cut is skipped).
+pub fn parse_journal(journal: &[u8]) -> Vec<serde_json::Value> {
+    journal
+        .split(|&b| b == b'\n')
+        .filter_map(|l| serde_json::from_slice(l).ok())
+        .collect()
+}
+
 /// A robot's state in memory. Clones share one store, so a test (or an
 /// in-process mission) can restart an agent on what it had, and read what
 /// it wrote.
@@ -72,7 +80,7 @@ impl MemoryRobotStore {
 
     /// The journal's lines, parsed.
     pub fn journal_lines(&self) -> Vec<serde_json::Value> {
-        crate::robot::journal::parse(&self.inner().journal)
+        parse_journal(&self.inner().journal)
     }
 
     /// The last plan counter accepted.

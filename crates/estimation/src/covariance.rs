@@ -17,8 +17,6 @@ use std::ops::Index;
 use twindrive_kinematics::{Mat6, StateVec, Transition};
 use wide::{f64x2, f64x4};
 
-use crate::ekf::StateAndCovariance;
-
 /// One column of a 6x6 matrix.
 pub(crate) type Col = [f64; 6];
 
@@ -348,6 +346,13 @@ impl Index<(usize, usize)> for PackedCovariance {
         assert!(i < 6, "index ({i}, {j}) out of a 6x6 matrix");
         &self.0[COLUMN_START[j] + i - j]
     }
+}
+
+/// The estimate: mean and covariance (the filter's contract).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StateAndCovariance {
+    pub state: StateVec,
+    pub covariance: Mat6,
 }
 
 /// A state with its packed covariance (filter histories, smoothed tracks).

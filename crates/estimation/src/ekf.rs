@@ -14,16 +14,10 @@ use nalgebra::SMatrix;
 use serde::{Deserialize, Serialize};
 use twindrive_kinematics::{Mat6, StateVec, Transition, step_with_jacobian, wrap_angle};
 
+pub use crate::covariance::StateAndCovariance;
 use crate::covariance::{
     Col, Lanes, add_wheel_noise, gain, joseph_update, propagate, symmetric_inverse,
 };
-
-/// The estimate: mean and covariance (the filter's contract).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StateAndCovariance {
-    pub state: StateVec,
-    pub covariance: Mat6,
-}
 
 /// Process and measurement noise.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -18,6 +18,12 @@ pub const MAX_ROBOT_ID_BYTES: usize = 64;
 /// SHA-256 of a transfer's whole file: what identifies it on both sides.
 pub type TransferId = [u8; 32];
 
+/// The SHA-256 of a file: its transfer id.
+pub fn transfer_id(file: &[u8]) -> TransferId {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(file).into()
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Message {
     pub version: u16,

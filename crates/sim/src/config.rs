@@ -8,7 +8,7 @@ use parry2d_f64::math::Vector;
 use twindrive_kinematics::{DiffDriveParams, EncoderSpec, Pose};
 use twindrive_log::{LOG_FORMAT, LOG_VERSION, LogHeader, RangeSensorInfo, ns_from_seconds};
 
-use crate::controller::ManualCommand;
+use crate::manual::{ManualCommand, read_manual_commands};
 use crate::scenario::{
     BumpSection, ControllerSection, ScenarioFile, ScriptedSpec, TrackerSection, WallFollowerSpec,
     require_finite, require_non_negative, require_positive, validate_params,
@@ -310,7 +310,7 @@ impl Scenario {
             }
             ControllerSection::Manual(spec) => {
                 let commands_path = base.join(&spec.commands);
-                ControllerConfig::Manual(crate::controller::read_manual_commands(&commands_path)?)
+                ControllerConfig::Manual(read_manual_commands(&commands_path)?)
             }
         };
 

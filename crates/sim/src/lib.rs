@@ -15,6 +15,7 @@
 pub mod builtin;
 mod config;
 pub mod controller;
+pub mod manual;
 pub mod map;
 mod scan;
 pub mod scenario;

@@ -42,7 +42,7 @@ impl RobotDir {
     /// no journal yet; a torn last line is skipped).
     pub fn journal(dir: &Path) -> std::io::Result<Vec<serde_json::Value>> {
         match std::fs::read(dir.join("journal.jsonl")) {
-            Ok(bytes) => Ok(twindrive_agent::robot::journal::parse(&bytes)),
+            Ok(bytes) => Ok(twindrive_agent::store::parse_journal(&bytes)),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
             Err(e) => Err(e),
         }

@@ -5,6 +5,7 @@ mod cli;
 mod commands;
 mod evidence;
 mod figures;
+mod flags;
 mod inputs;
 mod json;
 mod output;

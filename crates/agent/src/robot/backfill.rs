@@ -7,15 +7,9 @@ use twindrive_link::upload::{Sender, SenderConfig};
 use twindrive_link::wire::Message;
 use twindrive_log::MissionLog;
 
-use super::RobotAgent;
+use super::{Backfill, RobotAgent};
 use crate::backend::RobotBackend;
 use crate::store::{LogFiles, RobotStore};
-
-/// A robot log on its way to the master.
-pub(super) struct Backfill {
-    pub(super) plan_sha256: String,
-    pub(super) sender: Sender,
-}
 
 impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     /// Writes the logs of plans that ended, then the next message of the

@@ -6,15 +6,7 @@ use twindrive_mission::plan::hex;
 
 use super::RobotAgent;
 use crate::backend::RobotBackend;
-use crate::store::RobotStore;
-
-/// Every line that parses (a torn last line from a power cut is skipped).
-pub fn parse(journal: &[u8]) -> Vec<serde_json::Value> {
-    journal
-        .split(|&b| b == b'\n')
-        .filter_map(|l| serde_json::from_slice(l).ok())
-        .collect()
-}
+use crate::store::{RobotStore, parse_journal};
 
 fn transfer_from_hex(s: &str) -> Option<TransferId> {
     if s.len() != 64 {
@@ -31,7 +23,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     /// Reads the journal of an earlier run: what each plan file became, a
     /// plan interrupted mid-run (now stopped for good), logs to offer again.
     pub(super) fn recover(&mut self) -> std::io::Result<()> {
-        let lines = parse(&self.store.read_journal()?);
+        let lines = parse_journal(&self.store.read_journal()?);
         let mut executing: Option<TransferId> = None;
         let mut logs: Vec<(String, bool)> = Vec::new();
         for line in &lines {

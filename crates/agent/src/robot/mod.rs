@@ -21,14 +21,14 @@
 //! that was executing is marked stopped and is never driven again (no plan
 //! step runs twice); logs not yet acknowledged are offered again.
 //!
-//! - [`journal`]: the journal's lines and what a restart reads from them;
+//! - `journal`: what a restart reads from the journal;
 //! - `acceptance`: whether a plan that arrived whole is driven;
 //! - `run`: driving it, and the hand-back;
 //! - `backfill`: the robot's logs home.
 
 mod acceptance;
 mod backfill;
-pub mod journal;
+mod journal;
 mod run;
 
 use std::collections::{HashMap, VecDeque};
@@ -36,16 +36,18 @@ use std::collections::{HashMap, VecDeque};
 use ed25519_dalek::VerifyingKey;
 use serde_json::json;
 use twindrive_link::envelope::PlanGate;
-use twindrive_link::upload::{Receiver, ReceiverConfig, ReceiverEvent};
-use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Stamper, Status, TransferId};
+use twindrive_link::upload::{Receiver, ReceiverConfig, ReceiverEvent, Sender};
+use twindrive_link::wire::{
+    Body, Handback, Message, PlanPhase, Stamper, Status, TransferId, WindowSample,
+};
 use twindrive_log::MissionLog;
 use twindrive_mission::plan::hex;
 
 use crate::backend::RobotBackend;
+use crate::executive::Executive;
 use crate::localize::LocalizeSettings;
+use crate::navigator::Navigator;
 use crate::store::RobotStore;
-use backfill::Backfill;
-use run::Running;
 
 /// How the agent runs.
 #[derive(Debug, Clone)]
@@ -82,6 +84,29 @@ impl AgentConfig {
             localization: LocalizeSettings::default(),
         }
     }
+}
+
+/// A plan being driven.
+struct Running {
+    transfer: TransferId,
+    exec: Executive,
+    /// The augmented EKF and the localizer.
+    nav: Navigator,
+    /// Whether the localizer has a recent fix (as last journaled).
+    localized: bool,
+    log: MissionLog,
+    /// Backend time of the plan's first tick.
+    t0_s: Option<f64>,
+    wheels: [f64; 2],
+    max_deviation_m: f64,
+    window: VecDeque<WindowSample>,
+    tick: u64,
+}
+
+/// A robot log on its way to the master.
+struct Backfill {
+    plan_sha256: String,
+    sender: Sender,
 }
 
 /// A plan is driven only by a robot facing its first heading within this (rad).

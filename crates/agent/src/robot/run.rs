@@ -10,29 +10,12 @@ use twindrive_link::wire::{Handback, PlanPhase, TransferId, WindowSample};
 use twindrive_log::{MissionLog, StepRecord};
 use twindrive_mission::plan::{MissionPlan, hex};
 
-use super::{RobotAgent, WINDOW_EVERY, WINDOW_TICKS, pose3};
+use super::{RobotAgent, Running, WINDOW_EVERY, WINDOW_TICKS, pose3};
 use crate::backend::RobotBackend;
 use crate::executive::{Executive, Stop};
 use crate::localize::Mode;
 use crate::navigator::{Navigator, initial_estimate, with_learnt_params};
 use crate::store::RobotStore;
-
-/// A plan being driven.
-pub(super) struct Running {
-    pub(super) transfer: TransferId,
-    pub(super) exec: Executive,
-    /// The augmented EKF and the localizer.
-    pub(super) nav: Navigator,
-    /// Whether the localizer has a recent fix (as last journaled).
-    pub(super) localized: bool,
-    pub(super) log: MissionLog,
-    /// Backend time of the plan's first tick.
-    pub(super) t0_s: Option<f64>,
-    pub(super) wheels: [f64; 2],
-    pub(super) max_deviation_m: f64,
-    pub(super) window: VecDeque<WindowSample>,
-    pub(super) tick: u64,
-}
 
 impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     pub(super) fn start(

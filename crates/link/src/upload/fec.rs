@@ -3,7 +3,6 @@
 
 use std::collections::BTreeMap;
 
-use super::sender::SenderConfig;
 use crate::wire::Offer;
 
 /// The tail block a sender protects, and how many repair shards. The
@@ -13,14 +12,20 @@ use crate::wire::Offer;
 /// shard costs one chunk's time on the link; a shortfall costs about two
 /// round trips after the end: shards are added while the chance of a
 /// shortfall, times that, outweighs one more shard.
-pub(crate) fn tail_block(chunks: u32, chunk_bytes: u32, config: &SenderConfig) -> (u32, u32) {
-    let p = config.loss_hint;
+pub(crate) fn tail_block(
+    chunks: u32,
+    chunk_bytes: u32,
+    loss_hint: f64,
+    rtt_hint_ns: u64,
+    pace_bit_s: Option<f64>,
+) -> (u32, u32) {
+    let p = loss_hint;
     if !(p > 0.0 && p < 1.0) || chunks == 0 {
         return (chunks, 0);
     }
     let per_chunk_bits = 8.0 * (f64::from(chunk_bytes) + 64.0);
-    let rtt_s = config.rtt_hint_ns as f64 * 1e-9;
-    let (in_four_rtt, chunk_s) = match config.pace_bit_s {
+    let rtt_s = rtt_hint_ns as f64 * 1e-9;
+    let (in_four_rtt, chunk_s) = match pace_bit_s {
         Some(rate) => (
             (4.0 * rtt_s * rate / per_chunk_bits).ceil() as u32,
             per_chunk_bits / rate,

@@ -25,23 +25,12 @@
 //! - [`store`]: where a receiver keeps its chunks ([`ChunkStore`]), and a
 //!   store in memory (the durable one on disk is `twindrive-store`'s).
 
-use sha2::{Digest, Sha256};
-
-use crate::wire::TransferId;
-
 pub mod fec;
 pub mod receiver;
 pub mod sender;
 pub mod store;
 
+pub use crate::wire::transfer_id;
 pub use receiver::{Receiver, ReceiverConfig, ReceiverEvent};
-pub use sender::{Sender, SenderConfig, SenderStats};
+pub use sender::{DEFAULT_CHUNK_BYTES, Sender, SenderConfig, SenderStats};
 pub use store::{ChunkStore, MemoryStore};
-
-/// Default chunk payload: small enough for any link's MTU budget.
-pub const DEFAULT_CHUNK_BYTES: u32 = 1024;
-
-/// The SHA-256 of a file: its transfer id.
-pub fn transfer_id(file: &[u8]) -> TransferId {
-    Sha256::digest(file).into()
-}

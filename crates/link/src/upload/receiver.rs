@@ -5,8 +5,7 @@
 use std::collections::VecDeque;
 
 use super::store::ChunkStore;
-use super::transfer_id;
-use crate::wire::{Body, MAX_NAK_RANGES, Message, Offer, Stamper, TransferId};
+use crate::wire::{Body, MAX_NAK_RANGES, Message, Offer, Stamper, TransferId, transfer_id};
 
 /// Receiver settings.
 #[derive(Debug, Clone, Copy)]

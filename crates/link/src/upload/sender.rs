@@ -4,8 +4,10 @@
 use std::collections::VecDeque;
 
 use super::fec::tail_block;
-use super::{DEFAULT_CHUNK_BYTES, transfer_id};
-use crate::wire::{Body, Message, Offer, Stamper, TransferId};
+use crate::wire::{Body, Message, Offer, Stamper, TransferId, transfer_id};
+
+/// Default chunk payload: small enough for any link's MTU budget.
+pub const DEFAULT_CHUNK_BYTES: u32 = 1024;
 
 /// Sender settings.
 #[derive(Debug, Clone, Copy)]
@@ -101,7 +103,13 @@ impl Sender {
         // Repair shards need an even size.
         let chunk_bytes = config.chunk_bytes.max(2).next_multiple_of(2);
         let chunks = (file.len() as u64).div_ceil(u64::from(chunk_bytes)) as u32;
-        let (fec_from, fec_repairs) = tail_block(chunks, chunk_bytes, &config);
+        let (fec_from, fec_repairs) = tail_block(
+            chunks,
+            chunk_bytes,
+            config.loss_hint,
+            config.rtt_hint_ns,
+            config.pace_bit_s,
+        );
         let offer = Offer {
             transfer: transfer_id(&file),
             size: file.len() as u64,

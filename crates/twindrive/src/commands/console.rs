@@ -11,7 +11,7 @@ use crate::cli::ConsoleArgs;
 use crate::usage::usage;
 
 pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
-    super::ops::check_distinct_robots(&args.robot)?;
+    crate::flags::check_distinct_robots(&args.robot)?;
     for o in &args.allow_origin {
         if !(o.starts_with("http://") || o.starts_with("https://")) {
             return Err(usage(format!(
@@ -36,8 +36,8 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
             )
         }
     };
-    let link = super::ops::link_profile(args.link.as_deref())?;
-    let key = super::ops::signing_key(args.key.as_deref())?;
+    let link = crate::flags::link_profile(args.link.as_deref())?;
+    let key = crate::flags::signing_key(args.key.as_deref())?;
     let rehearsal = args
         .rehearsal
         .as_deref()
@@ -63,7 +63,7 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
         params: args
             .calibration
             .as_deref()
-            .map(super::plan::read_calibration)
+            .map(crate::flags::read_calibration)
             .transpose()?,
         robots: args.robot.clone(),
         session: SessionOptions {

@@ -65,30 +65,6 @@ fn write_new(path: &Path, bytes: &[u8], mode: u32) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The bytes of the twin's world a plan was rehearsed in: `scenario` if
-/// given, else the built-in scenario the plan names (`scenario_name`).
-pub fn world_bytes(scenario_name: &str, scenario: Option<&Path>) -> anyhow::Result<Vec<u8>> {
-    Ok(match scenario {
-        Some(path) => std::fs::read(path)
-            .with_context(|| format!("--scenario: reading {}", path.display()))?,
-        None => match twindrive_sim::builtin::ALL
-            .iter()
-            .find(|(n, _)| *n == scenario_name)
-        {
-            Some((_, text)) => text.as_bytes().to_vec(),
-            None => bail!(
-                "the plan's scenario `{scenario_name}` is not built in; pass --scenario with the TOML it was rehearsed in"
-            ),
-        },
-    })
-}
-
-pub fn since_epoch() -> anyhow::Result<std::time::Duration> {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .context("the system clock is before 1970")
-}
-
 pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
     let plan_json =
         std::fs::read(&args.plan).with_context(|| format!("reading {}", args.plan.display()))?;
@@ -96,11 +72,11 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
         .with_context(|| format!("--key: reading {}", args.key.display()))?;
     let key = read_private_key_pem(&key_text)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.key.display()))?;
-    let plan = super::verify_plan::parse_plan(&plan_json, &args.plan)?;
-    let world = world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
+    let plan = crate::flags::parse_plan(&plan_json, &args.plan)?;
+    let world = crate::flags::world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
     let twin = crate::verification::twin_of(&plan, args.scenario.as_deref())?;
     crate::verification::check_before_sending(&plan, &twin, args.allow_failed_verification)?;
-    let now = since_epoch()?;
+    let now = crate::flags::since_epoch()?;
     let envelope = Envelope::new(
         &args.robot,
         args.counter.unwrap_or(now.as_millis() as u64),

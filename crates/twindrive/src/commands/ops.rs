@@ -15,10 +15,9 @@ use twindrive_agent::narrate::{Narrator, Verbosity};
 use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
 use twindrive_agent::twin::Twin;
-use twindrive_link::emulator::{LinkEmulator, LinkProfile};
+use twindrive_link::emulator::LinkEmulator;
 use twindrive_link::envelope::{
-    Envelope, Supervision, Tolerances, peek_envelope, read_private_key_pem, read_public_key_pem,
-    sha256_hex, sign_plan,
+    Envelope, Supervision, Tolerances, peek_envelope, read_public_key_pem, sha256_hex, sign_plan,
 };
 use twindrive_mission::plan::MissionPlan;
 use twindrive_net::{Emulation, SessionOptions, down_key, open_session, up_key};
@@ -46,7 +45,7 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 }
 
 fn unix_now_s() -> anyhow::Result<f64> {
-    Ok(super::keys::since_epoch()?.as_secs_f64())
+    Ok(crate::flags::since_epoch()?.as_secs_f64())
 }
 
 /// `twindrive robot`.
@@ -250,11 +249,11 @@ fn first_plan(
         if same {
             (unfinished.clone().expect("checked"), true)
         } else {
-            let plan = super::verify_plan::parse_plan(&plan_json, path)?;
+            let plan = crate::flags::parse_plan(&plan_json, path)?;
             let world =
-                super::keys::world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
+                crate::flags::world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
             let key = key.expect("clap: --plan requires --key");
-            let now = super::keys::since_epoch()?;
+            let now = crate::flags::since_epoch()?;
             let envelope = Envelope::new(
                 robot,
                 now.as_millis() as u64,
@@ -301,38 +300,6 @@ fn first_plan(
     })
 }
 
-/// The robots a master or the console supervises are distinct (each id is
-/// checked when parsed).
-pub(super) fn check_distinct_robots(robots: &[String]) -> anyhow::Result<()> {
-    let mut seen = std::collections::HashSet::new();
-    for id in robots {
-        if !seen.insert(id) {
-            return Err(usage(format!("--robot {id} is given twice")));
-        }
-    }
-    Ok(())
-}
-
-/// `--link PROFILE`, parsed.
-pub(super) fn link_profile(arg: Option<&str>) -> anyhow::Result<Option<LinkProfile>> {
-    arg.map(|p| p.parse().map_err(|e| usage(format!("--link {p}: {e}"))))
-        .transpose()
-}
-
-/// `--key master.key`, read.
-pub(super) fn signing_key(
-    path: Option<&Path>,
-) -> anyhow::Result<Option<twindrive_link::envelope::SigningKey>> {
-    let Some(path) = path else {
-        return Ok(None);
-    };
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("--key: reading {}", path.display()))?;
-    read_private_key_pem(&text)
-        .map(Some)
-        .map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))
-}
-
 /// One robot the master supervises.
 struct Supervised {
     robot: String,
@@ -346,15 +313,15 @@ struct Supervised {
 /// zenoh session, each robot with its own operator, twin and output
 /// directory.
 pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
-    check_distinct_robots(&args.robot)?;
+    crate::flags::check_distinct_robots(&args.robot)?;
     let fleet = args.robot.len() > 1;
     if fleet && args.signed.is_some() {
         return Err(usage(
             "--signed holds a plan signed for one robot; a fleet needs --plan and --key (each robot gets its own signature)",
         ));
     }
-    let profile = link_profile(args.link.as_deref())?;
-    let key = signing_key(args.key.as_deref())?;
+    let profile = crate::flags::link_profile(args.link.as_deref())?;
+    let key = crate::flags::signing_key(args.key.as_deref())?;
     let verbosity = if args.quiet {
         Verbosity::Quiet
     } else if args.verbose {

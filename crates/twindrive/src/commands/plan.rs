@@ -6,7 +6,6 @@ use std::io::Write;
 use std::path::Path;
 
 use anyhow::{Context, bail};
-use serde::Deserialize;
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_log::MissionLog;
 use twindrive_mission::pipeline::{PipelineSettings, StageSummary, Stages};
@@ -18,27 +17,6 @@ use twindrive_sim::Scenario;
 use crate::cli::PlanArgs;
 use crate::figures;
 use crate::output::Staging;
-
-/// The three parameters of a `calib.json` (other fields are ignored).
-#[derive(Debug, Deserialize)]
-struct Calibration {
-    left_diameter_m: f64,
-    right_diameter_m: f64,
-    wheelbase_m: f64,
-}
-
-/// Reads the calibrated parameters from a `twindrive calibrate` output.
-pub fn read_calibration(path: &Path) -> anyhow::Result<DiffDriveParams> {
-    let c: Calibration = crate::json::read(
-        path,
-        "a calibration (calib.json from `twindrive calibrate`, with left_diameter_m, right_diameter_m and wheelbase_m)",
-    )?;
-    let params = DiffDriveParams::new(c.left_diameter_m, c.right_diameter_m, c.wheelbase_m);
-    params
-        .validate()
-        .with_context(|| format!("{}", path.display()))?;
-    Ok(params)
-}
 
 /// Everything one plan needs, checked.
 pub struct Job {
@@ -84,7 +62,7 @@ pub fn scenario_for(log: &MissionLog, given: Option<&Path>) -> anyhow::Result<Sc
 fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
     let log = twindrive_log::read_log_dir(&args.log_dir)?;
     let log_sha256 = log_dir_sha256(&args.log_dir)?;
-    let params = read_calibration(&args.calibration).context("--calibration")?;
+    let params = crate::flags::read_calibration(&args.calibration).context("--calibration")?;
     let mut redundancy = match &args.redundancy {
         Some(path) => {
             let text = std::fs::read_to_string(path)

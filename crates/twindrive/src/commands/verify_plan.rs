@@ -4,7 +4,6 @@
 use std::io::Write;
 use std::path::Path;
 
-use anyhow::Context;
 use serde::Serialize;
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::envelope::Tolerances;
@@ -41,20 +40,6 @@ pub struct VerifyReport {
     /// Passed, or why not: the open- and closed-loop replays touch nothing
     /// and stay within the robot's deviation tolerance of the plan's path.
     pub verdict: Verdict,
-}
-
-/// Reads and checks a plan file (format, hash, contents).
-pub fn read_plan(path: &Path) -> anyhow::Result<MissionPlan> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    parse_plan(&bytes, path)
-}
-
-/// Checks the bytes of the plan file `path` (format, hash, contents).
-pub fn parse_plan(bytes: &[u8], path: &Path) -> anyhow::Result<MissionPlan> {
-    let plan: MissionPlan = crate::json::parse(bytes, path, crate::json::PLAN)?;
-    plan.validate()
-        .with_context(|| format!("{}", path.display()))?;
-    Ok(plan)
 }
 
 /// The three replays.
@@ -203,7 +188,7 @@ pub fn print_report(r: &VerifyReport, out: &Path) -> anyhow::Result<()> {
 }
 
 pub fn run(plan_path: &Path, scenario: Option<&Path>, out: &Path) -> anyhow::Result<()> {
-    let plan = read_plan(plan_path)?;
+    let plan = crate::flags::read_plan(plan_path)?;
     let scenario = crate::verification::twin_of(&plan, scenario)?;
     let v = verify(&plan, &scenario)?;
     write_outputs(&plan, &v, &scenario, out)?;

@@ -850,7 +850,7 @@ pub fn inputs(
         None => site_like(&twin),
     };
     let calibrated = match &args.calibration {
-        Some(path) => crate::commands::plan::read_calibration(path)?,
+        Some(path) => crate::flags::read_calibration(path)?,
         None => crate::commands::demo::calibrate_like(&twin)?,
     };
     Ok((twin, world_toml, site, calibrated))
