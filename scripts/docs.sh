@@ -29,10 +29,17 @@ elif MDBOOK=$TOOLS/bin/mdbook && has_version "$MDBOOK"; then
     :
 else
     echo "docs: installing mdbook $MDBOOK_VERSION into $TOOLS (cargo install)" >&2
+    # Built in a directory of its own that goes away after (~300 MB), not
+    # in the workspace's target directory.
+    BUILD=$(mktemp -d)
+    trap 'rm -rf "$BUILD"' EXIT
     cargo install mdbook --locked --version "$MDBOOK_VERSION" --no-default-features \
-        --root "$TOOLS" --force --quiet
+        --root "$TOOLS" --target-dir "$BUILD" --force --quiet
     MDBOOK=$TOOLS/bin/mdbook
-    has_version "$MDBOOK"
+    if ! has_version "$MDBOOK"; then
+        echo "docs: $MDBOOK is not mdbook v$MDBOOK_VERSION after the install" >&2
+        exit 1
+    fi
 fi
 
 if [[ ${1:-} == --install-only ]]; then
