@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # The whole test suite: formatting, lints, every benchmark in smoke mode,
-# every test in the workspace. Needs the Rust toolchain (with rustfmt and
-# clippy), Node.js's npm (the console's pinned front-end libraries) and
-# python3 with venv and pip; installs Debian's chromium and chromium-driver
-# for the console's browser tests when they are missing, and the pinned
-# Python ROS 2 peers (rosbags, mcap-ros2-support) the ROS interop tests
-# check against. Run from anywhere. Prints the time of each stage at the end.
+# every test in the workspace, the book built and its links checked. Needs
+# the Rust toolchain (with rustfmt and clippy), Node.js's npm (the console's
+# pinned front-end libraries) and python3 with venv and pip; installs
+# Debian's chromium and chromium-driver for the console's browser tests when
+# they are missing, the pinned Python ROS 2 peers (rosbags,
+# mcap-ros2-support) the ROS interop tests check against, and the pinned
+# mdBook (scripts/docs.sh). Run from anywhere. Prints the time of each stage
+# at the end.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -39,6 +41,24 @@ wait_for_deps() {
     cat "$DEPS_LOG" >&2
 }
 
+# mdBook (scripts/docs.sh) compiles from crates.io in the background too,
+# at a lower priority than the workspace's build; nothing to do when it is
+# already installed.
+DOCS_LOG=$(mktemp)
+nice -n 10 bash scripts/docs.sh --install-only >"$DOCS_LOG" 2>&1 &
+DOCS_PID=$!
+build_docs() {
+    if ! wait "$DOCS_PID"; then
+        cat "$DOCS_LOG" >&2
+        echo "installing mdbook failed" >&2
+        return 1
+    fi
+    cat "$DOCS_LOG" >&2
+    bash scripts/docs.sh
+}
+
+# Links first: a broken one fails in a second, not after the build.
+stage "links in README and the book" python3 scripts/check_links.py
 stage "cargo fmt --check" cargo fmt --all --check
 stage "cargo clippy" cargo clippy --workspace --all-targets -- -D warnings
 stage "build the tests" cargo test --workspace --no-run
@@ -47,3 +67,4 @@ stage "test peers (chromium, Python ROS 2 packages)" wait_for_deps
 # of CI), on the dev build: a change that breaks a benchmark fails here.
 stage "benchmarks, smoke mode" env PEERS=0 bash bench/smoke.sh
 stage "cargo test" cargo test --workspace
+stage "the book: mdbook build, links" build_docs

@@ -508,6 +508,46 @@ mod tests {
         assert!(symmetric_inverse(&s, 3).is_none());
     }
 
+    /// Which multiply-add the kernels compute is decided when they are
+    /// compiled: fused (one rounding) where the target has FMA, which
+    /// `-C target-cpu=native` (`.cargo/config.toml`) turns on for a CPU that
+    /// has it, unfused (two roundings) otherwise. So the last bits of a
+    /// filter's result depend on the CPU the build was made for.
+    #[test]
+    fn multiply_adds_are_fused_exactly_when_the_target_has_fma() {
+        use std::hint::black_box;
+        // (1 + 2^-30)(1 - 2^-30) = 1 - 2^-60 exactly, which rounds to 1.
+        let e = 2f64.powi(-30);
+        let (a, b, c) = (black_box(1.0 + e), black_box(1.0 - e), black_box(-1.0));
+        let fused = -(e * e);
+        let unfused = 0.0;
+        assert_eq!(a.mul_add(b, c), fused);
+        assert_eq!(a * b + c, unfused);
+
+        let scalar = if cfg!(target_feature = "fma") {
+            fused
+        } else {
+            unfused
+        };
+        assert_eq!(fma(a, b, c).to_bits(), scalar.to_bits());
+
+        // The SIMD column updates go through `wide`, which also fuses with
+        // NEON on aarch64 (where Rust has no `fma` target feature).
+        let simd = if cfg!(any(
+            target_feature = "fma",
+            all(target_arch = "aarch64", target_feature = "neon")
+        )) {
+            fused
+        } else {
+            unfused
+        };
+        let mut column = Lanes::load(&[c; 6]);
+        column.axpy(b, &Lanes::load(&[a; 6]));
+        for v in column.to_col() {
+            assert_eq!(v.to_bits(), simd.to_bits());
+        }
+    }
+
     #[test]
     fn packing_round_trips_and_indexes_symmetrically() {
         let mut rng = ChaCha8Rng::seed_from_u64(4);

@@ -1,5 +1,6 @@
 //! No file in the repository can rot unnoticed: every scenario, benchmark
-//! setup and example TOML loads and runs.
+//! setup and example TOML loads and runs (and the book's configuration
+//! names its sources; `scripts/docs.sh` builds the book).
 
 mod common;
 
@@ -80,6 +81,16 @@ fn every_toml_in_the_repository_loads_and_runs() {
                 .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             assert!(pruned.kept.len() < path_samples.len(), "{}", path.display());
             definitions += 1;
+        } else if let Some(book) = table.get("book") {
+            // mdBook's configuration (docs/book.toml): its sources are there.
+            let src = book.get("src").and_then(|s| s.as_str()).unwrap_or("src");
+            let summary = path.parent().unwrap().join(src).join("SUMMARY.md");
+            assert!(
+                summary.is_file(),
+                "{}: no {}",
+                path.display(),
+                summary.display()
+            );
         } else {
             panic!(
                 "{}: neither a scenario nor a redundancy definition; teach this test what it is",
