@@ -228,3 +228,186 @@ fn link_and_agent_touch_no_file_system_socket_clock_or_randomness() {
         found.join("\n")
     );
 }
+
+/// The module a source file is (`src/robot/run.rs`: `robot::run`;
+/// `src/robot/mod.rs`: `robot`; the crate root: nothing).
+fn module_of(src: &Path, file: &Path) -> Vec<String> {
+    let rel = file.strip_prefix(src).unwrap();
+    let mut parts: Vec<String> = rel
+        .iter()
+        .map(|c| c.to_string_lossy().trim_end_matches(".rs").to_string())
+        .collect();
+    if parts.last().is_some_and(|p| p == "mod") {
+        parts.pop();
+    }
+    if parts.len() == 1 && (parts[0] == "lib" || parts[0] == "main") {
+        parts.clear();
+    }
+    parts
+}
+
+/// The paths a line of code names from `crate::` and `super::`, and from
+/// the file's own child modules (`use run::Running`), as module paths
+/// (items included: the caller resolves them to the longest module).
+fn paths_named(code: &str, own: &[String], children: &[String]) -> Vec<Vec<String>> {
+    let ident = |s: &str| -> Vec<String> {
+        let mut out = Vec::new();
+        for part in s.split("::") {
+            let name: String = part
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            if name.is_empty() {
+                break;
+            }
+            let whole = name.len() == part.len();
+            out.push(name);
+            if !whole {
+                break;
+            }
+        }
+        out
+    };
+    // What follows a prefix: one path, or a `{...}` group of them.
+    let expand = |rest: &str, base: Vec<String>| -> Vec<Vec<String>> {
+        if let Some(group) = rest.strip_prefix('{') {
+            let end = group.find('}').unwrap_or(group.len());
+            group[..end]
+                .split(',')
+                .map(|p| [base.clone(), ident(p.trim())].concat())
+                .collect()
+        } else {
+            vec![[base, ident(rest)].concat()]
+        }
+    };
+    let mut found = Vec::new();
+    let bytes = code.as_bytes();
+    for (k, _) in code.match_indices("crate::") {
+        if k > 0 && (bytes[k - 1].is_ascii_alphanumeric() || bytes[k - 1] == b'_') {
+            continue;
+        }
+        found.extend(expand(&code[k + 7..], Vec::new()));
+    }
+    for (k, _) in code.match_indices("super::") {
+        if k > 0
+            && (bytes[k - 1].is_ascii_alphanumeric()
+                || bytes[k - 1] == b'_'
+                || bytes[k - 1] == b':')
+        {
+            continue;
+        }
+        // Each `super` is the module's parent (a `mod.rs` is its directory's
+        // module).
+        let mut base = own.to_vec();
+        let mut rest = &code[k..];
+        while let Some(r) = rest.strip_prefix("super::") {
+            base.pop();
+            rest = r;
+        }
+        found.extend(expand(rest, base));
+    }
+    let code = code.trim_start();
+    let code = code.strip_prefix("pub ").unwrap_or(code);
+    if let Some(rest) = code.strip_prefix("use ") {
+        for child in children {
+            if let Some(r) = rest.strip_prefix(&format!("{child}::")) {
+                let base = [own.to_vec(), vec![child.clone()]].concat();
+                found.extend(expand(r, base));
+            }
+        }
+    }
+    found
+}
+
+/// The files of each crate use one another without a circle: a module uses
+/// what lies beside or below it and never something that uses it back. A
+/// module's own parts may use their parent (a directory module's `mod.rs`
+/// is their façade and holds what they share), and the crate root is no
+/// node.
+#[test]
+fn no_circle_between_the_files_of_a_crate() {
+    let mut circles = Vec::new();
+    let mut crates = 0;
+    for entry in std::fs::read_dir(repo().join("crates")).unwrap() {
+        let src = entry.unwrap().path().join("src");
+        let mut files = Vec::new();
+        rust_files(&src, &mut files);
+        if files.is_empty() {
+            continue;
+        }
+        crates += 1;
+        files.sort();
+        let modules: Vec<Vec<String>> = files.iter().map(|f| module_of(&src, f)).collect();
+        let index = |path: &[String]| -> Option<usize> {
+            (1..=path.len())
+                .rev()
+                .find_map(|n| modules.iter().position(|m| m.as_slice() == &path[..n]))
+        };
+        let mut edges: Vec<Vec<usize>> = vec![Vec::new(); files.len()];
+        for (i, file) in files.iter().enumerate() {
+            if modules[i].is_empty() {
+                continue;
+            }
+            let text = std::fs::read_to_string(file).unwrap();
+            let children: Vec<String> = text
+                .lines()
+                .filter_map(|l| {
+                    let l = l.trim_start();
+                    let l = l.strip_prefix("pub ").unwrap_or(l);
+                    let name = l.strip_prefix("mod ")?.strip_suffix(';')?;
+                    Some(name.to_string())
+                })
+                .collect();
+            // Test modules may use anything of their file's parent.
+            let code = text.split("#[cfg(test)]").next().unwrap_or_default();
+            for line in code.lines() {
+                if line.trim_start().starts_with("//") {
+                    continue;
+                }
+                for path in paths_named(line, &modules[i], &children) {
+                    if let Some(j) = index(&path)
+                        && j != i
+                        && !modules[j].is_empty()
+                        && !modules[i].starts_with(&modules[j])
+                        && !edges[i].contains(&j)
+                    {
+                        edges[i].push(j);
+                    }
+                }
+            }
+        }
+        // A circle: a file that reaches itself.
+        for start in 0..files.len() {
+            let mut stack = vec![(start, vec![start])];
+            let mut seen = vec![false; files.len()];
+            while let Some((at, trail)) = stack.pop() {
+                for &next in &edges[at] {
+                    if next == start {
+                        if trail.iter().min() == Some(&start) {
+                            let names: Vec<_> = trail
+                                .iter()
+                                .map(|&k| {
+                                    files[k]
+                                        .strip_prefix(repo().join("crates"))
+                                        .unwrap_or(&files[k])
+                                        .display()
+                                        .to_string()
+                                })
+                                .collect();
+                            circles.push(names.join(" -> "));
+                        }
+                    } else if !seen[next] {
+                        seen[next] = true;
+                        stack.push((next, [trail.clone(), vec![next]].concat()));
+                    }
+                }
+            }
+        }
+    }
+    assert!(crates >= 13, "{crates} crates");
+    assert!(
+        circles.is_empty(),
+        "files in a circle:\n{}",
+        circles.join("\n")
+    );
+}

@@ -482,7 +482,7 @@ pub fn run(args: &FleetExperimentArgs) -> anyhow::Result<()> {
     let twin = twindrive_sim::builtin::load("wall_following")
         .expect("built in")
         .context("the built-in wall_following scenario")?;
-    let calibrated = super::super::demo::calibrate_like(&twin)?;
+    let calibrated = super::super::calibrate::calibrate_like(&twin)?;
     let site = site_like(&twin);
     let mission = Mission0::rehearse(
         twin,

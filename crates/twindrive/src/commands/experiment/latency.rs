@@ -851,7 +851,7 @@ pub fn inputs(
     };
     let calibrated = match &args.calibration {
         Some(path) => crate::flags::read_calibration(path)?,
-        None => crate::commands::demo::calibrate_like(&twin)?,
+        None => crate::commands::calibrate::calibrate_like(&twin)?,
     };
     Ok((twin, world_toml, site, calibrated))
 }
