@@ -56,7 +56,8 @@ pub enum Command {
     /// parameters; redundancy (retraced loops, bump-and-back-up kinks, a
     /// trailing retrace) removed without dropping explored ground; wheel
     /// speeds re-computed; control spikes filtered within the robot's wheel
-    /// limits; the twin's predicted sensor readings along it. Writes --out
+    /// limits; the twin's site map (its walls and blocks), which the robot
+    /// localizes against and predicts its readings from. Writes --out
     /// (versioned JSON with a SHA-256 over its content) and beside it
     /// <stem>.csv, <stem>.tum, <stem>_stages.mcap (every stage, for
     /// Foxglove) and the figures <stem>_executed (pinch points),
@@ -131,7 +132,8 @@ pub enum Command {
     /// document compressed. A robot accepts it only if every part checks.
     Sign(SignArgs),
     /// Run the robot agent: receive signed plans over zenoh, drive them on
-    /// the robot (a site simulator today) and hand control back when
+    /// the robot (a simulated site, or a ROS 2 robot when the site has a
+    /// `[ros]` section) and hand control back when
     /// reality departs from the twin.
     ///
     /// Keeps its journal (journal.jsonl), accepted plans (plans/<sha256>.json),
@@ -298,7 +300,8 @@ pub struct MismatchExperimentArgs {
     /// link's draws).
     #[arg(long, default_value_t = 1, value_parser = usage::count)]
     pub seeds: u64,
-    /// The link profile (see `twindrive link-profiles`).
+    /// The link profile (lan, wifi, satellite-lossy, lunar, mars-relay) with
+    /// optional `key=value` overrides, e.g. `lunar,loss=0.1`.
     #[arg(long, default_value = "lunar")]
     pub profile: String,
     /// Give a run up after this long, seconds of mission time.
@@ -401,8 +404,9 @@ pub struct ZenohArgs {
     /// Connect to this zenoh endpoint (the other process, or a router); repeatable.
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: Vec<String>,
-    /// A standard zenoh JSON5 configuration (TLS, QUIC, client mode through
-    /// a router); --listen and --connect are added to it.
+    /// A standard zenoh JSON5 configuration (client mode through a router,
+    /// timeouts; this build speaks TCP and UDP); --listen and --connect are
+    /// added to it.
     #[arg(long, value_name = "FILE")]
     pub zenoh_config: Option<PathBuf>,
 }
@@ -713,8 +717,8 @@ pub struct PlanArgs {
     pub pinch_distance: Option<f64>,
     #[command(flatten)]
     pub flags: RedundancyFlags,
-    /// The twin's scenario TOML for the sensor predictions (default: the
-    /// built-in scenario named in the log).
+    /// The twin's scenario TOML whose world becomes the plan's site map
+    /// (default: the built-in scenario named in the log).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
     /// Drive the plan as fast as the wheel limits allow (time-optimal

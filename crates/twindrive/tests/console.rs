@@ -38,8 +38,8 @@ struct Console {
 }
 
 fn console(http_port: u16, out: &Path, args: &[&str]) -> Console {
-    // Plans need a robot model: the case study's calibration, as README's
-    // recipe gives it.
+    // Plans need a robot model: the case study's calibration, as the book's
+    // console chapter gives it.
     let calibration = fixture().path("calib.json");
     let model: &[&str] = if args.contains(&"--calibration") {
         &[]

@@ -4,7 +4,7 @@
 //! automatically, then dead-reckon the second half in 30 s windows.
 //!
 //! `cargo test --release -p twindrive --test lawnmower -- --nocapture` prints
-//! the tables in README. Skips (with a message) if `../shared/data` is absent.
+//! the tables in the book (docs/src/calibration.md). Skips (with a message) if `../shared/data` is absent.
 
 mod common;
 
