@@ -66,15 +66,5 @@ stage "test peers (chromium, Python ROS 2 packages)" wait_for_deps
 # Every benchmark in smoke mode, twindrive's side (the Python peers stay out
 # of CI), on the dev build: a change that breaks a benchmark fails here.
 stage "benchmarks, smoke mode" env PEERS=0 bash bench/smoke.sh
-# nextest (where installed) runs the test binaries side by side, each
-# test in its own process, instead of one binary after another; doctests
-# run apart (nextest does not run them).
-run_tests() {
-    if cargo nextest --version >/dev/null 2>&1; then
-        cargo nextest run --workspace --no-fail-fast && cargo test --workspace --doc
-    else
-        cargo test --workspace
-    fi
-}
-stage "tests" run_tests
+stage "cargo test" cargo test --workspace
 stage "the book: mdbook build, links" build_docs
