@@ -27,19 +27,23 @@ report() {
 }
 trap report EXIT
 
+# A job started in the background: wait for it and show what it printed.
+finish() {
+    local pid=$1 log=$2 what=$3
+    if ! wait "$pid"; then
+        cat "$log" >&2
+        echo "$what failed" >&2
+        return 1
+    fi
+    cat "$log" >&2
+}
+
 # The test peers (Debian's chromium, the Python ROS 2 packages) install in
 # the background while the workspace builds.
 DEPS_LOG=$(mktemp)
 (bash scripts/browser-deps.sh && bash scripts/ros-deps.sh >/dev/null) >"$DEPS_LOG" 2>&1 &
 DEPS_PID=$!
-wait_for_deps() {
-    if ! wait "$DEPS_PID"; then
-        cat "$DEPS_LOG" >&2
-        echo "installing the test peers failed" >&2
-        return 1
-    fi
-    cat "$DEPS_LOG" >&2
-}
+wait_for_deps() { finish "$DEPS_PID" "$DEPS_LOG" "installing the test peers"; }
 
 # mdBook (scripts/docs.sh) compiles from crates.io in the background too,
 # at a lower priority than the workspace's build; nothing to do when it is
@@ -47,15 +51,7 @@ wait_for_deps() {
 DOCS_LOG=$(mktemp)
 nice -n 10 bash scripts/docs.sh --install-only >"$DOCS_LOG" 2>&1 &
 DOCS_PID=$!
-build_docs() {
-    if ! wait "$DOCS_PID"; then
-        cat "$DOCS_LOG" >&2
-        echo "installing mdbook failed" >&2
-        return 1
-    fi
-    cat "$DOCS_LOG" >&2
-    bash scripts/docs.sh
-}
+build_docs() { finish "$DOCS_PID" "$DOCS_LOG" "installing mdbook" && bash scripts/docs.sh; }
 
 # Links first: a broken one fails in a second, not after the build.
 stage "links in README and the book" python3 scripts/check_links.py

@@ -41,15 +41,19 @@ impl RobotDir {
     /// The journal's lines in the state directory `dir` (none when it has
     /// no journal yet; a torn last line is skipped).
     pub fn journal(dir: &Path) -> std::io::Result<Vec<serde_json::Value>> {
-        match std::fs::read(dir.join("journal.jsonl")) {
-            Ok(bytes) => Ok(twindrive_agent::store::parse_journal(&bytes)),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
-            Err(e) => Err(e),
-        }
+        Ok(twindrive_agent::store::parse_journal(&journal_bytes(dir)?))
     }
 
     fn log_dir(&self, plan_sha256: &str) -> PathBuf {
         self.dir.join("logs").join(plan_sha256)
+    }
+}
+
+/// The journal's bytes in the state directory `dir` (none before its first line).
+fn journal_bytes(dir: &Path) -> std::io::Result<Vec<u8>> {
+    match std::fs::read(dir.join("journal.jsonl")) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
+        read => read,
     }
 }
 
@@ -61,10 +65,7 @@ impl RobotStore for RobotDir {
     }
 
     fn read_journal(&mut self) -> std::io::Result<Vec<u8>> {
-        match std::fs::read(self.dir.join("journal.jsonl")) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
-            read => read,
-        }
+        journal_bytes(&self.dir)
     }
 
     fn append_journal(&mut self, line: &[u8]) -> std::io::Result<()> {
