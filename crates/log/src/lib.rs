@@ -59,6 +59,16 @@ pub fn read_log_dir(dir: &std::path::Path) -> Result<MissionLog, LogError> {
     read_csv(&dir.join("log.csv"), &header)
 }
 
+/// A mission log: a directory `simulate` wrote, or a log MCAP (robot logs,
+/// rehearsals).
+pub fn read_mission_log(path: &std::path::Path) -> Result<MissionLog, LogError> {
+    if path.is_dir() {
+        read_log_dir(path)
+    } else {
+        read_mcap(path)
+    }
+}
+
 /// What a reader needs to interpret the per-step records.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -186,6 +186,14 @@ fn bounds<'a>(points: impl Iterator<Item = &'a (f64, f64)>) -> Option<((f64, f64
     b
 }
 
+/// Time plots keep at most this many points per series.
+pub const MAX_POINTS: usize = 4000;
+
+/// The step that thins a series of `len` points to at most [`MAX_POINTS`].
+pub fn stride(len: usize) -> usize {
+    len.div_ceil(MAX_POINTS).max(1)
+}
+
 /// Drops points closer than `min_step` to the last kept one (dense paths
 /// render badly); always keeps the last point.
 pub fn decimate(points: &[(f64, f64)], min_step: f64) -> Vec<(f64, f64)> {

@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use twindrive_log::MissionLog;
 use twindrive_mission::plan::MissionPlan;
 
-use crate::{DirStore, write_durably};
+use twindrive_files::write_durably;
+
+use crate::DirStore;
 
 /// What a master keeps of a mission, in one directory:
 /// - `plans/<sha256>.json`: every plan document, byte for byte what was

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use twindrive_link::upload::ChunkStore;
 use twindrive_link::wire::Offer;
 
-use crate::write_durably;
+use twindrive_files::write_durably;
 
 /// Chunks on disk: `DIR/<transfer hex>/<index>.chunk`, each written to a
 /// temporary file, synced and renamed, so a chunk is either whole or absent.

@@ -26,6 +26,6 @@ impl CounterFile {
     }
 
     pub fn store(&self, counter: u64) -> std::io::Result<()> {
-        crate::write_durably(&self.path, format!("{counter}\n").as_bytes())
+        twindrive_files::write_durably(&self.path, format!("{counter}\n").as_bytes())
     }
 }

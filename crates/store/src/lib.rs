@@ -2,8 +2,6 @@
 //! and the agents (`twindrive-agent`) touch no file system: what they must
 //! keep goes through their store traits, and this crate keeps it on disk.
 //!
-//! - [`durable`]: a file written whole or not at all (temporary file, sync,
-//!   rename, directory sync), and a line appended and synced;
 //! - [`chunks`]: upload chunks on disk ([`DirStore`], a
 //!   `twindrive_link::upload::ChunkStore`);
 //! - [`counter`]: the last plan counter a robot accepted ([`CounterFile`]);
@@ -17,7 +15,6 @@
 pub mod archive;
 pub mod chunks;
 pub mod counter;
-pub mod durable;
 pub mod keys;
 pub mod robot_dir;
 pub mod robot_log;
@@ -25,6 +22,5 @@ pub mod robot_log;
 pub use archive::{ArchivedLog, MasterArchive};
 pub use chunks::DirStore;
 pub use counter::CounterFile;
-pub use durable::{append_synced, write_durably};
 pub use keys::generate_key;
 pub use robot_dir::RobotDir;

@@ -4,7 +4,9 @@ use std::path::{Path, PathBuf};
 
 use twindrive_agent::store::{LogFiles, RobotStore};
 
-use crate::{CounterFile, DirStore, append_synced, write_durably};
+use twindrive_files::{append_synced, write_durably};
+
+use crate::{CounterFile, DirStore};
 
 /// A robot's durable state in one directory:
 /// - `journal.jsonl`: one JSON object per line, synced on every line;

@@ -8,7 +8,7 @@ use anyhow::Context;
 use twindrive_log::MissionLog;
 use twindrive_mission::plan::{MissionPlan, PlanGeometry};
 
-use crate::write_durably;
+use twindrive_files::write_durably;
 
 /// A robot log as received, into `dir`: the MCAP, the CSV and header, the real track
 /// (TUM), the plan's (TUM), and range residuals against the plan over time.

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use crate::usage;
-use serde::Serialize;
 
 /// Operate differential-drive robots over slow, lossy links through a digital twin.
 #[derive(Debug, Parser)]
@@ -780,9 +779,8 @@ pub enum StampsArg {
 }
 
 /// Which estimate `calibrate` reports.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Method {
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
     /// The augmented EKF's final estimate.
     Ekf,
     /// The EKF followed by a Rauch-Tung-Striebel smoother (same final
@@ -860,8 +858,8 @@ pub struct CalibrateArgs {
     #[arg(long, default_value = "0", value_name = "auto|SECONDS")]
     pub time_offset: String,
     /// Which estimate to report.
-    #[arg(long, value_enum, default_value_t = Method::Smoother)]
-    pub method: Method,
+    #[arg(long, value_enum, default_value_t = MethodArg::Smoother)]
+    pub method: MethodArg,
     /// Output JSON; figures and trajectories go beside it.
     #[arg(long, default_value = "calib.json")]
     pub out: PathBuf,

@@ -23,7 +23,7 @@ struct Calibration {
 
 /// Reads the calibrated parameters from a `twindrive calibrate` output.
 pub fn read_calibration(path: &Path) -> anyhow::Result<DiffDriveParams> {
-    let c: Calibration = crate::json::read(
+    let c: Calibration = twindrive_files::json::read(
         path,
         "a calibration (calib.json from `twindrive calibrate`, with left_diameter_m, right_diameter_m and wheelbase_m)",
     )?;
@@ -42,7 +42,7 @@ pub fn read_plan(path: &Path) -> anyhow::Result<MissionPlan> {
 
 /// Checks the bytes of the plan file `path` (format, hash, contents).
 pub fn parse_plan(bytes: &[u8], path: &Path) -> anyhow::Result<MissionPlan> {
-    let plan: MissionPlan = crate::json::parse(bytes, path, crate::json::PLAN)?;
+    let plan: MissionPlan = twindrive_files::json::parse(bytes, path, twindrive_files::json::PLAN)?;
     plan.validate()
         .with_context(|| format!("{}", path.display()))?;
     Ok(plan)

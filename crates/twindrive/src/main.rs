@@ -3,16 +3,8 @@
 
 mod cli;
 mod commands;
-mod evidence;
-mod figures;
 mod flags;
-mod inputs;
-mod json;
-mod output;
-mod progress;
-mod report;
 mod usage;
-mod verification;
 
 use std::process::ExitCode;
 
@@ -43,7 +35,7 @@ fn main() -> ExitCode {
             if usage::is_usage(&err) {
                 eprintln!("\nFor more information, try '--help'.");
                 ExitCode::from(2)
-            } else if err.is::<commands::verify_plan::PlanFailed>() {
+            } else if err.is::<twindrive_workflow::verify::PlanFailed>() {
                 // A plan that failed verification is an answer, not a fault.
                 ExitCode::from(3)
             } else {

@@ -106,8 +106,13 @@ fn every_toml_in_the_repository_loads_and_runs() {
 /// lower layers. Data-only crates sit under the ones that compute with them;
 /// the protocol (`link`) reads plans through `plan` alone, never through the
 /// pipeline or the simulator.
-const LAYERS: [&[&str]; 8] = [
-    &["twindrive-kinematics", "twindrive-plot"],
+const LAYERS: [&[&str]; 9] = [
+    &[
+        "twindrive-kinematics",
+        "twindrive-plot",
+        "twindrive-files",
+        "twindrive-progress",
+    ],
     &["twindrive-plan", "twindrive-log"],
     &[
         "twindrive-sim",
@@ -115,10 +120,11 @@ const LAYERS: [&[&str]; 8] = [
         "twindrive-ros",
         "twindrive-link",
     ],
+    &["twindrive-calibrate"],
     &["twindrive-mission"],
     &["twindrive-agent"],
-    &["twindrive-store", "twindrive-net"],
-    &["twindrive-console"],
+    &["twindrive-store", "twindrive-net", "twindrive-workflow"],
+    &["twindrive-console", "twindrive-experiment"],
     &["twindrive"],
 ];
 

@@ -96,6 +96,8 @@
 //!
 //! [`route_coverage`] measures a finished plan: the route's length within
 //! `r` of the plan, and the stretches it leaves uncovered.
+//! [`RouteProgress`] follows a route being driven on the same grid: which
+//! of it a robot has passed within `r` of, and how far a pose is from it.
 //!
 //! Lengths are along the polyline, durations by the input's time stamps.
 
@@ -107,6 +109,7 @@ mod grid;
 mod prune;
 mod reference;
 mod reversal;
+mod route;
 mod track;
 
 pub use config::{
@@ -116,6 +119,7 @@ pub use coverage::{RouteCoverage, UncoveredStretch, route_coverage};
 pub use prune::{
     Deletion, DeletionReason, Pruned, RefusedCut, remove_redundancy, remove_redundancy_reference,
 };
+pub use route::RouteProgress;
 
 use serde::{Deserialize, Serialize};
 

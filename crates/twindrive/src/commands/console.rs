@@ -42,7 +42,7 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
         .rehearsal
         .as_deref()
         .map(|p| {
-            crate::inputs::read_mission_log(p)
+            twindrive_log::read_mission_log(p)
                 .with_context(|| format!("--rehearsal {}", p.display()))
         })
         .transpose()?;

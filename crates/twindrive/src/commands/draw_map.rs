@@ -3,7 +3,7 @@ use std::path::Path;
 
 use anyhow::Context;
 
-use crate::output::Staging;
+use twindrive_files::Staging;
 
 pub fn run(dir: &Path) -> anyhow::Result<()> {
     let (pgm, yaml) = twindrive_sim::map::draw_office_map();

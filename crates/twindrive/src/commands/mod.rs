@@ -3,7 +3,6 @@
 mod calibrate;
 mod console;
 mod demo;
-mod demo_decoupled;
 mod draw_map;
 mod experiment;
 mod keys;
@@ -13,7 +12,7 @@ mod prune;
 mod rosbag;
 mod simulate;
 mod site_sim;
-pub mod verify_plan;
+mod verify_plan;
 
 use crate::cli::{Args, Command};
 

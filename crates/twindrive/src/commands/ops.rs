@@ -15,6 +15,7 @@ use twindrive_agent::narrate::{Narrator, Verbosity};
 use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
 use twindrive_agent::twin::Twin;
+use twindrive_files::write_durably;
 use twindrive_link::emulator::LinkEmulator;
 use twindrive_link::envelope::{
     Envelope, Supervision, Tolerances, peek_envelope, read_public_key_pem, sha256_hex, sign_plan,
@@ -22,7 +23,7 @@ use twindrive_link::envelope::{
 use twindrive_mission::plan::MissionPlan;
 use twindrive_net::{Emulation, SessionOptions, down_key, open_session, up_key};
 use twindrive_sim::Scenario;
-use twindrive_store::{DirStore, MasterArchive, RobotDir, write_durably};
+use twindrive_store::{DirStore, MasterArchive, RobotDir};
 
 use crate::cli::{MasterArgs, OnHandbackArg, RobotArgs, ZenohArgs};
 use crate::usage::usage;
@@ -160,7 +161,7 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
         );
         let (tx, rx) = (down_key(&args.id), up_key(&args.id));
         let mut stats = twindrive_net::DriveStats::default();
-        let mut voice = crate::progress::Voice::new();
+        let mut voice = twindrive_progress::Voice::new();
         let drive = twindrive_net::drive_counting(
             &mut agent,
             &session,
@@ -345,7 +346,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         let archive = MasterArchive::new(out);
         let first = first_plan(args, robot, &archive, key.as_ref())?;
         // The twin: the scenario the plan was rehearsed in.
-        let twin_scenario = match crate::verification::twin_of(
+        let twin_scenario = match twindrive_workflow::verification::twin_of(
             &first.plan,
             args.scenario.as_deref(),
         ) {
@@ -366,7 +367,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         };
         // Nothing that fails on the twin goes to the robot.
         if let Some(twin) = &twin_scenario {
-            crate::verification::check_before_sending(
+            twindrive_workflow::verification::check_before_sending(
                 &first.plan,
                 twin,
                 args.allow_failed_verification,
@@ -608,7 +609,7 @@ pub(crate) fn process_usage() -> Option<(f64, u64)> {
 struct Speaker {
     narrator: Narrator,
     /// `None` when quiet.
-    voice: Option<crate::progress::Voice>,
+    voice: Option<twindrive_progress::Voice>,
 }
 
 impl Speaker {
@@ -616,9 +617,9 @@ impl Speaker {
     /// plain lines).
     fn new(robot: &str, verbosity: Verbosity, live: bool) -> Self {
         let voice = if live {
-            crate::progress::Voice::new
+            twindrive_progress::Voice::new
         } else {
-            crate::progress::Voice::plain
+            twindrive_progress::Voice::plain
         };
         Self {
             narrator: Narrator::new(robot, verbosity),

@@ -12,8 +12,8 @@ use twindrive_mission::redundancy::{
 };
 
 use crate::cli::PruneArgs;
-use crate::output::Staging;
 use crate::usage::OrUsage;
+use twindrive_files::Staging;
 
 /// Reads `t,x,y,theta` CSV or TUM; velocities from the displacement along
 /// the heading (negative when reversing).
@@ -208,7 +208,7 @@ fn write_file(
     producer: &str,
     fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
-    let (dir, _, file_name) = crate::output::split_out_path(path, default_stem)?;
+    let (dir, _, file_name) = twindrive_files::split_out_path(path, default_stem)?;
     let staging = Staging::new(&dir, producer)?;
     staging.write_with(&file_name, fill)?;
     staging.commit()

@@ -7,10 +7,10 @@ use twindrive_ros::export::{ExportOptions, write_log_bag};
 use twindrive_ros::msgs::Distro;
 
 use crate::cli::{DistroArg, RosbagArgs};
-use crate::output::Staging;
+use twindrive_files::Staging;
 
 pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
-    let log = crate::inputs::read_mission_log(&args.log)?;
+    let log = twindrive_log::read_mission_log(&args.log)?;
     let map = match &args.scenario {
         Some(p) => Some(
             twindrive_sim::Scenario::load(p)

@@ -1,5 +1,5 @@
-//! Turning log files into estimator samples: simulator log directories and
-//! generic encoder/pose CSV files.
+//! Turning recordings into estimator samples: simulator log directories,
+//! generic encoder/pose CSV files and rosbag2 recordings.
 
 use std::path::Path;
 
@@ -8,15 +8,109 @@ use twindrive_estimation::{PoseSample, WheelSample};
 use twindrive_log::MissionLog;
 use twindrive_log::calib_csv::{EncoderCsv, PoseCsv, WheelColumns};
 
-use crate::cli::{CalibrateArgs, JointSignalArg, StampsArg};
+use twindrive_kinematics::Pose;
+use twindrive_ros::extract::{self, PoseSource, Stamps, WheelSource};
 
-/// A mission log: a directory `simulate` wrote, or a log MCAP (robot logs,
-/// rehearsals).
-pub fn read_mission_log(path: &Path) -> anyhow::Result<MissionLog> {
-    if path.is_dir() {
-        Ok(twindrive_log::read_log_dir(path)?)
-    } else {
-        Ok(twindrive_log::read_mcap(path)?)
+/// Where a calibration's samples come from.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A simulator output directory (`log.csv` and `log.meta.json`).
+    LogDir(std::path::PathBuf),
+    /// An encoder CSV and a pose CSV.
+    Csv {
+        encoders: std::path::PathBuf,
+        poses: std::path::PathBuf,
+    },
+    /// A rosbag2 recording.
+    Bag(BagSource),
+}
+
+/// What to read from a rosbag2 recording.
+#[derive(Debug, Clone)]
+pub struct BagSource {
+    pub path: std::path::PathBuf,
+    pub stamps: Stamps,
+    /// The wheels; `None` fails with the topics the bag has.
+    pub wheels: Option<WheelSource>,
+    pub poses: PoseSource,
+}
+
+/// A recording read into samples.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    pub wheels: Vec<WheelSample>,
+    pub poses: Vec<PoseSample>,
+    /// The parameters the recording says the operator believes (simulator
+    /// logs), a calibration's default start.
+    pub nominal: Option<[f64; 3]>,
+    pub ticks_per_rev: Option<u32>,
+    /// The true pose track (simulator logs).
+    pub truth: Option<Vec<(f64, Pose)>>,
+    /// Subtracted from the input's times (bags: Unix seconds).
+    pub time_origin_s: f64,
+}
+
+/// Reads `source`. `signs` flip wheel counters that run backwards;
+/// `ticks_per_rev` is needed for CSV ticks (a simulator log carries its own).
+pub fn read(
+    source: &Source,
+    ticks_per_rev: Option<u32>,
+    signs: [f64; 2],
+) -> anyhow::Result<Recording> {
+    match source {
+        Source::Bag(bag) => {
+            let (wheels, poses, time_origin_s) = from_bag(bag, signs)?;
+            Ok(Recording {
+                wheels,
+                poses,
+                nominal: None,
+                ticks_per_rev,
+                truth: None,
+                time_origin_s,
+            })
+        }
+        Source::LogDir(dir) => {
+            let log = read_log_dir(dir)?;
+            let mut wheels = wheels_from_log(&log);
+            for w in &mut wheels {
+                w.left_rad *= signs[0];
+                w.right_rad *= signs[1];
+            }
+            let n = log.header.nominal;
+            Ok(Recording {
+                wheels,
+                poses: poses_from_log(&log),
+                nominal: Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
+                ticks_per_rev: Some(log.header.ticks_per_rev),
+                truth: Some(
+                    log.steps
+                        .iter()
+                        .map(|s| (s.t_s(), s.ground_truth))
+                        .collect(),
+                ),
+                time_origin_s: 0.0,
+            })
+        }
+        Source::Csv { encoders, poses } => {
+            // The two files are read side by side.
+            let (e, p) = std::thread::scope(|scope| {
+                let e = scope.spawn(|| twindrive_log::calib_csv::read_encoder_csv(encoders));
+                let p = twindrive_log::calib_csv::read_pose_csv(poses);
+                (e.join(), p)
+            });
+            let e = e
+                .map_err(|_| anyhow::anyhow!("reading the encoder log panicked"))?
+                .context("--encoders")?;
+            let p = p.context("--poses")?;
+            Ok(Recording {
+                wheels: wheels_from_csv(&e, encoders, ticks_per_rev, signs)?,
+                poses: poses_from_csv(&p),
+                nominal: None,
+                ticks_per_rev,
+                truth: None,
+                time_origin_s: 0.0,
+            })
+        }
     }
 }
 
@@ -102,47 +196,22 @@ pub fn poses_from_csv(p: &PoseCsv) -> Vec<PoseSample> {
 /// Wheel angles and reference poses from a rosbag2 recording, with times
 /// counted from the first pose's whole second (returned third).
 pub fn from_bag(
-    args: &CalibrateArgs,
+    source: &BagSource,
     signs: [f64; 2],
 ) -> anyhow::Result<(Vec<WheelSample>, Vec<PoseSample>, f64)> {
-    use twindrive_ros::extract::{self, JointSignal, PoseSource, Stamps, WheelSource};
-    let path = args.bag.as_deref().expect("called with --bag");
-    let bag = twindrive_ros::Bag::open(path).context("--bag")?;
-    let stamps = match args.stamps {
-        StampsArg::Header => Stamps::Header,
-        StampsArg::Log => Stamps::LogTime,
-    };
-    let wheel_source = match (&args.ticks_topic, &args.left_joint, &args.right_joint) {
-        (Some(topic), _, _) => WheelSource::Ticks {
-            topic: topic.clone(),
-            left_field: args.left_field.clone().expect("clap requires it"),
-            right_field: args.right_field.clone().expect("clap requires it"),
-            ticks_per_rev: args.ticks_per_rev.expect("clap requires it"),
-        },
-        (None, Some(l), Some(r)) => WheelSource::Joints {
-            topic: args.joint_topic.clone(),
-            left: l.clone(),
-            right: r.clone(),
-            signal: match args.joint_signal {
-                JointSignalArg::Auto => JointSignal::Auto,
-                JointSignalArg::Position => JointSignal::Position,
-                JointSignalArg::Velocity => JointSignal::Velocity,
-            },
-        },
-        _ => bail!(
+    let bag = twindrive_ros::Bag::open(&source.path).context("--bag")?;
+    let stamps = source.stamps;
+    let Some(wheel_source) = &source.wheels else {
+        bail!(
             "--bag: name the wheels with --left-joint and --right-joint (on --joint-topic, default /joint_states), \
              or with --ticks-topic, --left-field and --right-field; the bag has: {}",
             bag.describe_topics()
-        ),
+        );
     };
-    let pose_source = PoseSource {
-        topic: args.pose_topic.clone().expect("clap requires it"),
-        frame: args.pose_frame.clone(),
-        parent: args.pose_parent.clone(),
-    };
+    let pose_source = &source.poses;
     let (wheels, poses) = std::thread::scope(|scope| {
-        let w = scope.spawn(|| extract::wheel_track(&bag, &wheel_source, stamps));
-        let p = extract::pose_track(&bag, &pose_source, stamps);
+        let w = scope.spawn(|| extract::wheel_track(&bag, wheel_source, stamps));
+        let p = extract::pose_track(&bag, pose_source, stamps);
         (w.join(), p)
     });
     let wheels = wheels.map_err(|_| anyhow::anyhow!("reading the wheels panicked"))??;
@@ -178,6 +247,26 @@ pub fn from_bag(
             .collect(),
         origin,
     ))
+}
+
+/// The three ways to give `calibrate` its data.
+pub const INPUTS: &str = "give a simulator output directory (log.csv + log.meta.json from `twindrive simulate`), \
+     both --encoders E.csv and --poses P.csv, or --bag REC.mcap|BAG_DIR";
+
+/// A simulator output directory; any other directory is refused with what
+/// `calibrate` expects.
+fn read_log_dir(dir: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
+    if !dir.join("log.meta.json").is_file() {
+        let what = if !dir.exists() {
+            "does not exist"
+        } else if !dir.is_dir() {
+            "is a file, not a simulator output directory"
+        } else {
+            "is not a simulator log (no log.meta.json in it)"
+        };
+        bail!("{}: {what}; {INPUTS}", dir.display());
+    }
+    Ok(twindrive_log::read_log_dir(dir)?)
 }
 
 /// Shifts encoder times onto the pose clock.

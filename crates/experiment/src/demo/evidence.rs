@@ -13,7 +13,7 @@ use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_log::MissionLog;
 use twindrive_plot::{Series, TimeFigure, WorldFigure, palette};
 
-use crate::inputs;
+use twindrive_calibrate::inputs;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct EllipseRow {

@@ -2,14 +2,13 @@
 //! allows, over each named profile and a grid of losses, in virtual time.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 use twindrive_link::efficiency::{self, Trial};
 use twindrive_link::emulator::{LinkProfile, Outage};
 
-use crate::cli::UploadExperimentArgs;
-use crate::output::Staging;
+use twindrive_files::Staging;
 
 /// The signed case-study plan (bytes), as `twindrive demo` makes it.
 pub const CASE_STUDY_BYTES: usize = 109_950;
@@ -36,7 +35,19 @@ impl Row {
     }
 }
 
-pub fn run(args: &UploadExperimentArgs) -> anyhow::Result<()> {
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Also write results.csv and results.md here.
+    pub out: Option<PathBuf>,
+    /// Seeds per row.
+    pub seeds: u64,
+    /// A quick run (one 20 kB file, loss up to 10 %) that only checks it works.
+    pub smoke: bool,
+}
+
+/// Runs the measurement; the table and the verdict to `out`.
+pub fn run(args: &Config, out: &mut impl Write) -> anyhow::Result<()> {
     let sizes: Vec<(usize, &'static str)> = if args.smoke {
         vec![(20_000, "20 kB")]
     } else {
@@ -53,7 +64,7 @@ pub fn run(args: &UploadExperimentArgs) -> anyhow::Result<()> {
     };
     let mut rows = Vec::new();
     let total = (profiles.len() * LOSSES.len() * sizes.len()) as u64 * args.seeds;
-    let bar = crate::progress::bar(total, "uploading");
+    let bar = twindrive_progress::bar(total, "uploading");
     for name in profiles {
         for loss in LOSSES {
             let mut profile = LinkProfile::named(name).expect("a named profile");
@@ -111,7 +122,6 @@ pub fn run(args: &UploadExperimentArgs) -> anyhow::Result<()> {
     let mut md = String::from(
         "| profile | loss | size | time (s) | ideal (s) | ratio |\n|---|---:|---|---:|---:|---:|\n",
     );
-    let mut out = std::io::stdout().lock();
     writeln!(
         out,
         "{:<16} {:>5} {:<18} {:>10} {:>10} {:>7}",

@@ -10,7 +10,7 @@ pub fn run_all<J: Sync, R: Send>(
     jobs: &[J],
     run: impl Fn(&J) -> anyhow::Result<R> + Sync,
 ) -> anyhow::Result<Vec<R>> {
-    let bar = crate::progress::bar(jobs.len() as u64, "runs");
+    let bar = twindrive_progress::bar(jobs.len() as u64, "runs");
     let next = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<anyhow::Result<R>>>> =
         Mutex::new((0..jobs.len()).map(|_| None).collect());

@@ -1,0 +1,29 @@
+//! Calibration of a differential-drive robot's wheel diameters and
+//! wheelbase from its encoders and an absolute pose reference (a tracker,
+//! motion capture, a localizer), as `twindrive calibrate` and the demo run
+//! it:
+//!
+//! - [`inputs`]: recordings into samples (simulator logs, CSV pairs,
+//!   rosbag2 recordings);
+//! - [`job`]: one calibration's checked inputs ([`Job`]);
+//! - [`run`]: the calibration ([`calibrate`]): the clock offset, the
+//!   window, the augmented EKF (and smoother) beside the batch fit, NEES
+//!   against the truth where a simulator log has it;
+//! - [`report`]: `calib.json` ([`Report`]) and what the figures are drawn from;
+//! - [`output`]: the report, trajectories and figures on disk;
+//! - [`figures`]: the parameter and innovation figures;
+//! - [`drive`]: the built-in calibration drive ([`calibrate_like`]).
+
+pub mod drive;
+pub mod figures;
+pub mod inputs;
+pub mod job;
+pub mod output;
+pub mod report;
+pub mod run;
+
+pub use drive::{calibrate_like, calibration_job};
+pub use job::{Job, Method, Offset};
+pub use output::write_outputs;
+pub use report::{Artefacts, Report, print_report};
+pub use run::calibrate;

@@ -1,0 +1,15 @@
+//! The operator's offline steps on the twin, each into an output directory
+//! written whole or not at all, as the commands and the demo run them:
+//!
+//! - [`simulate`]: a scenario's run (log, ground truth, summary, figures);
+//! - [`plan`]: the mission pipeline from a log to a hashed plan, with an
+//!   MCAP of every stage and the paper's pipeline figures;
+//! - [`verify`]: the plan replayed on the twin, the verdict and the overlay;
+//! - [`verification`]: the check every plan passes before it is sent;
+//! - [`figures`]: the figures of a run and of the pipeline.
+
+pub mod figures;
+pub mod plan;
+pub mod simulate;
+pub mod verification;
+pub mod verify;
