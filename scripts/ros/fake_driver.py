@@ -178,6 +178,7 @@ def main():
         started = time.monotonic()
         moved_at = None
         next_tick = started
+        announced = False
         while not stop.is_set() and time.monotonic() - started < a.run_for:
             now = time.monotonic()
             with lock:
@@ -204,6 +205,10 @@ def main():
                     position=np.array(s["wheel_rad"], dtype=np.float64),
                     velocity=np.array(s["wheel_rad_s"], dtype=np.float64),
                     effort=np.array([], dtype=np.float64)))
+                if not announced:
+                    # The tests start a mission once the robot's joints are live.
+                    print("publishing joint states", file=sys.stderr, flush=True)
+                    announced = True
             x, y, th = s["pose"]
             P = T["geometry_msgs/msg/Pose"](
                 position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
@@ -243,7 +248,7 @@ def main():
             time.sleep(max(0.0, next_tick - time.monotonic()))
 
         # What a `ros2 node list` / `ros2 topic info` would see.
-        tokens = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=2.0) if r.ok]
+        tokens = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=10.0) if r.ok]
         sim.stdin.close()
         sim.wait(timeout=10)
         with lock:

@@ -33,12 +33,7 @@ pub fn calibration_job(
         param_rel_std: 0.1,
         batch_window_s: 1.0,
         ticks_per_rev: Some(log.header.ticks_per_rev),
-        truth: Some(
-            log.steps
-                .iter()
-                .map(|s| (s.t_s(), s.ground_truth))
-                .collect(),
-        ),
+        truth: Some(inputs::truth_from_log(log)),
         time_origin_s: 0.0,
     }
 }

@@ -82,12 +82,7 @@ pub fn read(
                 poses: poses_from_log(&log),
                 nominal: Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
                 ticks_per_rev: Some(log.header.ticks_per_rev),
-                truth: Some(
-                    log.steps
-                        .iter()
-                        .map(|s| (s.t_s(), s.ground_truth))
-                        .collect(),
-                ),
+                truth: Some(truth_from_log(&log)),
                 time_origin_s: 0.0,
             })
         }
@@ -122,6 +117,14 @@ pub fn wheels_from_log(log: &MissionLog) -> Vec<WheelSample> {
             left_rad,
             right_rad,
         })
+        .collect()
+}
+
+/// The true pose track of a simulated log.
+pub fn truth_from_log(log: &MissionLog) -> Vec<(f64, Pose)> {
+    log.steps
+        .iter()
+        .map(|s| (s.t_s(), s.ground_truth))
         .collect()
 }
 

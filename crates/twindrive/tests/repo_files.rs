@@ -124,7 +124,7 @@ const LAYERS: [&[&str]; 9] = [
     &["twindrive-mission"],
     &["twindrive-agent"],
     &["twindrive-store", "twindrive-net", "twindrive-workflow"],
-    &["twindrive-console", "twindrive-experiment"],
+    &["twindrive-console", "twindrive-experiment", "twindrive-ops"],
     &["twindrive"],
 ];
 

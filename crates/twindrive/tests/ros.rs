@@ -642,8 +642,21 @@ impl RosRobot {
         }
     }
 
-    /// Runs a master to the end: its exit code and report.
+    /// Runs a master to the end: its exit code and report. The mission
+    /// starts once the driver publishes joint states, as an operator starts
+    /// one once the robot is up (a robot whose joints never reported stops
+    /// on a sensor fault at the plan's first step, which a slow start of
+    /// the driver on a loaded machine would otherwise cause).
     fn master(&self) -> (Option<i32>, Value) {
+        let started = std::time::Instant::now();
+        while !self.log("driver.log").contains("publishing joint states") {
+            assert!(
+                started.elapsed().as_secs() < 60,
+                "the fake driver published no joint states in 60 s: {}",
+                self.log("driver.log")
+            );
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
         let out = self.dir.path().join("master");
         let m = common::Proc(
             Command::new(env!("CARGO_BIN_EXE_twindrive"))

@@ -6,9 +6,11 @@
 //!   MCAP of every stage and the paper's pipeline figures;
 //! - [`verify`]: the plan replayed on the twin, the verdict and the overlay;
 //! - [`verification`]: the check every plan passes before it is sent;
-//! - [`figures`]: the figures of a run and of the pipeline.
+//! - [`figures`]: the figures of a run and of the pipeline;
+//! - [`inputs`]: plan files and the twin's world, read and checked.
 
 pub mod figures;
+pub mod inputs;
 pub mod plan;
 pub mod simulate;
 pub mod verification;

@@ -77,70 +77,7 @@ pub(super) fn case_study_report(c: &CaseStudy) -> Report {
     ] {
         r.figure(format!("calibration/calib_{file}"), caption);
     }
-    r.heading(3, "Table 1: an ellipse fitted to one circle");
-    r.paragraph(format!(
-        "One circle of the drive (t = {:.2} .. {:.2} s) as the tracker saw it, and as dead reckoning          with the hand-measured and with the calibrated parameters reconstructs it.",
-        c.t1.t0_s, c.t1.t1_s
-    ));
-    r.table(
-        &[
-            "path",
-            "major axis (m)",
-            "minor axis (m)",
-            "area (m²)",
-            "major err",
-            "minor err",
-            "area err",
-        ],
-        c.t1.rows
-            .iter()
-            .map(|row| {
-                vec![
-                    row.source.clone(),
-                    f(row.major_axis_m, 4),
-                    f(row.minor_axis_m, 4),
-                    f(row.area_m2, 4),
-                    format!("{:+.3} %", row.major_error_pct),
-                    format!("{:+.3} %", row.minor_error_pct),
-                    format!("{:+.3} %", row.area_error_pct),
-                ]
-            })
-            .collect(),
-    );
-    r.figure(
-        "evidence/table1_circle",
-        "One circle: tracker, nominal and calibrated dead reckoning",
-    );
-    r.heading(3, "Section 6: what a wrong wheelbase costs");
-    r.table(
-        &[
-            "dead reckoning",
-            "mean squared error (m²)",
-            "RMS (m)",
-            "sum of abs. differences (m)",
-            "final error (m)",
-        ],
-        c.s6.wheelbase_perturbation
-            .iter()
-            .map(|e| {
-                vec![
-                    e.label.clone(),
-                    f(e.mean_squared_error_m2, 4),
-                    f(e.rms_error_m, 3),
-                    f(e.sum_abs_difference_m, 1),
-                    f(e.final_error_m, 3),
-                ]
-            })
-            .collect(),
-    );
-    r.figure(
-        "evidence/section6_wheelbase",
-        "Wheelbase ±4 %: dead-reckoned paths against the true one (Fig. 10)",
-    );
-    r.figure(
-        "evidence/section6_sweep",
-        "Drift against the error of each parameter",
-    );
+    evidence::add_to(&mut r, c.t1, c.s6, 3, "evidence/");
     r.heading(2, "2. The mission on the twin (paper section 5.1)");
     r.paragraph(format!(
         "The wall follower drives around a right-angled wall for {:.0} s ({:.1} m) with one side IR sensor;          it bumped {} time(s), each time backing up and turning away.",

@@ -15,6 +15,8 @@ use twindrive_plot::{Series, TimeFigure, WorldFigure, palette};
 
 use twindrive_calibrate::inputs;
 
+use super::report::Report;
+
 #[derive(Debug, Clone, Serialize)]
 pub struct EllipseRow {
     pub source: String,
@@ -299,38 +301,80 @@ pub fn section6(log: &MissionLog, calibrated: [f64; 3], dir: &Path) -> anyhow::R
     })
 }
 
-/// Markdown of both.
-pub fn markdown(t1: &Table1, s6: &Section6) -> String {
-    let mut md = String::new();
-    md.push_str(&format!(
-        "## Table 1: one circle of the calibration drive (t = {:.2} .. {:.2} s)\n\n",
+/// Table 1 and Section 6 as sections of `r` at heading `level`, their
+/// figures under `figures` (a path prefix relative to the report). The
+/// case study's report and `evidence.md` both render them from here.
+pub fn add_to(r: &mut Report, t1: &Table1, s6: &Section6, level: u8, figures: &str) {
+    let f = |v: f64, d: usize| format!("{v:.d$}");
+    r.heading(level, "Table 1: an ellipse fitted to one circle");
+    r.paragraph(format!(
+        "One circle of the drive (t = {:.2} .. {:.2} s) as the tracker saw it, and as dead reckoning          with the hand-measured and with the calibrated parameters reconstructs it.",
         t1.t0_s, t1.t1_s
     ));
-    md.push_str("| path | major axis (m) | minor axis (m) | area (m²) | major err | minor err | area err |\n|---|---|---|---|---|---|---|\n");
-    for r in &t1.rows {
-        md.push_str(&format!(
-            "| {} | {:.4} | {:.4} | {:.4} | {:+.3} % | {:+.3} % | {:+.3} % |\n",
-            r.source,
-            r.major_axis_m,
-            r.minor_axis_m,
-            r.area_m2,
-            r.major_error_pct,
-            r.minor_error_pct,
-            r.area_error_pct
-        ));
-    }
-    md.push_str("\n![circle](table1_circle.svg)\n\n## Section 6: wheelbase off by ±4 % on the wall-following mission\n\n");
-    md.push_str("| dead reckoning | mean squared error (m²) | RMS (m) | sum of absolute differences (m) | final error (m) |\n|---|---|---|---|---|\n");
-    for e in &s6.wheelbase_perturbation {
-        md.push_str(&format!(
-            "| {} | {:.4} | {:.3} | {:.1} | {:.3} |\n",
-            e.label,
-            e.mean_squared_error_m2,
-            e.rms_error_m,
-            e.sum_abs_difference_m,
-            e.final_error_m
-        ));
-    }
-    md.push_str("\n![fig 10](section6_wheelbase.svg)\n\n![sweep](section6_sweep.svg)\n");
-    md
+    r.table(
+        &[
+            "path",
+            "major axis (m)",
+            "minor axis (m)",
+            "area (m²)",
+            "major err",
+            "minor err",
+            "area err",
+        ],
+        t1.rows
+            .iter()
+            .map(|row| {
+                vec![
+                    row.source.clone(),
+                    f(row.major_axis_m, 4),
+                    f(row.minor_axis_m, 4),
+                    f(row.area_m2, 4),
+                    format!("{:+.3} %", row.major_error_pct),
+                    format!("{:+.3} %", row.minor_error_pct),
+                    format!("{:+.3} %", row.area_error_pct),
+                ]
+            })
+            .collect(),
+    );
+    r.figure(
+        format!("{figures}table1_circle"),
+        "One circle: tracker, nominal and calibrated dead reckoning",
+    );
+    r.heading(level, "Section 6: what a wrong wheelbase costs");
+    r.table(
+        &[
+            "dead reckoning",
+            "mean squared error (m²)",
+            "RMS (m)",
+            "sum of abs. differences (m)",
+            "final error (m)",
+        ],
+        s6.wheelbase_perturbation
+            .iter()
+            .map(|e| {
+                vec![
+                    e.label.clone(),
+                    f(e.mean_squared_error_m2, 4),
+                    f(e.rms_error_m, 3),
+                    f(e.sum_abs_difference_m, 1),
+                    f(e.final_error_m, 3),
+                ]
+            })
+            .collect(),
+    );
+    r.figure(
+        format!("{figures}section6_wheelbase"),
+        "Wheelbase ±4 %: dead-reckoned paths against the true one (Fig. 10)",
+    );
+    r.figure(
+        format!("{figures}section6_sweep"),
+        "Drift against the error of each parameter",
+    );
+}
+
+/// `evidence.md`, for the directory `dir` its figures are in.
+pub fn markdown(t1: &Table1, s6: &Section6, dir: &Path) -> anyhow::Result<String> {
+    let mut r = Report::default();
+    add_to(&mut r, t1, s6, 2, "");
+    r.markdown(dir)
 }

@@ -85,7 +85,7 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
     let staging = Staging::new(&ev_dir, "demo")?;
     let t1 = evidence::table1(&cal_log, nominal, calibrated, staging.dir())?;
     let s6 = evidence::section6(&wf_log, calibrated, staging.dir())?;
-    let md = evidence::markdown(&t1, &s6);
+    let md = evidence::markdown(&t1, &s6, staging.dir())?;
     staging.write_with("evidence.md", |w| Ok(w.write_all(md.as_bytes())?))?;
     staging.write_with("evidence.json", |w| {
         serde_json::to_writer_pretty(w, &serde_json::json!({ "table1": t1, "section6": s6 }))

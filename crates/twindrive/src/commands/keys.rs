@@ -30,15 +30,18 @@ pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
         .with_context(|| format!("--key: reading {}", args.key.display()))?;
     let key = read_private_key_pem(&key_text)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.key.display()))?;
-    let plan = crate::flags::parse_plan(&plan_json, &args.plan)?;
-    let world = crate::flags::world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
+    let plan = twindrive_workflow::inputs::parse_plan(&plan_json, &args.plan)?;
+    let world = twindrive_workflow::inputs::world_bytes(
+        &plan.header.robot.scenario,
+        args.scenario.as_deref(),
+    )?;
     let twin = twindrive_workflow::verification::twin_of(&plan, args.scenario.as_deref())?;
     twindrive_workflow::verification::check_before_sending(
         &plan,
         &twin,
         args.allow_failed_verification,
     )?;
-    let now = crate::flags::since_epoch()?;
+    let now = twindrive_workflow::inputs::since_epoch()?;
     let envelope = Envelope::new(
         &args.robot,
         args.counter.unwrap_or(now.as_millis() as u64),

@@ -31,7 +31,7 @@ pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
     };
     let plan: Option<Vec<(u64, twindrive_kinematics::Pose)>> = match &args.plan {
         Some(p) => {
-            let plan = crate::flags::read_plan(p)?;
+            let plan = twindrive_workflow::inputs::read_plan(p)?;
             let poses = plan
                 .samples
                 .iter()

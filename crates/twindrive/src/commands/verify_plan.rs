@@ -7,7 +7,7 @@ use twindrive_workflow::verification::twin_of;
 use twindrive_workflow::verify::{self, PlanFailed};
 
 pub fn run(plan_path: &Path, scenario: Option<&Path>, out: &Path) -> anyhow::Result<()> {
-    let plan = crate::flags::read_plan(plan_path)?;
+    let plan = twindrive_workflow::inputs::read_plan(plan_path)?;
     let scenario = twin_of(&plan, scenario)?;
     let v = verify::verify(&plan, &scenario)?;
     verify::write_outputs(&plan, &v, &scenario, out)?;

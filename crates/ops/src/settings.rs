@@ -1,0 +1,35 @@
+//! A master process's configuration, checked.
+
+use std::path::PathBuf;
+
+use twindrive_agent::narrate::Verbosity;
+use twindrive_agent::operator::OnHandback;
+use twindrive_link::LinkProfile;
+use twindrive_link::envelope::SigningKey;
+use twindrive_net::SessionOptions;
+
+/// A master process, checked.
+pub struct MasterSettings {
+    /// The plan to sign (`--plan`), or a plan signed already (`--signed`).
+    pub plan: Option<PathBuf>,
+    pub signed: Option<PathBuf>,
+    pub key: Option<SigningKey>,
+    /// The robots, distinct; more than one is a fleet (each its own folder
+    /// under `out`).
+    pub robots: Vec<String>,
+    pub out: PathBuf,
+    pub zenoh: SessionOptions,
+    /// Emulate this link at the master on every robot's traffic.
+    pub profile: Option<LinkProfile>,
+    pub seed: u64,
+    pub expires_in: u64,
+    pub supervise: Option<f64>,
+    pub on_handback: OnHandback,
+    /// The twin's scenario (default: the built-in one the plan names).
+    pub scenario: Option<PathBuf>,
+    pub timeout: f64,
+    pub telemetry_budget: f64,
+    pub log_wait: f64,
+    pub allow_failed_verification: bool,
+    pub verbosity: Verbosity,
+}
