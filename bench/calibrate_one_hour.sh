@@ -15,8 +15,9 @@ source bench/profile.sh
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 
-cargo build "${PROFILE_FLAG[@]}" -q -p twindrive
-cargo run "${PROFILE_FLAG[@]}" -q -p twindrive-estimation --example one_hour_log -- "$WORK/log" "$DURATION_S" >&2
+build -p twindrive --bin twindrive
+build -p twindrive-estimation --example one_hour_log
+example_bin one_hour_log "$WORK/log" "$DURATION_S" >&2
 runs=()
 for i in 1 2 3; do
     start=$EPOCHREALTIME

@@ -12,7 +12,7 @@ TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 if [ "${SMOKE:-0}" = 1 ]; then
     PROFILE=debug; ARGS=(--robots 3 --pages 2 --seconds 3)
-    cargo build -q -p twindrive --bin twindrive --example console_fleet
+    # Built by `cargo test --workspace --no-run` (bench/profile.sh says why).
 else
     PROFILE=release; ARGS=(--robots 20 --pages 3 --seconds 20)
     cargo build -q --release -p twindrive --bin twindrive --example console_fleet

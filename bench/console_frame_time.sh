@@ -12,7 +12,7 @@ TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 if [ "${SMOKE:-0}" = 1 ]; then
     PROFILE=debug; DURATION=60; FRAMES=60
-    cargo build -q -p twindrive --bin twindrive --example console_frame_time
+    # Built by `cargo test --workspace --no-run` (bench/profile.sh says why).
 else
     PROFILE=release; DURATION=3600; FRAMES=300
     cargo build -q --release -p twindrive --bin twindrive --example console_frame_time

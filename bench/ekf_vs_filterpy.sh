@@ -27,7 +27,8 @@ source bench/profile.sh
 
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
-example() { cargo run "${PROFILE_FLAG[@]}" -q -p twindrive-estimation --example ekf_throughput -- "$@"; }
+build -p twindrive-estimation --example ekf_throughput
+example() { example_bin ekf_throughput "$@"; }
 
 echo "writing the input ..." >&2
 example --write-input "$TMP/input.csv"

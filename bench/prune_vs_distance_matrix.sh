@@ -31,7 +31,7 @@ source bench/profile.sh
 
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
-cargo build "${PROFILE_FLAG[@]}" -q -p twindrive-mission --example prune_peer
+build -p twindrive-mission --example prune_peer
 PEER=$ROOT/target/$PROFILE_DIR/examples/prune_peer
 
 echo "writing a $N-sample path (seed $SEED) ..." >&2

@@ -22,8 +22,8 @@ trap 'rm -rf "$WORK"' EXIT
 
 value_of() { awk -v k="$1" '$1 == k { v = $2 } END { if (v == "") exit 1; print v }'; }
 
-cargo build "${PROFILE_FLAG[@]}" -q -p twindrive
-cargo build "${PROFILE_FLAG[@]}" -q -p twindrive-ros --example bag_decode
+build -p twindrive --bin twindrive
+build -p twindrive-ros --example bag_decode
 ./target/$PROFILE_DIR/twindrive simulate scenarios/office_drive.toml --duration-s "$DURATION_S" --out "$WORK/sim" > /dev/null
 ./target/$PROFILE_DIR/twindrive rosbag "$WORK/sim" --scenario scenarios/office_drive.toml --out "$WORK/bag" > /dev/null
 out=$(./target/$PROFILE_DIR/examples/bag_decode "$WORK/bag")

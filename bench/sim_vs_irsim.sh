@@ -29,9 +29,9 @@ value_of() { awk -v k="$1" '$1 == k { v = $2 } END { if (v == "") exit 1; print 
 irsim() {
     MPLBACKEND=Agg "$VENV/bin/python" bench/irsim/run_irsim.py "$@" | value_of irsim_steps_per_s
 }
+build -p twindrive-sim --example throughput
 twindrive() {
-    cargo run "${PROFILE_FLAG[@]}" -q -p twindrive-sim --example throughput -- \
-        "$1" --steps "$TWINDRIVE_STEPS" | value_of steps_per_s
+    example_bin throughput "$1" --steps "$TWINDRIVE_STEPS" | value_of steps_per_s
 }
 
 echo "twindrive, lidar ..." >&2
