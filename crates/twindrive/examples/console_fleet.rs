@@ -13,7 +13,6 @@
 //! console's CPU time (from /proc) and every page's message and byte rates
 //! are measured over a window.
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
@@ -152,14 +151,7 @@ async fn main() -> anyhow::Result<()> {
     let pid = console.id();
     let stdout = console.stdout.take().expect("piped");
     let _console = Proc(console);
-    let mut lines = BufReader::new(stdout).lines();
-    let url = lines
-        .by_ref()
-        .map_while(Result::ok)
-        .find_map(|l| l.strip_prefix("console: open ").map(str::to_owned))
-        .ok_or_else(|| anyhow::anyhow!("the console printed no address"))?;
-    // Keep reading what the console prints.
-    std::thread::spawn(move || lines.for_each(drop));
+    let url = common::console_url(stdout)?;
     let token = url.split("token=").nth(1).expect("a token").to_owned();
 
     // The pages: each counts what it receives.

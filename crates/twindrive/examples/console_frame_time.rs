@@ -13,7 +13,6 @@
 //! frame and reads the map's own draw times (`performance.now()` around
 //! each draw) and the intervals between animation frames.
 
-use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -75,14 +74,7 @@ async fn main() -> anyhow::Result<()> {
         .spawn()?;
     let stdout = console.stdout.take().expect("piped");
     let _console = Proc(console);
-    let mut lines = BufReader::new(stdout).lines();
-    let url = lines
-        .by_ref()
-        .map_while(Result::ok)
-        .find_map(|l| l.strip_prefix("console: open ").map(str::to_owned))
-        .ok_or_else(|| anyhow::anyhow!("the console printed no address"))?;
-    // Keep reading what the console prints.
-    std::thread::spawn(move || lines.for_each(drop));
+    let url = common::console_url(stdout)?;
     let driver_port = free_port();
     let _driver = Proc(
         Command::new("/usr/bin/chromedriver")

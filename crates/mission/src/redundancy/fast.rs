@@ -252,28 +252,13 @@ fn farthest_near(
     cell: u32,
     p: Point,
     pinch_distance2: f64,
-    mut lo: u32,
+    lo: u32,
     hi: u32,
 ) -> Option<u32> {
-    let mut best = None;
-    for &c in grid.neighbours(cell) {
-        if c == NO_CELL {
-            continue;
-        }
-        for e in up_to(grid.entries(c), hi).iter().rev() {
-            let top = e.last.min(hi);
-            if top < lo {
-                break;
-            }
-            // Fails for anchors along segments (NaN position).
-            if distance2(e.pos, p) < pinch_distance2 {
-                best = Some(top);
-                lo = top + 1;
-                break;
-            }
-        }
-    }
-    best
+    // Fails for anchors along segments (NaN position).
+    farthest_in(grid, [cell], lo, hi, |e, _| {
+        distance2(e.pos, p) < pinch_distance2
+    })
 }
 
 /// The largest segment index `b` in `lo..=hi` whose segment `(b, b+1)`
@@ -283,13 +268,33 @@ fn farthest_meeting(
     cells: &[u32],
     pts: &[Point],
     a: usize,
-    mut lo: u32,
+    lo: u32,
     hi: u32,
 ) -> Option<u32> {
     let (p1, p2) = (pts[a], pts[a + 1]);
-    let meets = |b: u32| segments_meet(p1, p2, pts[b as usize], pts[b as usize + 1]);
+    // Segments first..last-1 of a sample entry have zero length at e.pos,
+    // and one test covers the entry: such a segment meets (p1, p2) only if
+    // e.pos lies on it, and then so does (to the bit) segment `last`, which
+    // leaves e.pos.
+    farthest_in(grid, cells.iter().copied(), lo, hi, |_, top| {
+        segments_meet(p1, p2, pts[top as usize], pts[top as usize + 1])
+    })
+}
+
+/// The largest `top = min(e.last, hi)` in `lo..=hi`, over the entries in
+/// the neighbourhoods of `cells`, for which `hit(e, top)` holds. Each
+/// cell's entries are scanned from the latest down, and a hit raises the
+/// bound for the cells after it.
+#[inline]
+fn farthest_in(
+    grid: &Grid,
+    cells: impl IntoIterator<Item = u32>,
+    mut lo: u32,
+    hi: u32,
+    mut hit: impl FnMut(&Entry, u32) -> bool,
+) -> Option<u32> {
     let mut best = None;
-    for &anchor_cell in cells {
+    for anchor_cell in cells {
         for &c in grid.neighbours(anchor_cell) {
             if c == NO_CELL {
                 continue;
@@ -299,11 +304,7 @@ fn farthest_meeting(
                 if top < lo {
                     break;
                 }
-                // Segments first..last-1 of a sample entry have zero length
-                // at e.pos, and one test covers the entry: such a segment
-                // meets (p1, p2) only if e.pos lies on it, and then so does
-                // (to the bit) segment `last`, which leaves e.pos.
-                if meets(top) {
+                if hit(e, top) {
                     best = Some(top);
                     lo = top + 1;
                     break;
