@@ -6,12 +6,13 @@
 set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
+source bench/profile.sh
+build -p twindrive-net --example loopback
 if [ "${SMOKE:-0}" = 1 ]; then
-    cargo run -q -p twindrive-net --example loopback -- --smoke
+    example_bin loopback --smoke
     exit 0
 fi
-cargo build -q --release -p twindrive-net --example loopback
 for run in 1 2 3; do
     echo "run $run"
-    target/release/examples/loopback --mb 32 --pings 500
+    example_bin loopback --mb 32 --pings 500
 done
