@@ -10,13 +10,13 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
+source bench/profile.sh
 if [ "${SMOKE:-0}" = 1 ]; then
-    PROFILE=debug; ARGS=(--robots 3 --pages 2 --seconds 3)
-    # Built by `cargo test --workspace --no-run` (bench/profile.sh says why).
+    ARGS=(--robots 3 --pages 2 --seconds 3)
 else
-    PROFILE=release; ARGS=(--robots 20 --pages 3 --seconds 20)
-    cargo build -q --release -p twindrive --bin twindrive --example console_fleet
+    ARGS=(--robots 20 --pages 3 --seconds 20)
 fi
-BIN="target/$PROFILE"
+build -p twindrive --bin twindrive --example console_fleet
+BIN="target/$PROFILE_DIR"
 "$BIN/twindrive" simulate scenarios/wall_following.toml --duration-s 120 --out "$TMP/mission" >/dev/null 2>&1
 "$BIN/examples/console_fleet" --twindrive "$BIN/twindrive" --rehearsal "$TMP/mission" "${ARGS[@]}"

@@ -10,13 +10,13 @@ cd "$ROOT"
 bash scripts/browser-deps.sh
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
+source bench/profile.sh
 if [ "${SMOKE:-0}" = 1 ]; then
-    PROFILE=debug; DURATION=60; FRAMES=60
-    # Built by `cargo test --workspace --no-run` (bench/profile.sh says why).
+    DURATION=60; FRAMES=60
 else
-    PROFILE=release; DURATION=3600; FRAMES=300
-    cargo build -q --release -p twindrive --bin twindrive --example console_frame_time
+    DURATION=3600; FRAMES=300
 fi
-BIN="target/$PROFILE"
+build -p twindrive --bin twindrive --example console_frame_time
+BIN="target/$PROFILE_DIR"
 "$BIN/twindrive" simulate scenarios/wall_following.toml --duration-s "$DURATION" --out "$TMP/mission" >/dev/null 2>&1
 "$BIN/examples/console_frame_time" --twindrive "$BIN/twindrive" --rehearsal "$TMP/mission" --frames "$FRAMES"

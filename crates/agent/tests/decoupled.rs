@@ -13,7 +13,7 @@ use twindrive_agent::operator::{OnHandback, Operator, OperatorConfig, Outcome};
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
 use twindrive_agent::store::MemoryRobotStore;
 use twindrive_agent::twin::Twin;
-use twindrive_link::emulator::{LinkEmulator, LinkProfile};
+use twindrive_link::emulator::LinkProfile;
 use twindrive_link::envelope::{Envelope, Supervision, sign_plan};
 use twindrive_link::upload::{MemoryStore, SenderConfig};
 use twindrive_link::vtime::VirtualLink;
@@ -106,10 +106,7 @@ fn harness_with_budget(
     budget: f64,
 ) -> Harness {
     let profile: LinkProfile = profile.parse().unwrap();
-    let link = VirtualLink::new(
-        LinkEmulator::new(profile.clone(), seed, 0),
-        LinkEmulator::new(profile.clone(), seed, 1),
-    );
+    let link = VirtualLink::symmetric(&profile, seed);
     let master = Master::new(
         "rover",
         MasterConfig {

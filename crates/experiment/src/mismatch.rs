@@ -368,7 +368,6 @@ pub struct Config {
 /// Runs the grid; `results.csv` and `results.md` into `dir`, the table to
 /// `out`.
 pub fn run(config: &Config, dir: &Path, out: &mut impl Write) -> anyhow::Result<()> {
-    let args = config;
     let profile = config.profile.clone();
     let mut missions = Vec::new();
     let sensor_sets = config.sensors.clone();
@@ -388,10 +387,10 @@ pub fn run(config: &Config, dir: &Path, out: &mut impl Write) -> anyhow::Result<
     }
     let mut jobs = Vec::new();
     for &sensors in &sensor_sets {
-        for &obstacle in &args.obstacle {
-            for &localization in &args.localization {
-                for &error in &args.errors {
-                    for seed in 0..args.seeds {
+        for &obstacle in &config.obstacle {
+            for &localization in &config.localization {
+                for &error in &config.errors {
+                    for seed in 0..config.seeds {
                         jobs.push(Job {
                             sensors,
                             error,
@@ -404,10 +403,10 @@ pub fn run(config: &Config, dir: &Path, out: &mut impl Write) -> anyhow::Result<
             }
         }
     }
-    writeln!(out, "{} runs over {}", jobs.len(), args.profile_text)?;
+    writeln!(out, "{} runs over {}", jobs.len(), config.profile_text)?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let rows = run_all(&missions, &jobs, &profile, args.max_duration_s)?;
-    let md = markdown(&rows, &args.profile_text);
+    let rows = run_all(&missions, &jobs, &profile, config.max_duration_s)?;
+    let md = markdown(&rows, &config.profile_text);
     let staging = Staging::new(dir, "experiment-mismatch")?;
     staging.write_with("results.csv", |w| Ok(w.write_all(csv(&rows).as_bytes())?))?;
     staging.write_with("results.md", |w| Ok(w.write_all(md.as_bytes())?))?;

@@ -12,7 +12,7 @@ use twindrive_agent::operator::{Operator, OperatorConfig};
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
 use twindrive_agent::store::MemoryRobotStore;
 use twindrive_agent::twin::Twin;
-use twindrive_link::emulator::{LinkEmulator, LinkProfile};
+use twindrive_link::emulator::LinkProfile;
 use twindrive_link::envelope::{Envelope, SigningKey, Supervision, Tolerances, sign_plan};
 use twindrive_link::upload::MemoryStore;
 use twindrive_link::vtime::VirtualLink;
@@ -65,10 +65,7 @@ impl<B: RobotBackend> Mission<B> {
         );
         let signed = sign_plan(key, plan_json, envelope).context("signing the plan")?;
         let signed_bytes = signed.len();
-        let link = VirtualLink::new(
-            LinkEmulator::new(profile.clone(), seed, 0),
-            LinkEmulator::new(profile.clone(), seed, 1),
-        );
+        let link = VirtualLink::symmetric(profile, seed);
         let master = Master::new(
             robot_id,
             MasterConfig::for_link(Some(profile), 8_000.0),

@@ -6,7 +6,7 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::emulator::{LinkEmulator, LinkProfile};
+use crate::emulator::LinkProfile;
 use crate::upload::{MemoryStore, Receiver, ReceiverConfig, Sender, SenderConfig};
 use crate::vtime::VirtualLink;
 use crate::wire;
@@ -62,10 +62,7 @@ pub fn upload(profile: &LinkProfile, size: usize, seed: u64, give_up_s: f64) -> 
     let mut sender = Sender::new("rover", file, config);
     // The robot's own receiver settings.
     let mut receiver = Receiver::new("rover", MemoryStore::default(), ReceiverConfig::default());
-    let mut net = VirtualLink::new(
-        LinkEmulator::new(profile.clone(), seed, 0),
-        LinkEmulator::new(profile.clone(), seed, 1),
-    );
+    let mut net = VirtualLink::symmetric(profile, seed);
     let until = (give_up_s * 1e9) as u64;
     // Done when the robot holds the whole file (the master hears so one
     // delay later).

@@ -5,7 +5,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-use crate::emulator::LinkEmulator;
+use crate::emulator::{LinkEmulator, LinkProfile};
 use crate::upload::{ChunkStore, Receiver, Sender};
 use crate::wire::{self, Message};
 
@@ -65,6 +65,15 @@ pub struct VirtualLink {
 }
 
 impl VirtualLink {
+    /// Both directions over `profile`, each with its own random stream of
+    /// `seed` (stream 0 up, A → B; stream 1 down).
+    pub fn symmetric(profile: &LinkProfile, seed: u64) -> Self {
+        Self::new(
+            LinkEmulator::new(profile.clone(), seed, 0),
+            LinkEmulator::new(profile.clone(), seed, 1),
+        )
+    }
+
     pub fn new(up: LinkEmulator, down: LinkEmulator) -> Self {
         Self {
             up,

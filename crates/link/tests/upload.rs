@@ -4,7 +4,7 @@
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use twindrive_link::emulator::{LinkEmulator, LinkProfile, Outage};
+use twindrive_link::emulator::{LinkProfile, Outage};
 use twindrive_link::upload::{
     ChunkStore, MemoryStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
 };
@@ -16,13 +16,6 @@ const S: u64 = 1_000_000_000;
 fn file(len: usize, seed: u64) -> Vec<u8> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..len).map(|_| rng.random::<u8>()).collect()
-}
-
-fn link(profile: &LinkProfile, seed: u64) -> VirtualLink {
-    VirtualLink::new(
-        LinkEmulator::new(profile.clone(), seed, 0),
-        LinkEmulator::new(profile.clone(), seed, 1),
-    )
 }
 
 fn sender_config(profile: &LinkProfile) -> SenderConfig {
@@ -54,7 +47,7 @@ fn a_lossy_upload_with_an_outage_arrives_byte_identical() {
         let mut sender = Sender::new("rover", data.clone(), sender_config(&profile));
         let mut receiver =
             Receiver::new("rover", MemoryStore::default(), ReceiverConfig::default());
-        let mut net = link(&profile, seed);
+        let mut net = VirtualLink::symmetric(&profile, seed);
         let mut got = None;
         let done = net.run(&mut sender, &mut receiver, 3_600 * S, |s, _| {
             s.is_finished()
@@ -84,7 +77,7 @@ fn restarts_of_either_side_resume_without_losing_or_repeating() {
     // Clones share what the store holds: a restarted receiver finds it.
     let kept = MemoryStore::default();
     let store = || kept.clone();
-    let mut net = link(&profile, 3);
+    let mut net = VirtualLink::symmetric(&profile, 3);
     let mut got = None;
 
     let mut sender = Sender::new("rover", data.clone(), sender_config(&profile));
@@ -130,7 +123,7 @@ fn a_receiver_that_forgot_the_transfer_still_gets_the_whole_file() {
     for (profile, seed) in [("lan", 1), ("satellite-lossy,loss=0.2", 2), ("lunar", 3)] {
         let profile: LinkProfile = profile.parse().unwrap();
         let data = file(120_000, seed);
-        let mut net = link(&profile, seed);
+        let mut net = VirtualLink::symmetric(&profile, seed);
         let mut sender = Sender::resume("rover", data.clone(), sender_config(&profile));
         let mut first = Receiver::new("rover", MemoryStore::default(), ReceiverConfig::default());
         // A quarter of the way.
@@ -159,7 +152,7 @@ fn corrupted_chunks_are_dropped_and_asked_for_again() {
     let data = file(80_000, 5);
     let mut sender = Sender::new("rover", data.clone(), sender_config(&profile));
     let mut receiver = Receiver::new("rover", MemoryStore::default(), ReceiverConfig::default());
-    let mut net = link(&profile, 11);
+    let mut net = VirtualLink::symmetric(&profile, 11);
     // Flip a byte in every 7th message's tail on the way up.
     let mut n = 0u64;
     net.tamper_up = Some(Box::new(move |bytes: &mut Vec<u8>| {
@@ -194,7 +187,7 @@ fn an_offer_above_the_size_cap_is_refused_before_any_chunk() {
     };
     let store = MemoryStore::default();
     let mut receiver = Receiver::new("rover", store, config);
-    let mut net = link(&profile, 1);
+    let mut net = VirtualLink::symmetric(&profile, 1);
     net.run(&mut sender, &mut receiver, 10 * S, |s, _| {
         s.refused().is_some()
     });
@@ -299,7 +292,7 @@ fn crc(data: &[u8]) -> u32 {
 fn repair_shards_rebuild_a_lost_tail_without_a_round_trip() {
     let profile: LinkProfile = "lunar,loss=0".parse().unwrap();
     let data = file(140_000, 9);
-    let mut net = link(&profile, 3);
+    let mut net = VirtualLink::symmetric(&profile, 3);
     // Every fifth chunk of the last forty is corrupted in flight (dropped).
     net.tamper_up = Some(Box::new(|bytes: &mut Vec<u8>| {
         if let Ok(m) = wire::decode(bytes)

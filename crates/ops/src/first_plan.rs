@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, bail};
 use twindrive_link::envelope::{
-    Envelope, SigningKey, Supervision, Tolerances, peek_envelope, sha256_hex, sign_plan,
+    Envelope, Supervision, Tolerances, peek_envelope, sha256_hex, sign_plan,
 };
 use twindrive_mission::plan::MissionPlan;
 use twindrive_store::MasterArchive;
@@ -30,7 +30,6 @@ pub fn first_plan(
     args: &MasterSettings,
     robot: &str,
     archive: &MasterArchive,
-    key: Option<&SigningKey>,
 ) -> anyhow::Result<FirstPlan> {
     // An upload this master began and did not finish is resumed when it
     // carries the same plan (a self-signed plan signs to new bytes each run).
@@ -54,7 +53,7 @@ pub fn first_plan(
         } else {
             let plan = parse_plan(&plan_json, path)?;
             let world = world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
-            let key = key.context("--plan needs --key to sign it")?;
+            let key = args.key.as_ref().context("--plan needs --key to sign it")?;
             let now = since_epoch()?;
             let envelope = Envelope::new(
                 robot,

@@ -26,8 +26,6 @@ use crate::{runtime, unix_now_s};
 /// `report.json` and `fleet.json`, and returns the worst outcome.
 pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Outcome> {
     let fleet = args.robots.len() > 1;
-    let profile = args.profile.clone();
-    let key = args.key.clone();
     let verbosity = args.verbosity;
     let quiet = verbosity == Verbosity::Quiet;
     let unix_at_zero = unix_now_s()?;
@@ -39,7 +37,7 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
             args.out.clone()
         };
         let archive = MasterArchive::new(out);
-        let first = first_plan(args, robot, &archive, key.as_ref())?;
+        let first = first_plan(args, robot, &archive)?;
         // The twin: the scenario the plan was rehearsed in.
         let twin_scenario = match twindrive_workflow::verification::twin_of(
             &first.plan,
@@ -75,14 +73,14 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
             .with_context(|| format!("writing the plan into {}", archive.dir().display()))?;
         let master = Master::new(
             robot,
-            MasterConfig::for_link(profile.as_ref(), args.telemetry_budget),
+            MasterConfig::for_link(args.profile.as_ref(), args.telemetry_budget),
             archive.log_chunks(),
         );
         let calibrated = first.plan.header.calibrated;
         let mut op = Operator::new(
             master,
             twin_scenario.map(|s| Twin::new(s, calibrated)),
-            key.clone(),
+            args.key.clone(),
             OperatorConfig {
                 on_handback: args.on_handback,
                 expires_in_s: args.expires_in,
@@ -138,7 +136,7 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
         };
         let runs = members.iter_mut().enumerate().map(|(k, m)| {
             // One emulator pair per robot, each its own random streams.
-            let emulation = profile.clone().map(|p| Emulation {
+            let emulation = args.profile.clone().map(|p| Emulation {
                 outgoing: LinkEmulator::new(p.clone(), args.seed, 2 * k as u64),
                 incoming: LinkEmulator::new(p, args.seed, 2 * k as u64 + 1),
             });

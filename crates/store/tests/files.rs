@@ -2,7 +2,7 @@
 //! either side, the plan counter, the robot's state directory.
 
 use twindrive_agent::store::{LogFiles, RobotStore};
-use twindrive_link::emulator::{LinkEmulator, LinkProfile};
+use twindrive_link::emulator::LinkProfile;
 use twindrive_link::upload::{
     ChunkStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
 };
@@ -22,13 +22,6 @@ fn file(len: usize, seed: u64) -> Vec<u8> {
             (x >> 24) as u8
         })
         .collect()
-}
-
-fn link(profile: &LinkProfile, seed: u64) -> VirtualLink {
-    VirtualLink::new(
-        LinkEmulator::new(profile.clone(), seed, 0),
-        LinkEmulator::new(profile.clone(), seed, 1),
-    )
 }
 
 fn sender_config(profile: &LinkProfile) -> SenderConfig {
@@ -54,7 +47,7 @@ fn restarts_of_either_side_resume_without_losing_or_repeating() {
     let data = file(150_000, 9);
     let tmp = tempfile::tempdir().unwrap();
     let store = || DirStore::new(tmp.path().join("chunks"));
-    let mut net = link(&profile, 3);
+    let mut net = VirtualLink::symmetric(&profile, 3);
     let mut got = None;
 
     let mut sender = Sender::new("rover", data.clone(), sender_config(&profile));

@@ -73,14 +73,11 @@ impl RouteProgress {
         }
     }
 
-    /// The route points in cell `(cx, cy)`.
-    fn cell(&self, cell: (i32, i32)) -> &[u32] {
+    /// Where the route points of cell `cell` lie in `members`.
+    fn cell(&self, cell: (i32, i32)) -> std::ops::Range<usize> {
         match self.ids.id(cell) {
-            NO_CELL => &[],
-            c => {
-                let c = c as usize;
-                &self.members[self.starts[c] as usize..self.starts[c + 1] as usize]
-            }
+            NO_CELL => 0..0,
+            c => self.starts[c as usize] as usize..self.starts[c as usize + 1] as usize,
         }
     }
 
@@ -90,12 +87,7 @@ impl RouteProgress {
         let r2 = self.cell_m * self.cell_m;
         for dx in -1..=1 {
             for dy in -1..=1 {
-                let c = self.ids.id((cx + dx, cy + dy));
-                if c == NO_CELL {
-                    continue;
-                }
-                let c = c as usize;
-                for i in self.starts[c] as usize..self.starts[c + 1] as usize {
+                for i in self.cell((cx + dx, cy + dy)) {
                     let k = self.members[i] as usize;
                     let q = self.points[k];
                     let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
@@ -141,8 +133,8 @@ impl RouteProgress {
                     if dx.abs() != ring && dy.abs() != ring {
                         continue;
                     }
-                    for &k in self.cell((cx + dx, cy + dy)) {
-                        let q = self.points[k as usize];
+                    for i in self.cell((cx + dx, cy + dy)) {
+                        let q = self.points[self.members[i] as usize];
                         best = best.min((q[0] - p[0]).hypot(q[1] - p[1]));
                     }
                 }
