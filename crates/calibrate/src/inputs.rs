@@ -203,6 +203,9 @@ pub fn from_bag(
     signs: [f64; 2],
 ) -> anyhow::Result<(Vec<WheelSample>, Vec<PoseSample>, f64)> {
     let bag = twindrive_ros::Bag::open(&source.path).context("--bag")?;
+    for d in bag.damage() {
+        tracing::warn!("{d}; calibrating from what was read");
+    }
     let stamps = source.stamps;
     let Some(wheel_source) = &source.wheels else {
         bail!(
@@ -254,7 +257,7 @@ pub fn from_bag(
 
 /// The three ways to give `calibrate` its data.
 pub const INPUTS: &str = "give a simulator output directory (log.csv + log.meta.json from `twindrive simulate`), \
-     both --encoders E.csv and --poses P.csv, or --bag REC.mcap|BAG_DIR";
+     both --encoders E.csv and --poses P.csv, or --bag BAG (a rosbag2 directory or one .mcap/.db3 file)";
 
 /// A simulator output directory; any other directory is refused with what
 /// `calibrate` expects.

@@ -12,8 +12,11 @@
 //! - [`report`]: `calib.json` ([`Report`]) and what the figures are drawn from;
 //! - [`output`]: the report, trajectories and figures on disk;
 //! - [`figures`]: the parameter and innovation figures;
-//! - [`drive`]: the built-in calibration drive ([`calibrate_like`]).
+//! - [`drive`]: the built-in calibration drive ([`calibrate_like`]);
+//! - [`bag_info`]: what a rosbag2 recording holds and which of it a
+//!   calibration can use (`twindrive bag info`).
 
+pub mod bag_info;
 pub mod drive;
 pub mod figures;
 pub mod inputs;

@@ -12,7 +12,67 @@ use crate::inputs;
 use crate::job::{Job, Method, Offset};
 use crate::report::{Artefacts, CrossCheck, DataSummary, Report, Residuals, params_of};
 
-/// Runs a calibration. `progress(done, total)` follows the filter.
+/// Fewest reference poses the filter must accept for a calibration to count.
+pub const MIN_ACCEPTED_POSES: u64 = 30;
+/// Smallest share of the reference poses the filter's gate may accept: below
+/// it the poses and the wheels disagree (a sign, a clock, a noise level or a
+/// reference that is not what it seems), and a fit to the few that pass is
+/// not evidence of anything.
+pub const MIN_ACCEPTED_FRACTION: f64 = 0.5;
+
+/// What to check when the reference and the wheels disagree.
+const DISAGREE_HINT: &str = "check --left-sign/--right-sign, the clock offset (--time-offset auto), \
+     --initial, and that --position-std-m/--heading-std-rad match the reference's noise";
+
+/// Refuses a calibration the data does not support: too few reference
+/// poses accepted, most of them rejected, or motion that leaves a parameter
+/// unpinned. The error says what was accepted and rejected and why.
+fn check_support(r: &Report) -> anyhow::Result<()> {
+    let (accepted, rejected) = (r.residuals.filter_accepted, r.residuals.filter_rejected);
+    let total = accepted + rejected;
+    let fraction = accepted as f64 / total.max(1) as f64;
+    let mut why = Vec::new();
+    if accepted < MIN_ACCEPTED_POSES {
+        why.push(format!(
+            "only {accepted} reference poses were accepted (at least {MIN_ACCEPTED_POSES} are needed)"
+        ));
+    }
+    if fraction < MIN_ACCEPTED_FRACTION {
+        why.push(format!(
+            "the filter's gate rejected {rejected} of {total} reference poses ({:.0} %; at most {:.0} % may be): \
+             the poses disagree with the wheels: {DISAGREE_HINT}",
+            100.0 * (1.0 - fraction),
+            100.0 * (1.0 - MIN_ACCEPTED_FRACTION)
+        ));
+    }
+    if !r.identifiability.well_determined {
+        why.push(format!(
+            "the motion does not pin every parameter: {}",
+            r.identifiability.verdict
+        ));
+    }
+    if why.is_empty() {
+        return Ok(());
+    }
+    anyhow::bail!(
+        "calibration refused, nothing written: {}.\n\
+         Data: {accepted} reference poses accepted, {rejected} rejected ({} in the window), {} encoder samples, \
+         t = {:.3} .. {:.3} s; relative standard deviations of (left, right, wheelbase): {:.2e}, {:.2e}, {:.2e}",
+        why.join("; "),
+        r.data.pose_samples,
+        r.data.encoder_samples,
+        r.data.start_s,
+        r.data.end_s,
+        r.identifiability.relative_std[0],
+        r.identifiability.relative_std[1],
+        r.identifiability.relative_std[2],
+    )
+}
+
+/// Runs a calibration. `progress(done, total)` follows the filter. A
+/// calibration the data does not support is an error (see
+/// [`MIN_ACCEPTED_POSES`], [`MIN_ACCEPTED_FRACTION`] and the batch fit's
+/// identifiability), so nothing is written from it.
 pub fn calibrate(
     mut job: Job,
     progress: impl FnMut(usize, usize),
@@ -103,7 +163,12 @@ pub fn calibrate(
         tracing::info!(elapsed_s = stage.elapsed().as_secs_f64(), "filter");
         (run, batch.join())
     });
-    let run = run?;
+    let run = run.map_err(|e| {
+        anyhow::anyhow!(
+            "calibration refused, nothing written: {e}. The poses disagree with the wheels: {}",
+            DISAGREE_HINT
+        )
+    })?;
     let b = b.map_err(|_| anyhow::anyhow!("the batch fit panicked"))??;
     let history = run.history.as_ref().expect("kept");
     let smoothed;
@@ -212,6 +277,8 @@ pub fn calibrate(
             time_origin_s: job.time_origin_s,
         },
     };
+
+    check_support(&report)?;
 
     let start_pose = match poses.iter().find_map(|p| p.heading_rad.map(|h| (p, h))) {
         Some((p, h)) => Pose::new(p.x_m, p.y_m, h),

@@ -19,12 +19,10 @@
 //! Times are the log's times plus `start_ns` (the log counts from the
 //! mission's start; pass the wall-clock start to place it in time).
 
-use std::io::{Seek, Write};
-
 use twindrive_kinematics::{DiffDriveParams, Pose, arc_step_wheels};
 use twindrive_log::{MissionLog, WorldMap};
 
-use crate::bag::BagWriter;
+use crate::bag::{BagWriter, WriteError};
 use crate::msgs::{
     Covariance, Distro, HazardDetection, HazardDetectionVector, Header, JointState, LaserScan,
     MapMetaData, OccupancyGrid, Odometry, Path, PoseStamped, PoseWithCovariance, Range, TFMessage,
@@ -44,7 +42,6 @@ const MAP_MARGIN_M: f64 = 0.5;
 /// What besides the log goes into the bag.
 #[derive(Debug, Clone, Default)]
 pub struct ExportOptions<'a> {
-    pub distro: Distro,
     /// Added to every log time (ns since the Unix epoch of the log's t = 0).
     pub start_ns: u64,
     pub map: Option<&'a WorldMap>,
@@ -79,18 +76,17 @@ fn inverse(a: &Pose) -> Pose {
     )
 }
 
-/// Writes `log` as one rosbag2 MCAP file into `w` (named `file_name` in
-/// the returned `metadata.yaml` text).
-pub fn write_log_bag<W: Write + Seek>(
+/// Writes `log` into `bag` (a storage file of either storage, whose
+/// distribution sets the message definitions) and finishes it.
+pub fn write_log_bag(
     log: &MissionLog,
     options: &ExportOptions<'_>,
-    w: W,
-    file_name: &str,
-) -> mcap::McapResult<ExportSummary> {
+    mut bag: BagWriter<'_>,
+) -> Result<ExportSummary, WriteError> {
     let h = &log.header;
     let nominal: DiffDriveParams = h.nominal;
     let t0 = options.start_ns;
-    let mut bag = BagWriter::new(w, file_name, options.distro)?;
+    let distro = bag.distro();
 
     // Latched topics first, at the start time, so a player sends them first.
     let tf_static = bag.topic::<TFMessage>("/tf_static", Qos::LATCHED)?;
@@ -308,7 +304,7 @@ pub fn write_log_bag<W: Write + Seek>(
                         min_range: info.min_range_m as f32,
                         max_range: info.max_range_m as f32,
                         range: reading[0] as f32,
-                        variance: (options.distro != Distro::Humble).then_some(0.0),
+                        variance: (distro != Distro::Humble).then_some(0.0),
                     },
                 )?;
             } else {

@@ -527,7 +527,7 @@ mod tests {
     fn bag(dir: &std::path::Path) -> Bag {
         let path = dir.join("t.mcap");
         let f = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
-        let mut w = BagWriter::new(f, "t.mcap", Distro::Jazzy).unwrap();
+        let mut w = BagWriter::mcap(f, "t.mcap", Distro::Jazzy).unwrap();
         let js = w
             .topic::<JointState>("/joint_states", Qos::DEFAULT)
             .unwrap();

@@ -1,9 +1,10 @@
 //! ROS 2 without a ROS install.
 //!
 //! ROS 2 messages are CDR bytes described by `.msg` definitions, and rosbag2
-//! recordings are MCAP files that store those definitions beside the bytes.
-//! This crate reads both at run time ([`Schema`], [`Value`], [`Bag`]) and
-//! writes the standard messages twindrive produces ([`msgs`], [`BagWriter`]).
+//! recordings are MCAP files or sqlite3 databases that hold those bytes
+//! (and, mostly, the definitions). This crate reads both at run time
+//! ([`Schema`], [`Value`], [`Bag`]) and writes the standard messages
+//! twindrive produces ([`msgs`], [`BagWriter`]).
 
 pub mod bag;
 pub mod export;
@@ -16,7 +17,10 @@ mod schema;
 mod type_hash;
 mod value;
 
-pub use bag::{Bag, BagError, BagWriter, MessageRef, TopicId, TopicInfo};
+pub use bag::{
+    Bag, BagError, BagWriter, Damage, FileInfo, MessageRef, Metadata, Storage, TopicId, TopicInfo,
+    WriteError,
+};
 pub use msgs::{Distro, RosMessage};
 pub use qos::Qos;
 pub use schema::{

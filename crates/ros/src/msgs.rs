@@ -168,6 +168,17 @@ const DEFINITIONS: &[(&str, &str, &[&str])] = &[
         &["std_msgs/msg/Header"],
     ),
     (
+        "sensor_msgs/msg/Imu",
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
+         geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n\
+         geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n",
+        &[
+            "std_msgs/msg/Header",
+            "geometry_msgs/msg/Quaternion",
+            "geometry_msgs/msg/Vector3",
+        ],
+    ),
+    (
         "sensor_msgs/msg/LaserScan",
         "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n\
          float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n\

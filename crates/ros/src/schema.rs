@@ -203,6 +203,33 @@ impl Schema {
         Ok(schema)
     }
 
+    /// The integer fields that could carry encoder ticks, as `calibrate
+    /// --left-field` takes them: `a.b` for a nested field, `data[0]` and
+    /// `data[1]` for an integer array; header stamps left out.
+    pub fn integer_fields(&self) -> Vec<String> {
+        fn walk(s: &Schema, ty: usize, prefix: &str, depth: usize, out: &mut Vec<String>) {
+            for f in &s.types[ty].fields {
+                let name = format!("{prefix}{}", f.name);
+                match (f.ty.base, f.ty.arity) {
+                    (Base::Primitive(p), Arity::Single) if p.is_integer() => out.push(name),
+                    (Base::Primitive(p), _) if p.is_integer() && p != Primitive::U8 => {
+                        out.push(format!("{name}[0]"));
+                        out.push(format!("{name}[1]"));
+                    }
+                    (Base::Message(m), Arity::Single)
+                        if depth < 3 && s.types[m].name != "std_msgs/msg/Header" =>
+                    {
+                        walk(s, m, &format!("{name}."), depth + 1, out)
+                    }
+                    _ => {}
+                }
+            }
+        }
+        let mut out = Vec::new();
+        walk(self, 0, "", 0, &mut out);
+        out
+    }
+
     /// The top-level type.
     pub fn root(&self) -> &MessageType {
         &self.types[0]

@@ -42,9 +42,12 @@ pub enum Command {
     /// Input: a simulator output directory (log.csv + log.meta.json), or
     /// --encoders E.csv (`t,left_ticks,right_ticks` cumulative counts, or
     /// `t,left_rad_s,right_rad_s`) with --poses P.csv (`t,x,y,theta`; theta
-    /// may be empty for position-only references), or --bag REC.mcap (a
-    /// rosbag2 recording: JointState wheels or a tick topic, and a
-    /// PoseStamped, Odometry or TF reference). Writes --out (JSON) and,
+    /// may be empty for position-only references), or --bag BAG (a rosbag2
+    /// recording, MCAP or sqlite3: JointState wheels or a tick topic, and a
+    /// PoseStamped, Odometry or TF reference). A calibration the data do
+    /// not support (too few reference poses accepted, most rejected, or
+    /// motion that leaves a parameter unpinned) exits 1 and writes nothing.
+    /// Writes --out (JSON) and,
     /// beside it, figures of each parameter over time with its ±3σ band and
     /// of the innovations, and TUM trajectories of the reference and of dead
     /// reckoning with the initial and calibrated parameters.
@@ -163,7 +166,7 @@ pub enum Command {
     /// banner, re-plan. Files go to --out (plans, rehearsals, robot logs,
     /// reports, console.token). Runs until Ctrl-C.
     Console(ConsoleArgs),
-    /// Write a mission log as a rosbag2 recording (MCAP) that ROS 2 tools play.
+    /// Write a mission log as a rosbag2 recording (MCAP or sqlite3) that ROS 2 tools play.
     ///
     /// Standard types only: /joint_states (JointState), /odom (Odometry, dead
     /// reckoning with the nominal parameters), /ground_truth (Odometry),
@@ -172,9 +175,14 @@ pub enum Command {
     /// LaserScan topic per range sensor, /tf (odom->base_link,
     /// map->odom), /tf_static (base_link-><sensor>_link), /map
     /// (OccupancyGrid, latched) and /plan (Path, latched) with --plan.
-    /// Writes DIR/metadata.yaml and DIR/<name>_0.mcap; `ros2 bag play DIR`
-    /// plays it.
+    /// Writes DIR/metadata.yaml and DIR/<name>_0.mcap (or <name>_0.db3 with
+    /// --storage sqlite3); `ros2 bag play DIR` plays it.
     Rosbag(RosbagArgs),
+    /// Look into a rosbag2 recording.
+    Bag {
+        #[command(subcommand)]
+        command: BagCommand,
+    },
     /// Run a site's simulator behind a pipe, as a stand-in for a robot's
     /// hardware (scripts/ros/fake_driver.py puts ROS 2 drivers around it).
     ///
@@ -748,10 +756,40 @@ pub struct RosbagArgs {
     /// sensor_msgs/msg/Range).
     #[arg(long, value_enum, default_value_t = DistroArg::Jazzy)]
     pub distro: DistroArg,
+    /// Storage of the bag: MCAP (`NAME_0.mcap`, zstd chunks; rosbag2's
+    /// default from Jazzy), or sqlite3 (`NAME_0.db3`, laid out as the
+    /// distribution's rosbag2 writes it: Humble plays it without the MCAP
+    /// plugin).
+    #[arg(long, value_enum, default_value_t = StorageArg::Mcap)]
+    pub storage: StorageArg,
     /// Unix time (seconds) of the log's t = 0; by default the bag starts at
     /// the epoch.
     #[arg(long, default_value_t = 0.0, value_parser = usage::unix_time)]
     pub start_time: f64,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum BagCommand {
+    /// What `ros2 bag info` prints (storage, files, duration, start and end,
+    /// message count, each topic with type, count and serialization
+    /// format), any damage (a recording cut short is read up to it), the
+    /// topics calibration can use (wheel joints, tick fields, pose
+    /// references, wheel odometry, scans, IMU) and a suggested
+    /// `calibrate --bag` command line.
+    ///
+    /// Reads MCAP (zstd, lz4 or plain chunks) and sqlite3 (.db3) storage,
+    /// split or not, files or messages compressed with zstd, with or
+    /// without metadata.yaml (versions 1 to 9).
+    Info {
+        /// A bag directory or one storage file (.mcap, .db3, either with .zstd).
+        bag: PathBuf,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StorageArg {
+    Mcap,
+    Sqlite3,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -794,11 +832,13 @@ pub enum MethodArg {
 pub struct CalibrateArgs {
     /// Simulator output directory (instead of --encoders/--poses or --bag).
     pub log_dir: Option<PathBuf>,
-    /// A rosbag2 recording (an .mcap file or a bag directory): wheels from
+    /// A rosbag2 recording (a bag directory or one .mcap/.db3 file; MCAP or
+    /// sqlite3, split, zstd-compressed or cut short): wheels from
     /// --left-joint/--right-joint (or --ticks-topic), reference from
-    /// --pose-topic. Times count from the first reference pose's whole
-    /// second (`data.time_origin_s` in the output).
-    #[arg(long, value_name = "REC.mcap|BAG_DIR", conflicts_with_all = ["log_dir", "encoders", "poses"], requires = "pose_topic")]
+    /// --pose-topic (`twindrive bag info` suggests them). Times count from
+    /// the first reference pose's whole second (`data.time_origin_s` in the
+    /// output).
+    #[arg(long, value_name = "BAG", conflicts_with_all = ["log_dir", "encoders", "poses"], requires = "pose_topic")]
     pub bag: Option<PathBuf>,
     /// sensor_msgs/msg/JointState topic with the wheel joints.
     #[arg(long, default_value = "/joint_states", requires = "bag")]

@@ -201,7 +201,7 @@ fn generic_csvs_with_an_unknown_clock_offset_and_a_backwards_counter() {
 }
 
 #[test]
-fn a_single_circle_gets_the_warning() {
+fn a_single_circle_is_refused_and_writes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let text_in = std::fs::read_to_string(repo().join("scenarios/calibration_drive.toml")).unwrap();
     let start = text_in.find("segments = [").unwrap();
@@ -213,17 +213,129 @@ fn a_single_circle_gets_the_warning() {
     std::fs::write(&scenario, one).unwrap();
     let sim = tmp.path().join("sim");
     simulate(&scenario, &sim, "60");
-    let out = tmp.path().join("calib.json");
+    let out = tmp.path().join("out/calib.json");
     let mut args = vec![sim.to_str().unwrap(), "--out", out.to_str().unwrap()];
     args.extend_from_slice(&SIM_NOISE);
     let (o, json, _) = calibrate(&args);
-    assert!(o.status.success(), "{}", text(&o.stderr));
-    let stdout = text(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    let stderr = text(&o.stderr);
     assert!(
-        stdout.contains("WARNING: this drive cannot separate the parameters"),
-        "{stdout}"
+        stderr.contains("calibration refused, nothing written")
+            && stderr.contains("cannot separate the parameters")
+            && stderr.contains("reference poses accepted"),
+        "{stderr}"
     );
-    assert_eq!(json.unwrap()["identifiability"]["well_determined"], false);
+    assert!(json.is_none());
+    assert!(!tmp.path().join("out").exists(), "nothing is written");
+}
+
+/// An AMCL-like reference (2 Hz, 5 cm of error) is refused either way, for
+/// the reason that holds: calibrated as if it were a 2 mm tracker, the gate
+/// rejects most poses; with its real noise stated, the poses are accepted
+/// but do not pin the wheels' scale. Nothing is written.
+#[test]
+fn a_sparse_noisy_reference_is_refused_for_the_right_reason() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = tmp.path().join("sim");
+    simulate(
+        &repo().join("scenarios/calibration_drive.toml"),
+        &sim,
+        "130",
+    );
+    // Every 60th tracker sample (the tracker runs at 120 Hz), with noise
+    // from a fixed-seed generator.
+    let log = std::fs::read_to_string(sim.join("log.csv")).unwrap();
+    let mut rows = log.lines();
+    let head: Vec<&str> = rows.next().unwrap().split(',').collect();
+    let col = |n: &str| head.iter().position(|h| *h == n).unwrap();
+    let (t, x, y, th) = (
+        col("t"),
+        col("tracker_x"),
+        col("tracker_y"),
+        col("tracker_theta"),
+    );
+    let (l, r) = (col("left_ticks"), col("right_ticks"));
+    let mut enc = String::from("t,left_ticks,right_ticks\n");
+    let mut poses = String::from("t,x,y,theta\n");
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut noise = |scale: f64| {
+        // xorshift, then a sum of uniforms: roughly normal, deterministic.
+        let mut sum = 0.0;
+        for _ in 0..12 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            sum += (seed >> 11) as f64 / (1u64 << 53) as f64;
+        }
+        (sum - 6.0) * scale
+    };
+    let mut k = 0;
+    for row in rows {
+        let v: Vec<&str> = row.split(',').collect();
+        if !v[l].is_empty() {
+            enc.push_str(&format!("{},{},{}\n", v[t], v[l], v[r]));
+        }
+        if !v[x].is_empty() {
+            if k % 60 == 0 {
+                let f = |i: usize| v[i].parse::<f64>().unwrap();
+                poses.push_str(&format!(
+                    "{},{},{},{}\n",
+                    v[t],
+                    f(x) + noise(0.05),
+                    f(y) + noise(0.05),
+                    f(th) + noise(0.05)
+                ));
+            }
+            k += 1;
+        }
+    }
+    let (e, p) = (tmp.path().join("enc.csv"), tmp.path().join("amcl.csv"));
+    std::fs::write(&e, enc).unwrap();
+    std::fs::write(&p, poses).unwrap();
+    let ticks = std::fs::read_to_string(sim.join("log.meta.json")).unwrap();
+    let ticks: serde_json::Value = serde_json::from_str(&ticks).unwrap();
+    let ticks = ticks["ticks_per_rev"].to_string();
+    let base = |out: &Path| {
+        vec![
+            "--encoders".to_string(),
+            e.display().to_string(),
+            "--poses".into(),
+            p.display().to_string(),
+            "--ticks-per-rev".into(),
+            ticks.clone(),
+            "--initial".into(),
+            "0.07,0.07,0.23".into(),
+            "--out".into(),
+            out.display().to_string(),
+        ]
+    };
+    let out = tmp.path().join("tight/calib.json");
+    let mut args = base(&out);
+    args.extend(["--position-std-m", "0.002", "--heading-std-rad", "0.005"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (o, json, _) = calibrate(&args);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
+    let stderr = text(&o.stderr);
+    assert!(
+        stderr.contains("calibration refused, nothing written") && stderr.contains("rejected"),
+        "{stderr}"
+    );
+    assert!(json.is_none() && !tmp.path().join("tight").exists());
+
+    let out = tmp.path().join("stated/calib.json");
+    let mut args = base(&out);
+    args.extend(["--position-std-m", "0.05", "--heading-std-rad", "0.05"].map(String::from));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (o, json, _) = calibrate(&args);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
+    let stderr = text(&o.stderr);
+    assert!(
+        stderr.contains("does not pin every parameter")
+            && !stderr.contains("gate rejected")
+            && stderr.contains("0 rejected"),
+        "{stderr}"
+    );
+    assert!(json.is_none() && !tmp.path().join("stated").exists());
 }
 
 /// Runs calibrate on hand-written CSVs and checks the clean failure (exit 1).

@@ -539,7 +539,7 @@ fn calibrate_says_what_input_it_expects() {
         "photos: is not a simulator log",
         "log.csv + log.meta.json from `twindrive simulate`",
         "--encoders E.csv and --poses P.csv",
-        "--bag REC.mcap|BAG_DIR",
+        "--bag BAG (a rosbag2 directory or one .mcap/.db3 file)",
     ] {
         assert!(stderr.contains(want), "expected `{want}` in: {stderr}");
     }

@@ -178,7 +178,8 @@ fn recordings_written_by_rosbags_and_mcap_ros2_calibrate_to_the_truth() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert_recovered(&j.unwrap(), LAG_S);
 
-    // Without the offset search the lag shows (the run still completes).
+    // Without the offset search the lag puts the poses at odds with the
+    // wheels: the gate rejects most of them and the calibration is refused.
     let out = tmp.path().join("c/calib.json");
     let mut args = vec![
         "calibrate",
@@ -194,9 +195,13 @@ fn recordings_written_by_rosbags_and_mcap_ros2_calibrate_to_the_truth() {
     args.extend(JOINTS);
     args.extend(SIM_NOISE);
     let o = twindrive(&args);
-    assert!(o.status.success(), "{}", text(&o.stderr));
-    let j: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
-    assert_eq!(j["clock_offset_s"], 0.0);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("calibration refused, nothing written") && e.contains("--time-offset auto"),
+        "{e}"
+    );
+    assert!(!out.exists());
 }
 
 #[test]
@@ -442,7 +447,9 @@ fn bad_recordings_and_wrong_names_say_which_topic_and_message() {
     ]);
     assert!(e.contains("`name[0]` is not a number field"), "{e}");
 
-    // A recording cut short (no summary, no footer).
+    // A recording cut short (no summary, no footer): read up to the cut,
+    // said on stderr; 65 s of this drive do not pin the wheelbase, so the
+    // calibration is refused rather than written.
     let file = tmp.path().join("pose.mcap");
     py(
         "make_bag.py",
@@ -461,7 +468,12 @@ fn bad_recordings_and_wrong_names_say_which_topic_and_message() {
     let (o, j) = calibrate(&broken, &out, &args);
     assert!(!o.status.success() && j.is_none());
     let e = text(&o.stderr);
-    assert!(e.contains("cut.mcap") && e.contains("mcap recover"), "{e}");
+    assert!(
+        e.contains("cut.mcap: cut short or damaged")
+            && e.contains("whole messages")
+            && e.contains("calibration refused"),
+        "{e}"
+    );
 
     // A message whose bytes end early: named by topic and index.
     let bad = tmp.path().join("bad.mcap");
@@ -829,5 +841,309 @@ fn silent_joint_states_stop_the_wheels_and_hand_back() {
             .iter()
             .all(|(t, v, w)| *t <= first_zero.0 || (*v == 0.0 && *w == 0.0)),
         "{after:?}"
+    );
+}
+
+/// `twindrive bag info`'s message count and per-topic (type, count).
+fn bag_info(
+    bag: &Path,
+) -> (
+    u64,
+    std::collections::BTreeMap<String, (String, u64)>,
+    String,
+) {
+    let o = twindrive(&["bag", "info", s(bag)]);
+    assert!(
+        o.status.success(),
+        "bag info {}: {}",
+        bag.display(),
+        text(&o.stderr)
+    );
+    let out = text(&o.stdout);
+    let total = out
+        .lines()
+        .find_map(|l| l.strip_prefix("Messages:"))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{out}"));
+    let topics = out
+        .lines()
+        .filter_map(|l| l.split_once("Topic: ").map(|(_, r)| r))
+        .map(|r| {
+            let parts: Vec<&str> = r.split(" | ").map(str::trim).collect();
+            let ty = parts[1].trim_start_matches("Type: ").to_string();
+            let count = parts[2].trim_start_matches("Count: ").parse().unwrap();
+            (parts[0].to_string(), (ty, count))
+        })
+        .collect();
+    (total, topics, out)
+}
+
+/// What `rosbags` counts in each of `bags` (scripts/ros/bag_counts.py).
+fn rosbags_counts(bags: &[PathBuf]) -> Vec<Value> {
+    let args: Vec<&str> = bags.iter().map(|b| s(b)).collect();
+    let v: Value = serde_json::from_str(&py("bag_counts.py", &args)).unwrap();
+    v.as_array().unwrap().clone()
+}
+
+fn assert_same_counts(bag: &Path, theirs: &Value) {
+    let (total, topics, out) = bag_info(bag);
+    assert_eq!(
+        total,
+        theirs["message_count"].as_u64().unwrap(),
+        "{}\n{out}",
+        bag.display()
+    );
+    let their_topics = theirs["topics"].as_object().unwrap();
+    assert_eq!(topics.len(), their_topics.len(), "{}\n{out}", bag.display());
+    for (name, t) in their_topics {
+        let (ty, count) = &topics[name];
+        assert_eq!(ty, t["type"].as_str().unwrap(), "{name}");
+        assert_eq!(
+            *count,
+            t["count"].as_u64().unwrap(),
+            "{}: {name}\n{out}",
+            bag.display()
+        );
+    }
+}
+
+/// The calibration drive rewritten by `rosbags` in every storage, split,
+/// compressed and metadata layout (scripts/ros/bag_variants.py).
+fn variants() -> &'static Path {
+    static D: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    D.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        py("bag_variants.py", &[s(calibration_bag()), s(dir.path())]);
+        dir
+    })
+    .path()
+}
+
+#[test]
+fn every_storage_and_layout_rosbags_writes_opens_with_its_counts() {
+    let mut bags: Vec<PathBuf> = std::fs::read_dir(variants())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_dir())
+        .collect();
+    bags.sort();
+    for want in [
+        "sqlite3_v8",
+        "sqlite3_v9",
+        "mcap_v9",
+        "sqlite3_file_zstd",
+        "mcap_file_zstd",
+        "sqlite3_message_zstd",
+        "sqlite3_split",
+        "mcap_split",
+        "sqlite3_split_no_metadata",
+        "mcap_split_no_metadata",
+        "sqlite3_v4",
+        "sqlite3_v5",
+        "sqlite3_v6",
+        "sqlite3_v7",
+        "sqlite3_foxy",
+        "sqlite3_humble",
+    ] {
+        assert!(
+            bags.iter().any(|b| b.ends_with(want)),
+            "bag_variants.py wrote no {want}: {bags:?}"
+        );
+    }
+    // Public rosbag2 test bags (crates/ros/tests/data/rosbag2/SOURCE.md).
+    let fixtures = repo().join("crates/ros/tests/data/rosbag2");
+    for name in [
+        "foxy_sqlite3_cdr_test",
+        "sqlite3_cdr_test",
+        "mcap_cdr_test",
+        "mcap_wbag",
+        "mcap_multiple_files_no_metadata",
+        "galactic_sqlite3_file_compression_no_metadata",
+    ] {
+        bags.push(fixtures.join(name));
+    }
+    let theirs = rosbags_counts(&bags);
+    for (bag, theirs) in bags.iter().zip(&theirs) {
+        assert!(theirs.get("error").is_none(), "{theirs}");
+        assert_same_counts(bag, theirs);
+    }
+    // The Foxy and Humble layouts store no definitions: the built-in ones
+    // decode them, and calibration reads the sqlite3 copies like the MCAP.
+    for name in [
+        "sqlite3_foxy",
+        "sqlite3_split_no_metadata",
+        "sqlite3_file_zstd",
+    ] {
+        let (_, _, out) = bag_info(&variants().join(name));
+        assert!(
+            out.contains("--left-joint wheel_left_joint --right-joint wheel_right_joint --pose-topic /tracker/pose"),
+            "{name}: {out}"
+        );
+    }
+}
+
+#[test]
+fn the_sqlite3_copy_calibrates_exactly_as_the_mcap_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut args = JOINTS.to_vec();
+    args.extend(["--pose-topic", "/tracker/pose"]);
+    let run = |bag: &Path, name: &str| {
+        let out = tmp.path().join(name).join("calib.json");
+        let (o, j) = calibrate(bag, &out, &args);
+        assert!(o.status.success(), "{name}: {}", text(&o.stderr));
+        let j = j.unwrap();
+        ["left_diameter_m", "right_diameter_m", "wheelbase_m"].map(|k| j[k].as_f64().unwrap())
+    };
+    let mcap = run(calibration_bag(), "mcap");
+    for name in [
+        "sqlite3_v9",
+        "sqlite3_humble",
+        "sqlite3_split_no_metadata",
+        "mcap_file_zstd",
+    ] {
+        let p = run(&variants().join(name), name);
+        for i in 0..3 {
+            assert!((p[i] - mcap[i]).abs() < 1e-9, "{name}: {p:?} vs {mcap:?}");
+        }
+    }
+    for i in 0..3 {
+        assert!((mcap[i] / TRUTH[i] - 1.0).abs() < 1e-3, "{mcap:?}");
+    }
+}
+
+#[test]
+fn sqlite3_bags_twindrive_writes_read_back_in_rosbags_message_for_message() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = calibration_drive().join("sim");
+    for distro in ["humble", "jazzy"] {
+        let mut lists = Vec::new();
+        for storage in ["mcap", "sqlite3"] {
+            let bag = tmp.path().join(format!("{distro}_{storage}"));
+            let o = twindrive(&[
+                "rosbag",
+                s(&sim),
+                "--out",
+                s(&bag),
+                "--distro",
+                distro,
+                "--storage",
+                storage,
+            ]);
+            assert!(o.status.success(), "{}", text(&o.stderr));
+            let read: Value =
+                serde_json::from_str(&py("read_bag_messages.py", &[s(&bag), "--distro", distro]))
+                    .unwrap();
+            assert_eq!(read["distro"], distro, "{storage}");
+            let (total, _, _) = bag_info(&bag);
+            assert_eq!(total as usize, read["messages"].as_array().unwrap().len());
+            lists.push(read["messages"].clone());
+        }
+        // The same topics, times and bytes in both storages.
+        assert_eq!(lists[0], lists[1], "{distro}");
+    }
+}
+
+#[test]
+fn recordings_cut_short_read_up_to_the_damage_and_calibrate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = calibration_bag();
+    let file = std::fs::read_dir(src)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .unwrap();
+    let whole = std::fs::read(&file).unwrap();
+    let (total, _, _) = bag_info(src);
+    let cut = |name: &str, bytes: &[u8]| {
+        let dir = tmp.path().join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        // A recorder that lost power writes no metadata.yaml either.
+        std::fs::write(dir.join(file.file_name().unwrap()), bytes).unwrap();
+        dir
+    };
+    let mut counts = Vec::new();
+    for percent in [50, 70, 90] {
+        let dir = cut(
+            &format!("cut{percent}"),
+            &whole[..whole.len() * percent / 100],
+        );
+        let (n, _, out) = bag_info(&dir);
+        assert!(
+            n < total && out.contains("cut short"),
+            "{percent} %: {n} of {total}\n{out}"
+        );
+        counts.push(n);
+        if percent == 70 {
+            let out_json = tmp.path().join("cal70/calib.json");
+            let mut args = JOINTS.to_vec();
+            args.extend(["--pose-topic", "/tracker/pose"]);
+            let (o, j) = calibrate(&dir, &out_json, &args);
+            assert!(o.status.success(), "{}", text(&o.stderr));
+            let stderr = text(&o.stderr);
+            assert!(
+                stderr.contains("cut short") && stderr.contains("whole messages"),
+                "{stderr}"
+            );
+            let j = j.unwrap();
+            let p = ["left_diameter_m", "right_diameter_m", "wheelbase_m"]
+                .map(|k| j[k].as_f64().unwrap());
+            for i in 0..3 {
+                assert!((p[i] / TRUTH[i] - 1.0).abs() < 1e-3, "{p:?} vs {TRUTH:?}");
+            }
+        }
+    }
+    assert!(counts.windows(2).all(|w| w[0] < w[1]), "{counts:?}");
+    // The last chunk's bytes scrambled: everything before it reads.
+    let summary = mcap::Summary::read(&whole).unwrap().unwrap();
+    let last = summary.chunk_indexes.last().unwrap();
+    let at = (last.chunk_start_offset + last.chunk_length / 2) as usize;
+    let mut bad = whole.clone();
+    for b in &mut bad[at..at + 256] {
+        *b ^= 0x5a;
+    }
+    let dir = cut("scrambled", &bad);
+    let (n, _, out) = bag_info(&dir);
+    assert!(
+        n < total && n > total / 2 && out.contains("damaged"),
+        "{n} of {total}\n{out}"
+    );
+    // Nothing whole: a clear error, not a panic.
+    let dir = cut("empty", &whole[..64]);
+    let o = twindrive(&["bag", "info", s(&dir)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        text(&o.stderr).contains("no whole message"),
+        "{}",
+        text(&o.stderr)
+    );
+}
+
+#[test]
+fn calibrations_the_bag_does_not_support_fail_and_write_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    // The left wheel's sign flipped: the gate rejects most poses.
+    let out = tmp.path().join("sign/calib.json");
+    let mut args = JOINTS.to_vec();
+    args.extend(["--pose-topic", "/tracker/pose", "--left-sign", "-1"]);
+    let (o, j) = calibrate(calibration_bag(), &out, &args);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("calibration refused, nothing written")
+            && (e.contains("rejected") || e.contains("failed the gate"))
+            && e.contains("--left-sign"),
+        "{e}"
+    );
+    assert!(j.is_none() && !tmp.path().join("sign").exists());
+    // Asking for what the bag lacks lists what it has.
+    let out = tmp.path().join("missing/calib.json");
+    let mut args = JOINTS.to_vec();
+    args.extend(["--pose-topic", "/amcl_pose"]);
+    let (o, _) = calibrate(&variants().join("sqlite3_v9"), &out, &args);
+    assert_eq!(o.status.code(), Some(1));
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("/amcl_pose") && e.contains("not in the bag") && e.contains("/tracker/pose"),
+        "{e}"
     );
 }

@@ -1,5 +1,6 @@
 //! One file per subcommand.
 
+mod bag;
 mod calibrate;
 mod console;
 mod demo;
@@ -40,6 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Master(a) => ops::master(&a),
         Command::Console(a) => console::run(&a),
         Command::Rosbag(a) => rosbag::run(&a),
+        Command::Bag { command } => bag::run(&command),
         Command::SiteSim { site } => site_sim::run(&site),
         Command::Experiment { command } => experiment::run(&command),
         Command::Router {

@@ -3,10 +3,11 @@
 use std::io::Write;
 
 use anyhow::Context;
+use twindrive_ros::BagWriter;
 use twindrive_ros::export::{ExportOptions, write_log_bag};
 use twindrive_ros::msgs::Distro;
 
-use crate::cli::{DistroArg, RosbagArgs};
+use crate::cli::{DistroArg, RosbagArgs, StorageArg};
 use twindrive_files::Staging;
 
 pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
@@ -44,11 +45,11 @@ pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
+    let distro = match args.distro {
+        DistroArg::Humble => Distro::Humble,
+        DistroArg::Jazzy => Distro::Jazzy,
+    };
     let options = ExportOptions {
-        distro: match args.distro {
-            DistroArg::Humble => Distro::Humble,
-            DistroArg::Jazzy => Distro::Jazzy,
-        },
         start_ns: (args.start_time * 1e9).round() as u64,
         map: map.as_ref(),
         plan: plan.as_deref(),
@@ -59,14 +60,24 @@ pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
         .and_then(|n| n.to_str())
         .filter(|n| !n.is_empty() && *n != "..")
         .with_context(|| format!("--out {}: name a bag directory", args.out.display()))?;
-    let file_name = format!("{name}_0.mcap");
     let staging = Staging::new(&args.out, "rosbag")?;
-    let mut summary = None;
-    staging.write_with(&file_name, |w| {
-        summary = Some(write_log_bag(&log, &options, w, &file_name)?);
-        Ok(())
-    })?;
-    let summary = summary.expect("written");
+    let (file_name, summary) = match args.storage {
+        StorageArg::Mcap => {
+            let file_name = format!("{name}_0.mcap");
+            let mut summary = None;
+            staging.write_with(&file_name, |w| {
+                let bag = BagWriter::mcap(w, &file_name, distro)?;
+                summary = Some(write_log_bag(&log, &options, bag)?);
+                Ok(())
+            })?;
+            (file_name, summary.expect("written"))
+        }
+        StorageArg::Sqlite3 => {
+            let file_name = format!("{name}_0.db3");
+            let bag = BagWriter::sqlite3(&staging.path(&file_name), &file_name, distro)?;
+            (file_name, write_log_bag(&log, &options, bag)?)
+        }
+    };
     staging.write_with("metadata.yaml", |w| {
         w.write_all(summary.metadata_yaml.as_bytes())?;
         Ok(())

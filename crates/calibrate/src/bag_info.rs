@@ -1,0 +1,524 @@
+//! `twindrive bag info`: what `ros2 bag info` prints about a recording, any
+//! damage, which topics a calibration can use (wheels, references, scans,
+//! IMU) and a suggested `calibrate --bag` command line.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Context;
+use twindrive_ros::{Bag, Value};
+
+/// Names that mark an external reference (motion capture, a tracker, a
+/// simulator's truth).
+const REFERENCE_HINTS: &[&str] = &[
+    "mocap",
+    "vicon",
+    "optitrack",
+    "qualisys",
+    "tracker",
+    "ground_truth",
+    "groundtruth",
+    "gt",
+];
+
+/// A topic or TF frame that can serve as calibration's pose reference.
+#[derive(Debug, Clone, PartialEq)]
+struct Reference {
+    topic: String,
+    /// TF: the child frame (and its parent).
+    frame: Option<(String, String)>,
+    what: String,
+    count: u64,
+    /// Named like an external reference.
+    hinted: bool,
+}
+
+/// What a JointState topic carries.
+#[derive(Debug, Default)]
+struct Joints {
+    names: Vec<String>,
+    position: bool,
+    velocity: bool,
+}
+
+/// The report on `path`.
+pub fn describe(path: &Path) -> anyhow::Result<String> {
+    let bag = Bag::open(path)?;
+    let mut o = String::new();
+    summary(&bag, &mut o);
+    for d in bag.damage() {
+        let _ = writeln!(o, "\nwarning: {d}");
+    }
+    usable(&bag, path, &mut o).context("reading the topics")?;
+    Ok(o)
+}
+
+fn seconds(ns: u64) -> String {
+    format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
+fn utc(ns: u64) -> String {
+    let t = std::time::UNIX_EPOCH + std::time::Duration::from_nanos(ns);
+    humantime::format_rfc3339_nanos(t).to_string()
+}
+
+fn size(bytes: u64) -> String {
+    let units = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = bytes as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < units.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{v:.1} {}", units[u])
+    }
+}
+
+/// `ros2 bag info`'s block.
+fn summary(bag: &Bag, o: &mut String) {
+    let files = bag.files();
+    let names: Vec<String> = files
+        .iter()
+        .map(|f| {
+            f.path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        })
+        .collect();
+    let _ = writeln!(
+        o,
+        "Files:             {}",
+        names.join("\n                   ")
+    );
+    let _ = writeln!(
+        o,
+        "Bag size:          {}",
+        size(files.iter().map(|f| f.size_bytes).sum())
+    );
+    let compression = if files.iter().any(|f| f.compressed) {
+        " (files compressed with zstd)"
+    } else {
+        ""
+    };
+    let _ = writeln!(
+        o,
+        "Storage id:        {}{compression}",
+        bag.storage().identifier()
+    );
+    if let Some(m) = bag.metadata() {
+        let _ = writeln!(o, "Metadata version:  {}", m.version);
+    } else {
+        let _ = writeln!(
+            o,
+            "Metadata version:  none (no metadata.yaml: files in the order of their first message)"
+        );
+    }
+    if let Some(d) = bag.ros_distro() {
+        let _ = writeln!(o, "ROS distro:        {d}");
+    }
+    match bag.time_range_ns() {
+        Some((a, b)) => {
+            let _ = writeln!(o, "Duration:          {}s", seconds(b - a));
+            let _ = writeln!(o, "Start:             {} ({})", utc(a), seconds(a));
+            let _ = writeln!(o, "End:               {} ({})", utc(b), seconds(b));
+        }
+        None => {
+            let _ = writeln!(o, "Duration:          0s (no messages)");
+        }
+    }
+    let _ = writeln!(o, "Messages:          {}", bag.message_count());
+    let width = bag.topics().iter().map(|t| t.name.len()).max().unwrap_or(0);
+    for (i, t) in bag.topics().iter().enumerate() {
+        let _ = writeln!(
+            o,
+            "{}Topic: {:<width$} | Type: {} | Count: {} | Serialization Format: {}",
+            if i == 0 {
+                "Topic information: "
+            } else {
+                "                   "
+            },
+            t.name,
+            t.type_name,
+            t.message_count,
+            t.message_encoding,
+        );
+    }
+}
+
+fn is_wheel_odometry(topic: &str, frames: Option<(&str, &str)>) -> bool {
+    match frames {
+        Some((parent, child)) => {
+            parent.trim_start_matches('/') == "odom"
+                && matches!(
+                    child.trim_start_matches('/'),
+                    "base_link" | "base_footprint"
+                )
+        }
+        None => {
+            let last = topic.rsplit('/').next().unwrap_or(topic);
+            last == "odom" || last.starts_with("odom") || topic.contains("wheel_odom")
+        }
+    }
+}
+
+fn hinted(name: &str) -> bool {
+    let lower = name.to_ascii_lowercase();
+    lower
+        .split(|c: char| !c.is_ascii_alphanumeric() && c != '_')
+        .any(|part| REFERENCE_HINTS.contains(&part))
+        || REFERENCE_HINTS
+            .iter()
+            .filter(|h| h.len() > 2)
+            .any(|h| lower.contains(h))
+}
+
+/// Which topics calibration can use, and a command line.
+fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
+    let mut joints: BTreeMap<String, Joints> = BTreeMap::new();
+    let mut refs: Vec<Reference> = Vec::new();
+    let mut wheel_odometry: Vec<String> = Vec::new();
+    let mut scans = Vec::new();
+    let mut imus = Vec::new();
+    let mut ticks: Vec<(String, String, Vec<String>)> = Vec::new();
+    let mut unreadable: Vec<String> = Vec::new();
+    let mut decode: Vec<&str> = Vec::new();
+    for t in bag.topics() {
+        let ty = t.type_name.as_str();
+        match ty {
+            "sensor_msgs/msg/JointState" | "nav_msgs/msg/Odometry" | "tf2_msgs/msg/TFMessage" => {
+                decode.push(&t.name)
+            }
+            "geometry_msgs/msg/PoseStamped" | "geometry_msgs/msg/PoseWithCovarianceStamped" => refs
+                .push(Reference {
+                    topic: t.name.clone(),
+                    frame: None,
+                    what: ty.to_string(),
+                    count: t.message_count,
+                    hinted: hinted(&t.name),
+                }),
+            "sensor_msgs/msg/LaserScan" => scans.push(format!("{} ({ty})", t.name)),
+            "sensor_msgs/msg/Imu" => imus.push(format!("{} ({ty})", t.name)),
+            _ if t.message_count > 0 && !standard_non_tick(ty) => {
+                if let Ok(schema) = bag.schema(&t.name) {
+                    let fields: Vec<String> = schema
+                        .integer_fields()
+                        .into_iter()
+                        .filter(|f| !f.ends_with(".sec") && !f.ends_with(".nanosec"))
+                        .collect();
+                    if fields.len() >= 2 {
+                        ticks.push((t.name.clone(), ty.to_string(), fields));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    // One pass over the topics that need their messages read.
+    let mut readable: Vec<&str> = Vec::new();
+    for t in &decode {
+        match bag.schema(t) {
+            Ok(_) => readable.push(t),
+            Err(e) => unreadable.push(e.to_string()),
+        }
+    }
+    let schemas: Vec<_> = readable
+        .iter()
+        .map(|t| bag.schema(t).expect("checked"))
+        .collect();
+    let mut tf_pairs: BTreeMap<(String, String, String), u64> = BTreeMap::new();
+    let mut odom_children: BTreeMap<String, (String, u64)> = BTreeMap::new();
+    bag.for_each_of(&readable, |k, m| {
+        let topic = readable[k];
+        let schema = &schemas[k];
+        match schema.root().name.as_str() {
+            "sensor_msgs/msg/JointState" => {
+                let j = joints.entry(topic.to_string()).or_default();
+                let names = schema.path("name").map_err(|e| e.to_string())?;
+                if let Some(list) = m.value.at(&names).and_then(Value::as_array) {
+                    for n in list.iter().filter_map(Value::as_str) {
+                        if j.names.len() < 64 && !j.names.iter().any(|x| x == n) {
+                            j.names.push(n.to_string());
+                        }
+                    }
+                    let len = |f: &str| {
+                        schema
+                            .path(f)
+                            .ok()
+                            .and_then(|p| m.value.at(&p).and_then(Value::as_array).map(<[_]>::len))
+                            .unwrap_or(0)
+                    };
+                    j.position |= len("position") == list.len() && !list.is_empty();
+                    j.velocity |= len("velocity") == list.len() && !list.is_empty();
+                }
+            }
+            "nav_msgs/msg/Odometry" => {
+                let child = schema
+                    .path("child_frame_id")
+                    .ok()
+                    .and_then(|p| m.value.at(&p).and_then(Value::as_str).map(str::to_string))
+                    .unwrap_or_default();
+                let e = odom_children.entry(topic.to_string()).or_insert((child, 0));
+                e.1 += 1;
+            }
+            _ => {
+                let list = schema.path("transforms").map_err(|e| e.to_string())?;
+                let twindrive_ros::Base::Message(ts) = list.ty.base else {
+                    return Ok(());
+                };
+                let child = schema
+                    .path_from(ts, "child_frame_id")
+                    .map_err(|e| e.to_string())?;
+                let parent = schema
+                    .path_from(ts, "header.frame_id")
+                    .map_err(|e| e.to_string())?;
+                for tr in m.value.at(&list).and_then(Value::as_array).unwrap_or(&[]) {
+                    if let (Some(c), Some(p)) = (
+                        tr.at(&child).and_then(Value::as_str),
+                        tr.at(&parent).and_then(Value::as_str),
+                    ) {
+                        *tf_pairs
+                            .entry((topic.to_string(), p.to_string(), c.to_string()))
+                            .or_default() += 1;
+                    }
+                }
+            }
+        }
+        Ok(())
+    })?;
+    for (topic, (child, count)) in &odom_children {
+        if is_wheel_odometry(topic, None) && !hinted(topic) {
+            wheel_odometry.push(format!(
+                "{topic} (nav_msgs/msg/Odometry, child frame `{child}`)"
+            ));
+        } else {
+            refs.push(Reference {
+                topic: topic.clone(),
+                frame: None,
+                what: format!("nav_msgs/msg/Odometry, child frame `{child}`"),
+                count: *count,
+                hinted: hinted(topic),
+            });
+        }
+    }
+    for ((topic, parent, child), count) in &tf_pairs {
+        if topic.ends_with("tf_static") {
+            continue;
+        }
+        if is_wheel_odometry(topic, Some((parent, child))) {
+            wheel_odometry.push(format!("{topic}: {parent} -> {child}"));
+        } else {
+            refs.push(Reference {
+                topic: topic.clone(),
+                frame: Some((parent.clone(), child.clone())),
+                what: format!("TF {parent} -> {child}"),
+                count: *count,
+                hinted: hinted(child) || hinted(parent),
+            });
+        }
+    }
+    let duration_s = bag
+        .time_range_ns()
+        .map(|(a, b)| (b - a) as f64 * 1e-9)
+        .unwrap_or(0.0);
+    let rate = |n: u64| {
+        if duration_s > 0.0 {
+            format!("{:.1} Hz", n as f64 / duration_s)
+        } else {
+            "-".into()
+        }
+    };
+
+    let _ = writeln!(o, "\nFor calibration (`twindrive calibrate --bag`):");
+    let _ = writeln!(o, "  wheels (joint states):");
+    if joints.is_empty() {
+        let _ = writeln!(o, "    none");
+    }
+    for (topic, j) in &joints {
+        let signals = match (j.position, j.velocity) {
+            (true, true) => "position and velocity",
+            (true, false) => "position",
+            (false, true) => "velocity",
+            (false, false) => "neither position nor velocity for every joint",
+        };
+        let _ = writeln!(o, "    {topic}: joints {} ({signals})", j.names.join(", "));
+    }
+    let _ = writeln!(o, "  wheels (two integer fields, encoder ticks):");
+    if ticks.is_empty() {
+        let _ = writeln!(o, "    none");
+    }
+    for (topic, ty, fields) in &ticks {
+        let _ = writeln!(o, "    {topic} ({ty}): {}", fields.join(", "));
+    }
+    refs.sort_by(|a, b| b.hinted.cmp(&a.hinted).then(b.count.cmp(&a.count)));
+    let _ = writeln!(o, "  pose references (best first):");
+    if refs.is_empty() {
+        let _ = writeln!(o, "    none");
+    }
+    for r in &refs {
+        let _ = writeln!(
+            o,
+            "    {} ({}, {} messages, {})",
+            r.topic,
+            r.what,
+            r.count,
+            rate(r.count)
+        );
+    }
+    if !wheel_odometry.is_empty() {
+        let _ = writeln!(
+            o,
+            "  wheel odometry (computed from the wheels, so not a reference):"
+        );
+        for w in &wheel_odometry {
+            let _ = writeln!(o, "    {w}");
+        }
+    }
+    let _ = writeln!(o, "  scans: {}", list_or_none(&scans));
+    let _ = writeln!(o, "  IMU: {}", list_or_none(&imus));
+    for u in &unreadable {
+        let _ = writeln!(o, "  cannot read: {u}");
+    }
+
+    let wheel_flags = match joints
+        .iter()
+        .find_map(|(t, j)| wheel_pair(&j.names).map(|(l, r)| (t, l, r)))
+    {
+        Some((topic, l, r)) => {
+            let mut f = String::new();
+            if topic != "/joint_states" {
+                let _ = write!(f, " --joint-topic {topic}");
+            }
+            let _ = write!(f, " --left-joint {l} --right-joint {r}");
+            Some(f)
+        }
+        None => ticks.first().map(|(topic, _, fields)| {
+            format!(
+                " --ticks-topic {topic} --left-field {} --right-field {} --ticks-per-rev TICKS",
+                fields[0], fields[1]
+            )
+        }),
+    };
+    let reference = refs.first().map(|r| match &r.frame {
+        Some((parent, child)) => format!(
+            " --pose-topic {} --pose-frame {child} --pose-parent {parent}",
+            r.topic
+        ),
+        None => format!(" --pose-topic {}", r.topic),
+    });
+    match (wheel_flags, reference) {
+        (Some(w), Some(p)) => {
+            let _ = writeln!(
+                o,
+                "\nSuggested (DL,DR,B: your robot's nominal wheel diameters and wheelbase in metres):\n  twindrive calibrate --bag {}{w}{p} --time-offset auto --initial DL,DR,B --out calib.json",
+                shell_quote(&path.display().to_string())
+            );
+        }
+        (w, p) => {
+            let _ = writeln!(
+                o,
+                "\nNo calibrate command line to suggest: {}.",
+                match (w, p) {
+                    (None, None) => "the bag has neither wheel data nor a pose reference",
+                    (None, _) =>
+                        "the bag has no wheel data (two wheel joints, or two integer tick fields)",
+                    _ => "the bag has no pose reference besides wheel odometry",
+                }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Standard packages whose messages never carry wheel ticks (std_msgs'
+/// integer arrays and robot vendors' packages may).
+fn standard_non_tick(type_name: &str) -> bool {
+    const PACKAGES: &[&str] = &[
+        "action_msgs",
+        "builtin_interfaces",
+        "diagnostic_msgs",
+        "geometry_msgs",
+        "lifecycle_msgs",
+        "map_msgs",
+        "nav_msgs",
+        "rcl_interfaces",
+        "rosgraph_msgs",
+        "sensor_msgs",
+        "shape_msgs",
+        "statistics_msgs",
+        "stereo_msgs",
+        "tf2_msgs",
+        "trajectory_msgs",
+        "unique_identifier_msgs",
+        "visualization_msgs",
+    ];
+    PACKAGES.contains(&type_name.split('/').next().unwrap_or(""))
+}
+
+fn list_or_none(v: &[String]) -> String {
+    if v.is_empty() {
+        "none".into()
+    } else {
+        v.join(", ")
+    }
+}
+
+/// The left and right wheel joints among `names`, if they can be told.
+fn wheel_pair(names: &[String]) -> Option<(&str, &str)> {
+    let find = |side: &str| {
+        let mut m = names.iter().filter(|n| {
+            let l = n.to_ascii_lowercase();
+            l.contains(side) && l.contains("wheel")
+        });
+        let first = m.next()?;
+        m.next().is_none().then_some(first.as_str())
+    };
+    match (find("left"), find("right")) {
+        (Some(l), Some(r)) => Some((l, r)),
+        _ if names.len() == 2 => Some((&names[0], &names[1])),
+        _ => None,
+    }
+}
+
+fn shell_quote(s: &str) -> String {
+    if s.chars()
+        .all(|c| c.is_ascii_alphanumeric() || "/._-+:@%".contains(c))
+    {
+        s.to_string()
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn references_and_wheel_odometry_are_told_apart() {
+        assert!(hinted("/mocap/pose") && hinted("/vicon/robot_1") && hinted("/ground_truth"));
+        assert!(!hinted("/amcl_pose") && !hinted("/odom"));
+        assert!(is_wheel_odometry("/odom", None));
+        assert!(is_wheel_odometry("/tf", Some(("odom", "base_link"))));
+        assert!(!is_wheel_odometry("/tf", Some(("world", "robot"))));
+    }
+
+    #[test]
+    fn wheel_joints_are_found_by_name() {
+        let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            wheel_pair(&names(&[
+                "arm_joint",
+                "wheel_right_joint",
+                "wheel_left_joint"
+            ])),
+            Some(("wheel_left_joint", "wheel_right_joint"))
+        );
+        assert_eq!(wheel_pair(&names(&["a", "b"])), Some(("a", "b")));
+        assert_eq!(wheel_pair(&names(&["a", "b", "c"])), None);
+    }
+}
