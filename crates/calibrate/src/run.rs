@@ -24,6 +24,11 @@ pub const MIN_ACCEPTED_FRACTION: f64 = 0.5;
 const DISAGREE_HINT: &str = "check --left-sign/--right-sign, the clock offset (--time-offset auto), \
      --initial, and that --position-std-m/--heading-std-rad match the reference's noise";
 
+/// Largest relative standard deviation of the weakest combination of
+/// (dL, dR, b) a calibration may have; between the batch fit's precision
+/// threshold (0.2 %) and this, it is written with a warning.
+pub const MAX_WEAKEST_RELATIVE_STD: f64 = 0.05;
+
 /// Refuses a calibration the data does not support: too few reference
 /// poses accepted, most of them rejected, or motion that leaves a parameter
 /// unpinned. The error says what was accepted and rejected and why.
@@ -45,9 +50,13 @@ fn check_support(r: &Report) -> anyhow::Result<()> {
             100.0 * (1.0 - MIN_ACCEPTED_FRACTION)
         ));
     }
-    if !r.identifiability.well_determined {
+    if !r
+        .identifiability
+        .pins_every_parameter(MAX_WEAKEST_RELATIVE_STD)
+    {
         why.push(format!(
-            "the motion does not pin every parameter: {}",
+            "the motion does not pin every parameter (the weakest combination must be known to {:.0} %): {}",
+            100.0 * MAX_WEAKEST_RELATIVE_STD,
             r.identifiability.verdict
         ));
     }
@@ -71,8 +80,8 @@ fn check_support(r: &Report) -> anyhow::Result<()> {
 
 /// Runs a calibration. `progress(done, total)` follows the filter. A
 /// calibration the data does not support is an error (see
-/// [`MIN_ACCEPTED_POSES`], [`MIN_ACCEPTED_FRACTION`] and the batch fit's
-/// identifiability), so nothing is written from it.
+/// [`MIN_ACCEPTED_POSES`], [`MIN_ACCEPTED_FRACTION`] and
+/// [`MAX_WEAKEST_RELATIVE_STD`]), so nothing is written from it.
 pub fn calibrate(
     mut job: Job,
     progress: impl FnMut(usize, usize),

@@ -77,6 +77,25 @@ const POOR_RELATIVE_STD: f64 = 0.002;
 const DEGENERATE_CONDITION: f64 = 1e3;
 
 impl Identifiability {
+    /// Relative standard deviation of the least-determined combination of
+    /// (dL, dR, b).
+    pub fn weakest_relative_std(&self) -> f64 {
+        if self.eigenvalues[0] > 0.0 {
+            1.0 / self.eigenvalues[0].sqrt()
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Whether the motion pins every parameter at all: the drive's geometry
+    /// separates them (no unobserved direction) and the weakest combination
+    /// is known to better than `max_relative_std`. Weaker than
+    /// [`well_determined`](Self::well_determined), which asks for precision.
+    pub fn pins_every_parameter(&self, max_relative_std: f64) -> bool {
+        self.condition_number <= DEGENERATE_CONDITION
+            && self.weakest_relative_std() < max_relative_std
+    }
+
     /// From the information matrix `h` (per metre²) at `params`.
     pub fn from_information(h: &Matrix3<f64>, params: [f64; 3]) -> Self {
         let d = Matrix3::from_diagonal(&Vector3::from(params));

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::io::{Seek, Write};
 
-use super::writer::{StorageWrite, TopicSpec, WriteError};
+use super::storage_write::{StorageWrite, TopicSpec, WriteError};
 use crate::msgs::Distro;
 
 pub(super) struct McapStorage<W: Write + Seek> {

@@ -19,6 +19,7 @@ pub mod metadata;
 mod source;
 mod sqlite_read;
 mod sqlite_write;
+mod storage_write;
 mod writer;
 
 use std::collections::BTreeMap;
@@ -26,7 +27,8 @@ use std::path::{Path, PathBuf};
 
 pub use metadata::Metadata;
 pub use source::Storage;
-pub use writer::{BagWriter, TopicId, WriteError};
+pub use storage_write::WriteError;
+pub use writer::{BagWriter, TopicId};
 
 use crate::msgs::{self, Distro};
 use crate::schema::{Schema, normalize_type_name};

@@ -15,11 +15,11 @@ use rusqlite::{Connection, OpenFlags};
 use super::source::Source;
 use super::{BagError, Damage, FileScan, RawVisitor, StoredDefinition, StoredTopic, TopicFilter};
 
-/// A temporary copy of a database.
+/// A temporary copy of a database, removed when dropped.
 #[derive(Debug)]
-enum Copy {
-    File(#[allow(dead_code)] tempfile::TempPath),
-    Dir(#[allow(dead_code)] tempfile::TempDir),
+enum TempCopy {
+    File { _path: tempfile::TempPath },
+    Dir { _dir: tempfile::TempDir },
 }
 
 /// A database ready to open: the file itself, or its decompressed copy.
@@ -27,7 +27,7 @@ enum Copy {
 pub(super) struct Db {
     path: PathBuf,
     /// A copy made to read it (removed on drop).
-    _copy: Option<Arc<Copy>>,
+    _copy: Option<Arc<TempCopy>>,
     /// How the file falls short (a compressed stream cut short, fewer
     /// pages than the header says).
     pub shortfall: Option<String>,
@@ -106,7 +106,9 @@ impl Db {
         }
         Ok(Self {
             path: copy.path().to_path_buf(),
-            _copy: Some(Arc::new(Copy::File(copy.into_temp_path()))),
+            _copy: Some(Arc::new(TempCopy::File {
+                _path: copy.into_temp_path(),
+            })),
             shortfall,
         })
     }
@@ -142,7 +144,7 @@ impl Db {
         let path = dir.path().join("bag.db3");
         Ok(Self {
             path,
-            _copy: Some(Arc::new(Copy::Dir(dir))),
+            _copy: Some(Arc::new(TempCopy::Dir { _dir: dir })),
             shortfall: None,
         })
     }

@@ -14,7 +14,7 @@ use std::path::Path;
 
 use rusqlite::Connection;
 
-use super::writer::{StorageWrite, TopicSpec, WriteError};
+use super::storage_write::{StorageWrite, TopicSpec, WriteError};
 use crate::msgs::Distro;
 
 pub(super) struct SqliteStorage {

@@ -6,47 +6,10 @@ use std::io::{Seek, Write};
 use std::path::Path;
 
 use super::metadata::{self, RenderTopic};
+use super::storage_write::{StorageWrite, TopicSpec, WriteError};
 use super::{mcap_write, sqlite_write};
 use crate::msgs::{self, Distro, RosMessage};
 use crate::qos::Qos;
-
-/// Writing a bag failed.
-#[derive(Debug, thiserror::Error)]
-pub enum WriteError {
-    #[error("writing MCAP: {0}")]
-    Mcap(#[from] mcap::McapError),
-    #[error("writing the sqlite3 database: {0}")]
-    Sqlite(#[from] rusqlite::Error),
-    #[error(transparent)]
-    Io(#[from] std::io::Error),
-}
-
-/// A topic as the storage writes it.
-pub(super) struct TopicSpec<'a> {
-    pub name: &'a str,
-    pub type_name: &'static str,
-    /// The full `ros2msg` definition.
-    pub definition: &'a str,
-    /// RIHS01, or empty (Humble).
-    pub type_hash: &'a str,
-    pub qos: Qos,
-}
-
-/// One storage's side of [`BagWriter`].
-pub(super) trait StorageWrite {
-    /// Declares topic number `index` (0, 1, … in order).
-    fn add_topic(&mut self, index: usize, topic: &TopicSpec<'_>) -> Result<(), WriteError>;
-    /// Writes the `sequence`-th message of topic `index`.
-    fn write(
-        &mut self,
-        index: usize,
-        sequence: u64,
-        t_ns: u64,
-        data: &[u8],
-    ) -> Result<(), WriteError>;
-    /// Completes the file; `metadata_yaml` is what goes beside it.
-    fn finish(self: Box<Self>, metadata_yaml: &str) -> Result<(), WriteError>;
-}
 
 /// A topic handle from [`BagWriter::topic`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
