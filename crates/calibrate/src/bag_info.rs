@@ -218,7 +218,7 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    // One pass over the topics that need their messages read.
+    // The topics whose messages are read, if their definitions parse.
     let mut readable: Vec<&str> = Vec::new();
     for t in &decode {
         match bag.schema(t) {
@@ -226,70 +226,95 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             Err(e) => unreadable.push(e.to_string()),
         }
     }
-    let schemas: Vec<_> = readable
-        .iter()
-        .map(|t| bag.schema(t).expect("checked"))
-        .collect();
     let mut tf_pairs: BTreeMap<(String, String, String), u64> = BTreeMap::new();
     let mut odom_children: BTreeMap<String, (String, u64)> = BTreeMap::new();
-    bag.for_each_of(&readable, |k, m| {
-        let topic = readable[k];
-        let schema = &schemas[k];
-        match schema.root().name.as_str() {
-            "sensor_msgs/msg/JointState" => {
-                let j = joints.entry(topic.to_string()).or_default();
-                let names = schema.path("name").map_err(|e| e.to_string())?;
-                if let Some(list) = m.value.at(&names).and_then(Value::as_array) {
-                    for n in list.iter().filter_map(Value::as_str) {
-                        if j.names.len() < 64 && !j.names.iter().any(|x| x == n) {
-                            j.names.push(n.to_string());
+    // One topic at a time, so a message that does not decode costs that
+    // topic, not the report.
+    for topic in readable {
+        let schema = bag.schema(topic)?;
+        let read = bag.for_each(topic, |m| {
+            match schema.root().name.as_str() {
+                "sensor_msgs/msg/JointState" => {
+                    let j = joints.entry(topic.to_string()).or_default();
+                    let names = schema.path("name").map_err(|e| e.to_string())?;
+                    if let Some(list) = m.value.at(&names).and_then(Value::as_array) {
+                        for n in list.iter().filter_map(Value::as_str) {
+                            if j.names.len() < 64 && !j.names.iter().any(|x| x == n) {
+                                j.names.push(n.to_string());
+                            }
+                        }
+                        let len = |f: &str| {
+                            schema
+                                .path(f)
+                                .ok()
+                                .and_then(|p| {
+                                    m.value.at(&p).and_then(Value::as_array).map(<[_]>::len)
+                                })
+                                .unwrap_or(0)
+                        };
+                        j.position |= len("position") == list.len() && !list.is_empty();
+                        j.velocity |= len("velocity") == list.len() && !list.is_empty();
+                    }
+                }
+                "nav_msgs/msg/Odometry" => {
+                    let child = schema
+                        .path("child_frame_id")
+                        .ok()
+                        .and_then(|p| m.value.at(&p).and_then(Value::as_str).map(str::to_string))
+                        .unwrap_or_default();
+                    let e = odom_children.entry(topic.to_string()).or_insert((child, 0));
+                    e.1 += 1;
+                }
+                _ => {
+                    let list = schema.path("transforms").map_err(|e| e.to_string())?;
+                    let twindrive_ros::Base::Message(ts) = list.ty.base else {
+                        return Ok(());
+                    };
+                    let child = schema
+                        .path_from(ts, "child_frame_id")
+                        .map_err(|e| e.to_string())?;
+                    let parent = schema
+                        .path_from(ts, "header.frame_id")
+                        .map_err(|e| e.to_string())?;
+                    for tr in m.value.at(&list).and_then(Value::as_array).unwrap_or(&[]) {
+                        if let (Some(c), Some(p)) = (
+                            tr.at(&child).and_then(Value::as_str),
+                            tr.at(&parent).and_then(Value::as_str),
+                        ) {
+                            *tf_pairs
+                                .entry((
+                                    topic.to_string(),
+                                    p.trim_start_matches('/').to_string(),
+                                    c.trim_start_matches('/').to_string(),
+                                ))
+                                .or_default() += 1;
                         }
                     }
-                    let len = |f: &str| {
-                        schema
-                            .path(f)
-                            .ok()
-                            .and_then(|p| m.value.at(&p).and_then(Value::as_array).map(<[_]>::len))
-                            .unwrap_or(0)
-                    };
-                    j.position |= len("position") == list.len() && !list.is_empty();
-                    j.velocity |= len("velocity") == list.len() && !list.is_empty();
                 }
             }
-            "nav_msgs/msg/Odometry" => {
-                let child = schema
-                    .path("child_frame_id")
-                    .ok()
-                    .and_then(|p| m.value.at(&p).and_then(Value::as_str).map(str::to_string))
-                    .unwrap_or_default();
-                let e = odom_children.entry(topic.to_string()).or_insert((child, 0));
-                e.1 += 1;
-            }
-            _ => {
-                let list = schema.path("transforms").map_err(|e| e.to_string())?;
-                let twindrive_ros::Base::Message(ts) = list.ty.base else {
-                    return Ok(());
-                };
-                let child = schema
-                    .path_from(ts, "child_frame_id")
-                    .map_err(|e| e.to_string())?;
-                let parent = schema
-                    .path_from(ts, "header.frame_id")
-                    .map_err(|e| e.to_string())?;
-                for tr in m.value.at(&list).and_then(Value::as_array).unwrap_or(&[]) {
-                    if let (Some(c), Some(p)) = (
-                        tr.at(&child).and_then(Value::as_str),
-                        tr.at(&parent).and_then(Value::as_str),
-                    ) {
-                        *tf_pairs
-                            .entry((topic.to_string(), p.to_string(), c.to_string()))
-                            .or_default() += 1;
-                    }
-                }
-            }
+            Ok(())
+        });
+        if let Err(e) = read {
+            joints.remove(topic);
+            odom_children.remove(topic);
+            tf_pairs.retain(|(t, _, _), _| t != topic);
+            unreadable.push(e.to_string());
         }
-        Ok(())
-    })?;
+    }
+    // Frames on the robot (the base and everything mounted on it): an edge
+    // from one of them, or into `odom`, is not the robot's pose in the world.
+    let mut on_robot: Vec<String> = vec!["base_link".into(), "base_footprint".into()];
+    loop {
+        let more: Vec<String> = tf_pairs
+            .keys()
+            .filter(|(_, p, c)| on_robot.contains(p) && !on_robot.contains(c))
+            .map(|(_, _, c)| c.clone())
+            .collect();
+        if more.is_empty() {
+            break;
+        }
+        on_robot.extend(more);
+    }
     for (topic, (child, count)) in &odom_children {
         if is_wheel_odometry(topic, None) && !hinted(topic) {
             wheel_odometry.push(format!(
@@ -306,7 +331,7 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
         }
     }
     for ((topic, parent, child), count) in &tf_pairs {
-        if topic.ends_with("tf_static") {
+        if topic.ends_with("tf_static") || on_robot.contains(parent) || child == "odom" {
             continue;
         }
         if is_wheel_odometry(topic, Some((parent, child))) {
@@ -505,6 +530,83 @@ mod tests {
         assert!(is_wheel_odometry("/odom", None));
         assert!(is_wheel_odometry("/tf", Some(("odom", "base_link"))));
         assert!(!is_wheel_odometry("/tf", Some(("world", "robot"))));
+    }
+
+    /// A robot without motion capture: nav2's `/amcl_pose`, and a `/tf`
+    /// full of edges that are not the robot's pose in the world (the wheels
+    /// on the base, `map -> odom`, wheel odometry).
+    #[test]
+    fn the_suggested_reference_is_a_pose_of_the_robot_in_the_world() {
+        use twindrive_ros::msgs::{
+            Distro, Header, JointState, Pose, PoseWithCovariance, PoseWithCovarianceStamped,
+            TFMessage, TransformStamped,
+        };
+        use twindrive_ros::{BagWriter, Qos};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("b_0.db3");
+        let mut w = BagWriter::sqlite3(&path, "b_0.db3", Distro::Humble).unwrap();
+        let js = w
+            .topic::<JointState>("/joint_states", Qos::DEFAULT)
+            .unwrap();
+        let tf = w.topic::<TFMessage>("/tf", Qos::DEFAULT).unwrap();
+        let amcl = w
+            .topic::<PoseWithCovarianceStamped>("/amcl_pose", Qos::DEFAULT)
+            .unwrap();
+        for k in 0..200u64 {
+            let t = 1_000_000_000 + k * 20_000_000;
+            let a = k as f64 * 0.01;
+            w.write(
+                js,
+                t,
+                &JointState {
+                    header: Header::new(t, ""),
+                    name: vec!["wheel_left_joint".into(), "wheel_right_joint".into()],
+                    position: vec![a, a],
+                    velocity: vec![],
+                    effort: vec![],
+                },
+            )
+            .unwrap();
+            let transforms = vec![
+                TransformStamped::planar(t, "base_link", "wheel_left_link", 0.0, 0.08, a),
+                TransformStamped::planar(t, "base_link", "wheel_right_link", 0.0, -0.08, a),
+                TransformStamped::planar(t, "wheel_left_link", "left_tyre", 0.0, 0.0, 0.0),
+                TransformStamped::planar(t, "odom", "base_link", a, 0.0, 0.0),
+            ];
+            w.write(tf, t, &TFMessage { transforms }).unwrap();
+            if k % 25 == 0 {
+                let map_odom = TransformStamped::planar(t, "map", "odom", 0.1, 0.0, 0.0);
+                w.write(
+                    tf,
+                    t,
+                    &TFMessage {
+                        transforms: vec![map_odom],
+                    },
+                )
+                .unwrap();
+                let pose = PoseWithCovarianceStamped {
+                    header: Header::new(t, "map"),
+                    pose: PoseWithCovariance {
+                        pose: Pose::planar(a, 0.0, 0.0),
+                        ..Default::default()
+                    },
+                };
+                w.write(amcl, t, &pose).unwrap();
+            }
+        }
+        std::fs::write(dir.path().join("metadata.yaml"), w.finish().unwrap()).unwrap();
+        let text = describe(dir.path()).unwrap();
+        let suggested = text.lines().last().unwrap();
+        assert!(
+            suggested.contains("--pose-topic /amcl_pose")
+                && suggested
+                    .contains("--left-joint wheel_left_joint --right-joint wheel_right_joint"),
+            "{text}"
+        );
+        for not_a_reference in ["wheel_left_link", "left_tyre", "TF map -> odom"] {
+            assert!(!text.contains(not_a_reference), "{not_a_reference}: {text}");
+        }
+        assert!(text.contains("/tf: odom -> base_link"), "{text}");
     }
 
     #[test]

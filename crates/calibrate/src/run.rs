@@ -173,10 +173,14 @@ pub fn calibrate(
         (run, batch.join())
     });
     let run = run.map_err(|e| {
-        anyhow::anyhow!(
-            "calibration refused, nothing written: {e}. The poses disagree with the wheels: {}",
-            DISAGREE_HINT
-        )
+        let text = e.to_string();
+        if text.contains("diverged") {
+            anyhow::anyhow!(
+                "calibration refused, nothing written: {text}. The poses disagree with the wheels: {DISAGREE_HINT}"
+            )
+        } else {
+            anyhow::Error::from(e)
+        }
     })?;
     let b = b.map_err(|_| anyhow::anyhow!("the batch fit panicked"))??;
     let history = run.history.as_ref().expect("kept");

@@ -31,6 +31,17 @@ impl Distro {
             _ => None,
         }
     }
+
+    /// The definitions a release's messages follow, by the release's name
+    /// as a bag records it: Humble's up to Iron (`sensor_msgs/msg/Range`
+    /// without `variance`), Jazzy's from Jazzy on.
+    pub fn of_release(name: &str) -> Option<Self> {
+        match name.to_ascii_lowercase().as_str() {
+            "foxy" | "galactic" | "humble" | "iron" => Some(Distro::Humble),
+            "jazzy" | "kilted" | "rolling" => Some(Distro::Jazzy),
+            _ => None,
+        }
+    }
 }
 
 /// A message type with its definition.
@@ -491,6 +502,17 @@ pub struct PoseWithCovariance {
     pub pose: Pose,
     pub covariance: Covariance,
 }
+
+/// A localizer's pose (nav2's `/amcl_pose`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct PoseWithCovarianceStamped {
+    pub header: Header,
+    pub pose: PoseWithCovariance,
+}
+message!(
+    PoseWithCovarianceStamped,
+    "geometry_msgs/msg/PoseWithCovarianceStamped"
+);
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Twist {

@@ -757,9 +757,9 @@ pub struct RosbagArgs {
     #[arg(long, value_enum, default_value_t = DistroArg::Jazzy)]
     pub distro: DistroArg,
     /// Storage of the bag: MCAP (`NAME_0.mcap`, zstd chunks; rosbag2's
-    /// default from Jazzy), or sqlite3 (`NAME_0.db3`, laid out as the
-    /// distribution's rosbag2 writes it: Humble plays it without the MCAP
-    /// plugin).
+    /// default from Iron), or sqlite3 (`NAME_0.db3`, laid out as the
+    /// distribution's rosbag2 writes it: with --distro humble, Humble plays
+    /// it without the MCAP plugin).
     #[arg(long, value_enum, default_value_t = StorageArg::Mcap)]
     pub storage: StorageArg,
     /// Unix time (seconds) of the log's t = 0; by default the bag starts at

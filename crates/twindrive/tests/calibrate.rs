@@ -317,7 +317,8 @@ fn a_sparse_noisy_reference_is_refused_for_the_right_reason() {
     assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
     let stderr = text(&o.stderr);
     assert!(
-        stderr.contains("calibration refused, nothing written") && stderr.contains("rejected"),
+        stderr.contains("calibration refused, nothing written")
+            && stderr.contains("the filter's gate rejected"),
         "{stderr}"
     );
     assert!(json.is_none() && !tmp.path().join("tight").exists());
@@ -332,7 +333,7 @@ fn a_sparse_noisy_reference_is_refused_for_the_right_reason() {
     assert!(
         stderr.contains("does not pin every parameter")
             && !stderr.contains("gate rejected")
-            && stderr.contains("0 rejected"),
+            && stderr.contains(", 0 rejected ("),
         "{stderr}"
     );
     assert!(json.is_none() && !tmp.path().join("stated").exists());

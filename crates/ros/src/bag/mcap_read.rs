@@ -1,6 +1,8 @@
 //! Reading one MCAP storage file as a stream (memory bounded by the largest
-//! chunk, not the file): chunks compressed with zstd, lz4 or not at all,
-//! each chunk's CRC checked before its messages are used, and a file cut short or damaged read up to its last whole
+//! chunk, not the file; [`super::Bag::for_each_of`] buffers a file only
+//! when its messages are stored out of log-time order): chunks compressed with zstd, lz4 or not at all,
+//! each chunk's CRC (where the writer stored one) checked before its
+//! messages are used, and a file cut short or damaged read up to its last whole
 //! record. The summary section is not needed.
 
 use std::cell::Cell;
@@ -13,9 +15,13 @@ use mcap::sans_io::LinearReaderOptions;
 use super::source::Source;
 use super::{BagError, Damage, FileScan, RawVisitor, StoredDefinition, StoredTopic, TopicFilter};
 
-/// The largest record or decompressed chunk read (a damaged length field
-/// cannot make the reader allocate more).
+/// The largest record or decompressed chunk read: a damaged length field
+/// cannot make the reader allocate more. For a plain file, a chunk's
+/// content is at most this many times the file (zstd and lz4 on ROS
+/// messages stay well below), between 64 MiB and 1 GiB.
 const RECORD_LIMIT_BYTES: usize = 1 << 30;
+const RECORD_LIMIT_MIN_BYTES: usize = 64 << 20;
+const CHUNK_EXPANSION: usize = 32;
 
 /// Counts the bytes read, to say where a damaged file stops.
 struct Counted<R> {
@@ -35,11 +41,19 @@ type Reader = mcap::io::MessageReader<Counted<Box<dyn Read>>>;
 
 fn reader(source: &Source) -> Result<(Reader, Rc<Cell<u64>>), BagError> {
     let bytes = Rc::new(Cell::new(0));
+    let limit = if source.compressed() {
+        RECORD_LIMIT_BYTES
+    } else {
+        (source.len() as usize)
+            .saturating_mul(CHUNK_EXPANSION)
+            .clamp(RECORD_LIMIT_MIN_BYTES, RECORD_LIMIT_BYTES)
+    };
     let options = LinearReaderOptions::default()
         // A chunk is checked whole before any of its messages is used: a
-        // damaged one yields nothing rather than what decompressed first.
+        // damaged one yields nothing rather than what decompressed first
+        // (where the writer stored a CRC; some rosbag2 presets do not).
         .with_prevalidate_chunk_crcs(true)
-        .with_record_length_limit(RECORD_LIMIT_BYTES);
+        .with_record_length_limit(limit);
     let counted = Counted {
         inner: source.stream()?,
         bytes: bytes.clone(),

@@ -1,6 +1,6 @@
 //! rosbag2's `metadata.yaml`: read in every layout rosbag2 has written
-//! (versions 1 to 9: Foxy writes 4, Galactic 5, Humble 5 and 6, Iron 7 and
-//! 8, Jazzy 8 and 9, Rolling 9), and written at version 8.
+//! (versions 1 to 9: Foxy and Galactic write 4, Humble 5, Iron 7, Jazzy 9),
+//! and written at version 8.
 //!
 //! What changed between versions (rosbag2's `yaml.hpp`): 3 added the
 //! compression fields; 4 the topics' `offered_qos_profiles` (a YAML text);
@@ -324,6 +324,29 @@ rosbag2_bagfile_information:
         assert!(e.starts_with("rosbag2_bagfile_information.topics_with_message_count[0].message_count: expected a whole number"), "{e}");
         let e = Metadata::parse(&FOXY.replace("version: 4", "version: 10")).unwrap_err();
         assert!(e.contains("versions 1 to 9"), "{e}");
+    }
+
+    /// Versions before Foxy: 2 has no compression fields and no QoS, 3
+    /// adds compression.
+    #[test]
+    fn reads_the_oldest_layouts() {
+        let v2 = FOXY
+            .replace("version: 4", "version: 2")
+            .replace("        offered_qos_profiles: \"- history: 3\\n  depth: 0\\n  reliability: 1\\n\"\n", "")
+            .replace("  compression_format: \"\"\n  compression_mode: \"\"\n", "");
+        assert!(
+            !v2.contains("offered_qos") && !v2.contains("compression"),
+            "{v2}"
+        );
+        let m = Metadata::parse(&v2).unwrap();
+        assert_eq!((m.version, m.compression_mode.as_str()), (2, ""));
+        assert_eq!(m.topics[0].message_count, 3);
+        let v3 = FOXY
+            .replace("version: 4", "version: 3")
+            .replace("compression_mode: \"\"", "compression_mode: FILE");
+        let m = Metadata::parse(&v3).unwrap();
+        assert_eq!(m.compression_mode, "FILE");
+        assert!(!m.compresses_messages());
     }
 
     #[test]

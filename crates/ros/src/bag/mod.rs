@@ -194,6 +194,9 @@ pub struct Bag {
     path: PathBuf,
     storage: Storage,
     metadata: Option<Metadata>,
+    /// What could not be used at all: an unreadable `metadata.yaml`, a
+    /// file of a split bag with nothing readable.
+    notes: Vec<Damage>,
     files: Vec<BagFile>,
     topics: Vec<TopicInfo>,
     /// Stored definitions by type name: (encoding, text), the first file's.
@@ -221,8 +224,20 @@ impl Bag {
             path: p.into(),
             message,
         };
+        // `BAG/metadata.yaml` names its bag.
+        let path = match path.parent() {
+            Some(dir) if path.file_name().is_some_and(|n| n == METADATA) => {
+                if dir.as_os_str().is_empty() {
+                    Path::new(".")
+                } else {
+                    dir
+                }
+            }
+            _ => path,
+        };
+        let mut notes: Vec<Damage> = Vec::new();
         let (sources, metadata) = if path.is_dir() {
-            locate(path)?
+            locate(path, &mut notes)?
         } else {
             let source = Source::recognise(path)?.ok_or_else(|| {
                 file_err(
@@ -245,16 +260,35 @@ impl Bag {
             ));
         }
         let mut files = Vec::new();
+        let several = sources.len() > 1;
         for source in sources {
-            let (db, scan) = match source.storage {
-                Storage::Mcap => (None, mcap_read::scan(&source)?),
-                Storage::Sqlite3 => {
-                    let db = sqlite_read::Db::prepare(&source)?;
+            let scanned = match source.storage {
+                Storage::Mcap => mcap_read::scan(&source).map(|scan| (None, scan)),
+                Storage::Sqlite3 => sqlite_read::Db::prepare(&source).and_then(|db| {
                     let scan = sqlite_read::scan(&source, &db)?;
-                    (Some(db), scan)
-                }
+                    Ok((Some(db), scan))
+                }),
             };
-            files.push(BagFile { source, db, scan });
+            match scanned {
+                Ok((db, scan)) => files.push(BagFile { source, db, scan }),
+                // One unreadable file of several (a split cut at power
+                // loss, an empty file): the others are read.
+                Err(e) if several => notes.push(Damage {
+                    path: source.path.clone(),
+                    messages_read: 0,
+                    time_range_ns: None,
+                    position: "nothing read from this file".into(),
+                    reason: e.to_string(),
+                }),
+                Err(e) => return Err(e),
+            }
+        }
+        if files.is_empty() {
+            let reasons: Vec<String> = notes.iter().map(|d| d.reason.clone()).collect();
+            return Err(file_err(
+                path,
+                format!("no whole message can be read: {}", reasons.join("; ")),
+            ));
         }
         if metadata.is_none() {
             // Without metadata.yaml the files go in the order of their
@@ -289,7 +323,7 @@ impl Bag {
                             return Err(file_err(
                                 &f.source.path,
                                 format!(
-                                    "topic `{}` has type {} here and {} in an earlier file",
+                                    "topic `{}` has type {} here and {} elsewhere in the bag",
                                     t.name, t.type_name, x.type_name
                                 ),
                             ));
@@ -330,7 +364,10 @@ impl Bag {
             }
         }
         topics.sort_by(|a, b| a.name.cmp(&b.name));
-        if let Some(d) = files.iter().find_map(|f| f.scan.damage.as_ref())
+        if let Some(d) = files
+            .iter()
+            .find_map(|f| f.scan.damage.as_ref())
+            .or(notes.first())
             && files.iter().all(|f| f.scan.messages == 0)
         {
             return Err(file_err(
@@ -342,6 +379,7 @@ impl Bag {
             path: path.into(),
             storage,
             metadata,
+            notes,
             files,
             topics,
             definitions,
@@ -392,11 +430,13 @@ impl Bag {
             .collect()
     }
 
-    /// Where files stop being readable (empty for a whole recording).
+    /// Where files stop being readable, and what was passed over (an
+    /// unreadable `metadata.yaml`, a split file with nothing readable);
+    /// empty for a whole recording.
     pub fn damage(&self) -> Vec<&Damage> {
-        self.files
+        self.notes
             .iter()
-            .filter_map(|f| f.scan.damage.as_ref())
+            .chain(self.files.iter().filter_map(|f| f.scan.damage.as_ref()))
             .collect()
     }
 
@@ -442,30 +482,36 @@ impl Bag {
             )));
         }
         let name = &info.type_name;
-        match self.definitions.get(name) {
-            Some((encoding, data)) if encoding == "ros2msg" => {
-                let text = std::str::from_utf8(data)
-                    .map_err(|_| terr("the message definition is not UTF-8 text".into()))?;
-                return Schema::parse(name, text)
-                    .map_err(|e| terr(format!("the stored definition of {name}: {e}")));
-            }
-            Some((encoding, _)) if encoding == "ros2idl" => {
-                return Err(terr(format!(
-                    "the type {name} is defined as `{encoding}`, and only `ros2msg` definitions are read (IDL-only types are not supported)"
-                )));
-            }
-            // Stored without a usable definition (`unknown`, empty): fall
-            // back to the built-in one.
-            _ => {}
+        if name.is_empty() {
+            return Err(terr(
+                "the file gives it no type (an MCAP channel without a schema)".into(),
+            ));
         }
-        let distro = match self.distro.as_deref().and_then(Distro::parse) {
+        let distro = match self.distro.as_deref().and_then(Distro::of_release) {
             Some(d) => d,
             // Bags that store no definitions come from Humble or earlier.
             None if self.definitions.is_empty() => Distro::Humble,
             None => Distro::Jazzy,
         };
         let normal = normalize_type_name(name);
-        let text = msgs::definition(&normal, distro).ok_or_else(|| {
+        let builtin = msgs::definition(&normal, distro);
+        match self.definitions.get(name) {
+            Some((encoding, data)) if encoding == "ros2msg" && !data.is_empty() => {
+                let text = std::str::from_utf8(data)
+                    .map_err(|_| terr("the message definition is not UTF-8 text".into()))?;
+                return Schema::parse(name, text)
+                    .map_err(|e| terr(format!("the stored definition of {name}: {e}")));
+            }
+            Some((encoding, _)) if encoding == "ros2idl" && builtin.is_none() => {
+                return Err(terr(format!(
+                    "the type {name} is defined as `{encoding}`, and only `ros2msg` definitions are read (IDL-only types are not supported)"
+                )));
+            }
+            // Stored as IDL, or without a usable definition (`unknown`,
+            // empty): the built-in one, if twindrive has it.
+            _ => {}
+        }
+        let text = builtin.ok_or_else(|| {
             terr(format!(
                 "the bag stores no definition of {name} (sqlite3 bags before ROS 2 Iron keep only type names) and twindrive has no built-in one; built in: {}",
                 msgs::known_types().collect::<Vec<_>>().join(", ")
@@ -572,14 +618,37 @@ impl Bag {
 }
 
 /// The storage files of a bag directory and its `metadata.yaml`, if any.
-fn locate(dir: &Path) -> Result<(Vec<Source>, Option<Metadata>), BagError> {
+fn locate(
+    dir: &Path,
+    notes: &mut Vec<Damage>,
+) -> Result<(Vec<Source>, Option<Metadata>), BagError> {
     let file_err = |message: String| BagError::File {
         path: dir.into(),
         message,
     };
     let meta_path = dir.join(METADATA);
-    if meta_path.is_file() {
-        let m = Metadata::read(&meta_path)?;
+    // A metadata.yaml that does not read (empty after a crash, a version
+    // from the future) is passed over: the files are found as without one.
+    let metadata = if meta_path.is_file() {
+        match Metadata::read(&meta_path) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                notes.push(Damage {
+                    path: meta_path.clone(),
+                    messages_read: 0,
+                    time_range_ns: None,
+                    position:
+                        "ignored; the storage files are read in the order of their first message"
+                            .into(),
+                    reason: e.to_string(),
+                });
+                None
+            }
+        }
+    } else {
+        None
+    };
+    if let Some(m) = metadata {
         let storage =
             Storage::from_identifier(&m.storage_identifier).ok_or_else(|| BagError::File {
                 path: meta_path.clone(),
@@ -623,7 +692,10 @@ fn locate(dir: &Path) -> Result<(Vec<Source>, Option<Metadata>), BagError> {
             }
             let source = Source::recognise(&p)?.ok_or_else(|| BagError::File {
                 path: p.clone(),
-                message: "neither an MCAP file nor an SQLite database".into(),
+                message: format!(
+                    "metadata.yaml lists it as a {} storage file, but it is neither an MCAP file nor an SQLite database",
+                    storage.identifier()
+                ),
             })?;
             if source.storage != storage {
                 return Err(BagError::File {
@@ -664,6 +736,21 @@ fn locate(dir: &Path) -> Result<(Vec<Source>, Option<Metadata>), BagError> {
             sources.extend(Source::recognise(&p)?);
         }
     }
+    // A recorder that compresses each finished file and then deletes it
+    // can leave both when it stops in between: the plain one is whole.
+    let plain: Vec<PathBuf> = sources
+        .iter()
+        .filter(|s| !s.compressed())
+        .map(|s| s.path.clone())
+        .collect();
+    sources.retain(|s| {
+        let twin = s
+            .path
+            .to_string_lossy()
+            .strip_suffix(".zstd")
+            .map(PathBuf::from);
+        !(s.compressed() && twin.is_some_and(|t| plain.contains(&t)))
+    });
     if sources.is_empty() {
         return Err(file_err(
             "a directory without metadata.yaml and without storage files (.mcap, .db3, or either with .zstd): not a rosbag2 bag".into(),
@@ -675,7 +762,8 @@ fn locate(dir: &Path) -> Result<(Vec<Source>, Option<Metadata>), BagError> {
 /// `n` of a rosbag2 file name `name_n.db3` / `name_n.mcap(.zstd)`.
 fn split_index(path: &Path) -> u64 {
     let name = path.file_name().unwrap_or_default().to_string_lossy();
-    let stem = name.split('.').next().unwrap_or("");
+    let name = name.strip_suffix(".zstd").unwrap_or(&name);
+    let stem = name.rsplit_once('.').map_or(name, |(stem, _)| stem);
     stem.rsplit('_')
         .next()
         .and_then(|n| n.parse().ok())

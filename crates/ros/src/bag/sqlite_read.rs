@@ -63,14 +63,16 @@ impl Db {
             .prefix("twindrive-bag-")
             .suffix(".db3")
             .tempfile()
-            .map_err(io)?;
+            .map_err(|e| temp_error(source, e))?;
         let mut input = source.stream()?;
         let mut buf = vec![0u8; 1 << 16];
         let mut shortfall = None;
         loop {
             match input.read(&mut buf) {
                 Ok(0) => break,
-                Ok(n) => copy.write_all(&buf[..n]).map_err(io)?,
+                Ok(n) => copy
+                    .write_all(&buf[..n])
+                    .map_err(|e| temp_error(source, e))?,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
                 Err(e) => {
                     shortfall = Some(format!("the zstd stream stops short ({e})"));
@@ -118,17 +120,13 @@ impl Db {
     /// copied into a temporary directory and the log is folded in there,
     /// so the user's files stay as they are.
     fn with_wal(source: &Source, wal: &Path) -> Result<Self, BagError> {
-        let io = |e: std::io::Error| BagError::Io {
-            path: source.path.clone(),
-            source: e,
-        };
         let dir = tempfile::Builder::new()
             .prefix("twindrive-bag-")
             .tempdir()
-            .map_err(io)?;
+            .map_err(|e| temp_error(source, e))?;
         let db = dir.path().join("bag.db3");
-        std::fs::copy(&source.path, &db).map_err(io)?;
-        std::fs::copy(wal, dir.path().join("bag.db3-wal")).map_err(io)?;
+        std::fs::copy(&source.path, &db).map_err(|e| temp_error(source, e))?;
+        std::fs::copy(wal, dir.path().join("bag.db3-wal")).map_err(|e| temp_error(source, e))?;
         let conn = Connection::open(&db).map_err(|e| BagError::File {
             path: source.path.clone(),
             message: format!("SQLite cannot open it with its write-ahead log: {e}"),
@@ -165,6 +163,17 @@ impl Db {
                 | OpenFlags::SQLITE_OPEN_NO_MUTEX,
         )
         .map_err(err)
+    }
+}
+
+/// Making the working copy failed: the error names where copies go.
+fn temp_error(source: &Source, e: std::io::Error) -> BagError {
+    BagError::File {
+        path: source.path.clone(),
+        message: format!(
+            "a working copy in {} (set TMPDIR to another directory): {e}",
+            std::env::temp_dir().display()
+        ),
     }
 }
 
@@ -297,7 +306,7 @@ pub(super) fn scan(source: &Source, db: &Db) -> Result<FileScan, BagError> {
             Ok(Some(row)) => row,
             Ok(None) => break,
             Err(e) => {
-                scan.damage = Some(damage(source, &scan, e.to_string()));
+                scan.damage = Some(damage(source, db, &scan, e.to_string()));
                 break;
             }
         };
@@ -324,25 +333,30 @@ pub(super) fn scan(source: &Source, db: &Db) -> Result<FileScan, BagError> {
                 scan.add_message(t.max(0) as u64);
             }
             Err(e) => {
-                scan.damage = Some(damage(source, &scan, e.to_string()));
+                scan.damage = Some(damage(source, db, &scan, e.to_string()));
                 break;
             }
         }
     }
-    if scan.damage.is_none()
-        && let Some(e) = &db.shortfall
-    {
-        scan.damage = Some(damage(source, &scan, e.clone()));
+    if scan.damage.is_none() && db.shortfall.is_some() {
+        scan.damage = Some(damage(source, db, &scan, "the last rows are gone".into()));
     }
     Ok(scan)
 }
 
-fn damage(source: &Source, scan: &FileScan, reason: String) -> Damage {
+fn damage(source: &Source, db: &Db, scan: &FileScan, reason: String) -> Damage {
     Damage {
         path: source.path.clone(),
         messages_read: scan.messages,
         time_range_ns: scan.time_range_ns(),
-        position: format!("the first {} rows of `messages`", scan.messages),
+        position: format!(
+            "the `messages` table up to row {}{}",
+            scan.last_row_id,
+            db.shortfall
+                .as_ref()
+                .map(|s| format!("; {s}"))
+                .unwrap_or_default()
+        ),
         reason: format!("SQLite stops reading: {reason}"),
     }
 }

@@ -178,11 +178,12 @@ fn split_bags_without_metadata_read_in_time_order() {
     for storage in [Storage::Mcap, Storage::Sqlite3] {
         let dir = tempfile::tempdir().unwrap();
         let ext = storage.extension();
-        // Written out of name order on purpose: the times decide.
+        // Names out of time order on purpose (`b_0` is not the first):
+        // without metadata.yaml the first messages' times decide.
         for (i, t0) in [
-            (0, 1_000_000_000u64),
-            (1, 1_400_000_000),
-            (2, 1_800_000_000),
+            (2, 1_000_000_000u64),
+            (0, 1_400_000_000),
+            (1, 1_800_000_000),
         ] {
             write_steps(
                 dir.path(),
@@ -209,9 +210,9 @@ fn split_bags_without_metadata_read_in_time_order() {
         assert_eq!(
             names,
             [
+                format!("b_2.{ext}"),
                 format!("b_0.{ext}"),
-                format!("b_1.{ext}"),
-                format!("b_2.{ext}")
+                format!("b_1.{ext}")
             ]
         );
     }
@@ -230,7 +231,14 @@ fn whole_file_zstd_compression_reads_in_both_storages() {
     for storage in [Storage::Mcap, Storage::Sqlite3] {
         let dir = tempfile::tempdir().unwrap();
         let name = format!("b_0.{}", storage.extension());
-        let plain = write_steps(dir.path(), &name, storage, Distro::Jazzy, 30, 1_000_000_000);
+        let plain = write_steps(
+            dir.path(),
+            &name,
+            storage,
+            Distro::Jazzy,
+            8000,
+            1_000_000_000,
+        );
         let packed = zstd_file(&plain);
         let yaml = std::fs::read_to_string(dir.path().join("metadata.yaml"))
             .unwrap()
@@ -240,17 +248,16 @@ fn whole_file_zstd_compression_reads_in_both_storages() {
         std::fs::write(dir.path().join("metadata.yaml"), yaml).unwrap();
         let bag = Bag::open(dir.path()).unwrap();
         assert!(bag.files()[0].compressed, "{storage:?}");
-        assert_eq!(left_positions(&bag).len(), 30);
+        assert_eq!(left_positions(&bag).len(), 8000);
         // A compressed file cut short reads up to the cut.
         let bytes = std::fs::read(&packed).unwrap();
         std::fs::write(&packed, &bytes[..bytes.len() * 9 / 10]).unwrap();
-        match Bag::open(dir.path()) {
-            Ok(bag) => {
-                assert_eq!(bag.damage().len(), 1, "{storage:?}");
-                assert!(bag.message_count() < 45);
-            }
-            Err(e) => assert!(e.to_string().contains("no whole message"), "{e}"),
-        }
+        let bag = Bag::open(dir.path()).unwrap();
+        assert_eq!(bag.damage().len(), 1, "{storage:?}");
+        let n = bag.message_count();
+        assert!(n > 1000 && n < 12_000, "{storage:?}: {n}");
+        let left = left_positions(&bag);
+        assert!(left.windows(2).all(|w| w[1] == w[0] + 1.0));
     }
 }
 
@@ -334,22 +341,62 @@ fn sqlite3_cut_short_reads_up_to_the_damage() {
         1_000_000_000,
     );
     let whole = std::fs::read(&path).unwrap();
+    let mut last = 0;
     for percent in [50, 70, 90] {
         std::fs::write(&path, &whole[..whole.len() * percent / 100]).unwrap();
-        match Bag::open(dir.path()) {
-            Ok(bag) => {
-                let n = bag.message_count();
-                assert!(n < 4500, "{percent} %: {n}");
-                assert_eq!(bag.damage().len(), 1);
-                let left = left_positions(&bag);
-                assert!(left.windows(2).all(|w| w[1] == w[0] + 1.0));
-            }
-            Err(e) => {
-                let e = e.to_string();
-                assert!(e.contains("b_0.db3"), "{e}");
-            }
-        }
+        let bag = Bag::open(dir.path()).unwrap();
+        let n = bag.message_count();
+        assert!(n > last && n < 4500, "{percent} %: {n} after {last}");
+        last = n;
+        let d = bag.damage();
+        assert_eq!(d.len(), 1);
+        assert!(d[0].position.contains("bytes of the"), "{}", d[0]);
+        let left = left_positions(&bag);
+        assert!(!left.is_empty());
+        assert!(left.windows(2).all(|w| w[1] == w[0] + 1.0));
     }
+}
+
+#[test]
+fn what_a_crashed_recorder_leaves_beside_the_files_is_passed_over() {
+    let dir = tempfile::tempdir().unwrap();
+    for (i, t0) in [(0, 1_000_000_000u64), (1, 1_400_000_000)] {
+        write_steps(
+            dir.path(),
+            &format!("b_{i}.db3"),
+            Storage::Sqlite3,
+            Distro::Jazzy,
+            40,
+            t0,
+        );
+    }
+    // The second file compressed but its original not yet deleted, an
+    // empty third split, and metadata.yaml begun but empty.
+    let second = dir.path().join("b_1.db3");
+    std::fs::write(
+        dir.path().join("b_1.db3.zstd"),
+        zstd::stream::encode_all(&std::fs::read(&second).unwrap()[..], 1).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(dir.path().join("b_2.db3"), b"").unwrap();
+    std::fs::write(dir.path().join("metadata.yaml"), b"").unwrap();
+    let bag = Bag::open(dir.path()).unwrap();
+    assert_eq!(bag.files().len(), 2, "{:?}", bag.files());
+    assert!(bag.files().iter().all(|f| !f.compressed));
+    assert_eq!(bag.message_count(), 120);
+    let notes: Vec<String> = bag.damage().iter().map(|d| d.to_string()).collect();
+    assert_eq!(notes.len(), 2, "{notes:?}");
+    assert!(
+        notes[0].contains("metadata.yaml") && notes[0].contains("ignored"),
+        "{notes:?}"
+    );
+    assert!(
+        notes[1].contains("b_2.db3") && notes[1].contains("nothing read"),
+        "{notes:?}"
+    );
+    // The file named by its metadata.yaml opens as its bag.
+    let by_yaml = Bag::open(&dir.path().join("metadata.yaml")).unwrap();
+    assert_eq!(by_yaml.message_count(), 120);
 }
 
 #[test]
@@ -466,4 +513,56 @@ fn a_sqlite3_recording_left_in_its_write_ahead_log_reads_whole() {
         .into();
     assert!(before == after);
     assert_eq!(std::fs::read_dir(&bag_dir).unwrap().count(), 2);
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/rosbag2")
+        .join(name)
+}
+
+/// rosbag2's own test bags (tests/data/rosbag2/SOURCE.md): the same seven
+/// `test_msgs` messages in three storages and layouts.
+#[test]
+fn rosbag2s_own_test_bags_decode_with_their_stored_definitions() {
+    let mut decoded = Vec::new();
+    for name in ["sqlite3_cdr_test", "mcap_cdr_test"] {
+        let bag = Bag::open(&fixture(name)).unwrap();
+        assert_eq!(bag.message_count(), 7, "{name}");
+        let mut seen = Vec::new();
+        let counts = bag
+            .for_each_of(&["/test_topic", "/array_topic"], |k, m| {
+                seen.push((k, m.log_time_ns, format!("{:?}", m.value)));
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(counts, [3, 4], "{name}");
+        decoded.push(seen);
+    }
+    // Both storages hold the same bytes: they decode to the same values.
+    assert_eq!(decoded[0], decoded[1]);
+    // Foxy's database stores only type names, and test_msgs is not a type
+    // twindrive knows: the error names the type.
+    let bag = Bag::open(&fixture("foxy_sqlite3_cdr_test")).unwrap();
+    assert_eq!(bag.metadata().unwrap().version, 4);
+    let e = bag.schema("/test_topic").unwrap_err().to_string();
+    assert!(
+        e.contains("test_msgs/msg/BasicTypes") && e.contains("stores no definition"),
+        "{e}"
+    );
+}
+
+#[test]
+fn rosbag2s_file_compressed_split_bag_without_metadata_reads_in_order() {
+    let bag = Bag::open(&fixture("galactic_sqlite3_file_compression_no_metadata")).unwrap();
+    assert_eq!(bag.files().len(), 4);
+    assert!(bag.files().iter().all(|f| f.compressed));
+    assert_eq!(bag.message_count(), 775);
+    let mut last = 0;
+    bag.for_each("/topic", |m| {
+        assert!(m.log_time_ns >= last);
+        last = m.log_time_ns;
+        Ok(())
+    })
+    .unwrap();
 }

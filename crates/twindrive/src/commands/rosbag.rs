@@ -74,8 +74,10 @@ pub fn run(args: &RosbagArgs) -> anyhow::Result<()> {
         }
         StorageArg::Sqlite3 => {
             let file_name = format!("{name}_0.db3");
-            let bag = BagWriter::sqlite3(&staging.path(&file_name), &file_name, distro)?;
-            (file_name, write_log_bag(&log, &options, bag)?)
+            let written = BagWriter::sqlite3(&staging.path(&file_name), &file_name, distro)
+                .and_then(|bag| write_log_bag(&log, &options, bag))
+                .with_context(|| format!("writing {}/{file_name}", args.out.display()))?;
+            (file_name, written)
         }
     };
     staging.write_with("metadata.yaml", |w| {
