@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::Context;
-use twindrive_ros::{Bag, Value};
+use twindrive_ros::{Bag, MessageRef, Schema, Value};
 
 /// Names that mark an external reference (motion capture, a tracker, a
 /// simulator's truth).
@@ -177,9 +177,91 @@ fn hinted(name: &str) -> bool {
             .any(|h| lower.contains(h))
 }
 
+/// What the joint-state, odometry and TF topics hold.
+#[derive(Default)]
+struct Seen {
+    joints: BTreeMap<String, Joints>,
+    /// (topic, parent, child) → transforms.
+    tf_pairs: BTreeMap<(String, String, String), u64>,
+    /// topic → (child frame, messages).
+    odom_children: BTreeMap<String, (String, u64)>,
+}
+
+impl Seen {
+    fn absorb(&mut self, topic: &str, schema: &Schema, m: &MessageRef<'_>) -> Result<(), String> {
+        match schema.root().name.as_str() {
+            "sensor_msgs/msg/JointState" => {
+                let j = self.joints.entry(topic.to_string()).or_default();
+                let names = schema.path("name").map_err(|e| e.to_string())?;
+                if let Some(list) = m.value.at(&names).and_then(Value::as_array) {
+                    for n in list.iter().filter_map(Value::as_str) {
+                        if j.names.len() < 64 && !j.names.iter().any(|x| x == n) {
+                            j.names.push(n.to_string());
+                        }
+                    }
+                    let len = |f: &str| {
+                        schema
+                            .path(f)
+                            .ok()
+                            .and_then(|p| m.value.at(&p).and_then(Value::as_array).map(<[_]>::len))
+                            .unwrap_or(0)
+                    };
+                    j.position |= len("position") == list.len() && !list.is_empty();
+                    j.velocity |= len("velocity") == list.len() && !list.is_empty();
+                }
+            }
+            "nav_msgs/msg/Odometry" => {
+                let child = schema
+                    .path("child_frame_id")
+                    .ok()
+                    .and_then(|p| m.value.at(&p).and_then(Value::as_str).map(str::to_string))
+                    .unwrap_or_default();
+                let e = self
+                    .odom_children
+                    .entry(topic.to_string())
+                    .or_insert((child, 0));
+                e.1 += 1;
+            }
+            _ => {
+                let list = schema.path("transforms").map_err(|e| e.to_string())?;
+                let twindrive_ros::Base::Message(ts) = list.ty.base else {
+                    return Ok(());
+                };
+                let child = schema
+                    .path_from(ts, "child_frame_id")
+                    .map_err(|e| e.to_string())?;
+                let parent = schema
+                    .path_from(ts, "header.frame_id")
+                    .map_err(|e| e.to_string())?;
+                for tr in m.value.at(&list).and_then(Value::as_array).unwrap_or(&[]) {
+                    if let (Some(c), Some(p)) = (
+                        tr.at(&child).and_then(Value::as_str),
+                        tr.at(&parent).and_then(Value::as_str),
+                    ) {
+                        *self
+                            .tf_pairs
+                            .entry((
+                                topic.to_string(),
+                                p.trim_start_matches('/').to_string(),
+                                c.trim_start_matches('/').to_string(),
+                            ))
+                            .or_default() += 1;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn forget(&mut self, topic: &str) {
+        self.joints.remove(topic);
+        self.odom_children.remove(topic);
+        self.tf_pairs.retain(|(t, _, _), _| t != topic);
+    }
+}
+
 /// Which topics calibration can use, and a command line.
 fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
-    let mut joints: BTreeMap<String, Joints> = BTreeMap::new();
     let mut refs: Vec<Reference> = Vec::new();
     let mut wheel_odometry: Vec<String> = Vec::new();
     let mut scans = Vec::new();
@@ -226,81 +308,30 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             Err(e) => unreadable.push(e.to_string()),
         }
     }
-    let mut tf_pairs: BTreeMap<(String, String, String), u64> = BTreeMap::new();
-    let mut odom_children: BTreeMap<String, (String, u64)> = BTreeMap::new();
-    // One topic at a time, so a message that does not decode costs that
-    // topic, not the report.
-    for topic in readable {
-        let schema = bag.schema(topic)?;
-        let read = bag.for_each(topic, |m| {
-            match schema.root().name.as_str() {
-                "sensor_msgs/msg/JointState" => {
-                    let j = joints.entry(topic.to_string()).or_default();
-                    let names = schema.path("name").map_err(|e| e.to_string())?;
-                    if let Some(list) = m.value.at(&names).and_then(Value::as_array) {
-                        for n in list.iter().filter_map(Value::as_str) {
-                            if j.names.len() < 64 && !j.names.iter().any(|x| x == n) {
-                                j.names.push(n.to_string());
-                            }
-                        }
-                        let len = |f: &str| {
-                            schema
-                                .path(f)
-                                .ok()
-                                .and_then(|p| {
-                                    m.value.at(&p).and_then(Value::as_array).map(<[_]>::len)
-                                })
-                                .unwrap_or(0)
-                        };
-                        j.position |= len("position") == list.len() && !list.is_empty();
-                        j.velocity |= len("velocity") == list.len() && !list.is_empty();
-                    }
-                }
-                "nav_msgs/msg/Odometry" => {
-                    let child = schema
-                        .path("child_frame_id")
-                        .ok()
-                        .and_then(|p| m.value.at(&p).and_then(Value::as_str).map(str::to_string))
-                        .unwrap_or_default();
-                    let e = odom_children.entry(topic.to_string()).or_insert((child, 0));
-                    e.1 += 1;
-                }
-                _ => {
-                    let list = schema.path("transforms").map_err(|e| e.to_string())?;
-                    let twindrive_ros::Base::Message(ts) = list.ty.base else {
-                        return Ok(());
-                    };
-                    let child = schema
-                        .path_from(ts, "child_frame_id")
-                        .map_err(|e| e.to_string())?;
-                    let parent = schema
-                        .path_from(ts, "header.frame_id")
-                        .map_err(|e| e.to_string())?;
-                    for tr in m.value.at(&list).and_then(Value::as_array).unwrap_or(&[]) {
-                        if let (Some(c), Some(p)) = (
-                            tr.at(&child).and_then(Value::as_str),
-                            tr.at(&parent).and_then(Value::as_str),
-                        ) {
-                            *tf_pairs
-                                .entry((
-                                    topic.to_string(),
-                                    p.trim_start_matches('/').to_string(),
-                                    c.trim_start_matches('/').to_string(),
-                                ))
-                                .or_default() += 1;
-                        }
-                    }
-                }
+    // One pass over every topic; if a message does not decode, topic by
+    // topic, so it costs only its topic.
+    let schemas = readable
+        .iter()
+        .map(|t| bag.schema(t))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut seen = Seen::default();
+    if bag
+        .for_each_of(&readable, |k, m| seen.absorb(readable[k], &schemas[k], &m))
+        .is_err()
+    {
+        seen = Seen::default();
+        for (topic, schema) in readable.iter().zip(&schemas) {
+            if let Err(e) = bag.for_each(topic, |m| seen.absorb(topic, schema, &m)) {
+                seen.forget(topic);
+                unreadable.push(e.to_string());
             }
-            Ok(())
-        });
-        if let Err(e) = read {
-            joints.remove(topic);
-            odom_children.remove(topic);
-            tf_pairs.retain(|(t, _, _), _| t != topic);
-            unreadable.push(e.to_string());
         }
     }
+    let Seen {
+        joints,
+        tf_pairs,
+        odom_children,
+    } = seen;
     // Frames on the robot (the base and everything mounted on it): an edge
     // from one of them, or into `odom`, is not the robot's pose in the world.
     let mut on_robot: Vec<String> = vec!["base_link".into(), "base_footprint".into()];

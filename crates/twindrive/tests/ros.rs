@@ -484,6 +484,13 @@ fn bad_recordings_and_wrong_names_say_which_topic_and_message() {
         "{e}"
     );
     assert!(!e.contains("panicked"), "{e}");
+    // `bag info` still reports the rest, and names what it cannot read.
+    let (total, topics, out) = bag_info(&bad);
+    assert!(total > 10 && topics.contains_key("/joint_states"), "{out}");
+    assert!(
+        out.contains("cannot read:") && out.contains("topic `/joint_states`, message 7"),
+        "{out}"
+    );
 }
 
 /// Ten JointState messages and a pose stream, message `bad` cut short.
