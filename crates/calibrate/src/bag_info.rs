@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::Context;
-use twindrive_ros::{Bag, MessageRef, Schema, Value};
+use twindrive_ros::{Bag, MessageRef, Value};
 
 /// Names that mark an external reference (motion capture, a tracker, a
 /// simulator's truth).
@@ -188,7 +188,8 @@ struct Seen {
 }
 
 impl Seen {
-    fn absorb(&mut self, topic: &str, schema: &Schema, m: &MessageRef<'_>) -> Result<(), String> {
+    fn absorb(&mut self, topic: &str, m: &MessageRef<'_>) -> Result<(), String> {
+        let schema = m.schema;
         match schema.root().name.as_str() {
             "sensor_msgs/msg/JointState" => {
                 let j = self.joints.entry(topic.to_string()).or_default();
@@ -310,18 +311,14 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
     }
     // One pass over every topic; if a message does not decode, topic by
     // topic, so it costs only its topic.
-    let schemas = readable
-        .iter()
-        .map(|t| bag.schema(t))
-        .collect::<Result<Vec<_>, _>>()?;
     let mut seen = Seen::default();
     if bag
-        .for_each_of(&readable, |k, m| seen.absorb(readable[k], &schemas[k], &m))
+        .for_each_of(&readable, |k, m| seen.absorb(readable[k], &m))
         .is_err()
     {
         seen = Seen::default();
-        for (topic, schema) in readable.iter().zip(&schemas) {
-            if let Err(e) = bag.for_each(topic, |m| seen.absorb(topic, schema, &m)) {
+        for topic in &readable {
+            if let Err(e) = bag.for_each(topic, |m| seen.absorb(topic, &m)) {
                 seen.forget(topic);
                 unreadable.push(e.to_string());
             }

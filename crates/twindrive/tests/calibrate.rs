@@ -295,48 +295,49 @@ fn a_sparse_noisy_reference_is_refused_for_the_right_reason() {
     let ticks = std::fs::read_to_string(sim.join("log.meta.json")).unwrap();
     let ticks: serde_json::Value = serde_json::from_str(&ticks).unwrap();
     let ticks = ticks["ticks_per_rev"].to_string();
-    let base = |out: &Path| {
-        vec![
-            "--encoders".to_string(),
+    // Calibrates with the reference's stated noise; checks the refusal
+    // (exit 1, nothing written) and returns what it said.
+    let refused = |name: &str, position_std_m: &str, heading_std_rad: &str| {
+        let out = tmp.path().join(name).join("calib.json");
+        let (e, p, out_s) = (
             e.display().to_string(),
-            "--poses".into(),
             p.display().to_string(),
-            "--ticks-per-rev".into(),
-            ticks.clone(),
-            "--initial".into(),
-            "0.07,0.07,0.23".into(),
-            "--out".into(),
             out.display().to_string(),
-        ]
+        );
+        let args = [
+            "--encoders",
+            &e,
+            "--poses",
+            &p,
+            "--ticks-per-rev",
+            &ticks,
+            "--initial",
+            "0.07,0.07,0.23",
+            "--out",
+            &out_s,
+            "--position-std-m",
+            position_std_m,
+            "--heading-std-rad",
+            heading_std_rad,
+        ];
+        let (o, json, _) = calibrate(&args);
+        assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
+        assert!(json.is_none() && !tmp.path().join(name).exists());
+        text(&o.stderr)
     };
-    let out = tmp.path().join("tight/calib.json");
-    let mut args = base(&out);
-    args.extend(["--position-std-m", "0.002", "--heading-std-rad", "0.005"].map(String::from));
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let (o, json, _) = calibrate(&args);
-    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
-    let stderr = text(&o.stderr);
+    let stderr = refused("tight", "0.002", "0.005");
     assert!(
         stderr.contains("calibration refused, nothing written")
             && stderr.contains("the filter's gate rejected"),
         "{stderr}"
     );
-    assert!(json.is_none() && !tmp.path().join("tight").exists());
-
-    let out = tmp.path().join("stated/calib.json");
-    let mut args = base(&out);
-    args.extend(["--position-std-m", "0.05", "--heading-std-rad", "0.05"].map(String::from));
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let (o, json, _) = calibrate(&args);
-    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stdout));
-    let stderr = text(&o.stderr);
+    let stderr = refused("stated", "0.05", "0.05");
     assert!(
         stderr.contains("does not pin every parameter")
             && !stderr.contains("gate rejected")
             && stderr.contains(", 0 rejected ("),
         "{stderr}"
     );
-    assert!(json.is_none() && !tmp.path().join("stated").exists());
 }
 
 /// Runs calibrate on hand-written CSVs and checks the clean failure (exit 1).

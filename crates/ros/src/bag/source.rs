@@ -33,6 +33,17 @@ impl Storage {
         }
     }
 
+    /// The storage whose magic bytes a file starts with.
+    fn by_magic(head: &[u8]) -> Option<Self> {
+        if head.starts_with(MCAP_MAGIC) {
+            Some(Storage::Mcap)
+        } else if head.starts_with(SQLITE_MAGIC) {
+            Some(Storage::Sqlite3)
+        } else {
+            None
+        }
+    }
+
     /// The file extension, without the dot.
     pub fn extension(self) -> &'static str {
         match self {
@@ -79,36 +90,25 @@ impl Source {
             }));
         }
         let mut head = [0u8; 16];
-        let n = read_head(path, &mut head)?;
-        let head = &head[..n];
-        let storage = if head.starts_with(MCAP_MAGIC) {
-            Storage::Mcap
-        } else if head.starts_with(SQLITE_MAGIC) {
-            Storage::Sqlite3
-        } else if head.starts_with(ZSTD_MAGIC) {
+        let n = read_full(&mut open(path)?, &mut head).map_err(|e| io(path, e))?;
+        let (storage, compressed) = match Storage::by_magic(&head[..n]) {
+            Some(storage) => (storage, false),
             // A compressed file under another name: look inside.
-            let mut inner = [0u8; 16];
-            let mut d = zstd::stream::read::Decoder::new(open(path)?).map_err(|e| io(path, e))?;
-            let n = read_full(&mut d, &mut inner).map_err(|e| io(path, e))?;
-            let storage = if inner[..n].starts_with(MCAP_MAGIC) {
-                Storage::Mcap
-            } else if inner[..n].starts_with(SQLITE_MAGIC) {
-                Storage::Sqlite3
-            } else {
-                return Ok(None);
-            };
-            return Ok(Some(Self {
-                path: path.into(),
-                storage,
-                compressed: true,
-            }));
-        } else {
-            return Ok(None);
+            None if head[..n].starts_with(ZSTD_MAGIC) => {
+                let mut d =
+                    zstd::stream::read::Decoder::new(open(path)?).map_err(|e| io(path, e))?;
+                let n = read_full(&mut d, &mut head).map_err(|e| io(path, e))?;
+                match Storage::by_magic(&head[..n]) {
+                    Some(storage) => (storage, true),
+                    None => return Ok(None),
+                }
+            }
+            None => return Ok(None),
         };
         Ok(Some(Self {
             path: path.into(),
             storage,
-            compressed: false,
+            compressed,
         }))
     }
 
@@ -146,10 +146,6 @@ fn open(path: &Path) -> Result<BufReader<File>, BagError> {
         1 << 16,
         File::open(path).map_err(|e| io(path, e))?,
     ))
-}
-
-fn read_head(path: &Path, buf: &mut [u8]) -> Result<usize, BagError> {
-    read_full(&mut open(path)?, buf).map_err(|e| io(path, e))
 }
 
 fn read_full(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
