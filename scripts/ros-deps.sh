@@ -11,16 +11,4 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV=$ROOT/.venv-ros
 PINS=(rosbags==0.11.9 mcap-ros2-support==0.6.0 mcap==1.6.0 eclipse-zenoh==1.10.2)
 
-if [[ ! -x $VENV/bin/python ]]; then
-    python3 -m venv "$VENV"
-fi
-installed=$("$VENV/bin/python" -m pip freeze 2>/dev/null || true)
-missing=0
-for pin in "${PINS[@]}"; do
-    grep -qx "$pin" <<<"$installed" || missing=1
-done
-if [[ $missing == 1 ]]; then
-    echo "ros-deps: installing ${PINS[*]} into $VENV" >&2
-    "$VENV/bin/python" -m pip install -q --disable-pip-version-check "${PINS[@]}" >&2
-fi
-echo "$VENV/bin/python"
+bash "$ROOT/scripts/pinned-venv.sh" ros-deps "$VENV" "${PINS[@]}"
