@@ -8,6 +8,8 @@
 //!   its smoother;
 //! - [`batch`]: an independent Levenberg-Marquardt fit used as a cross-check;
 //! - [`clock`]: the offset between an encoder clock and a pose clock;
+//! - [`selfcal`]: self-calibration of the wheels and a lidar's mount (and a
+//!   gyro) from relative laser motions, without an external pose reference;
 //! - [`ellipse_fit`], [`dead_reckoning`]: for the paper's evidence.
 //!
 //! REP-103 throughout; the paper's eq. (3) has the opposite heading sign.
@@ -20,8 +22,10 @@ mod ekf;
 pub mod ellipse_fit;
 pub mod evaluation;
 pub mod localize;
+mod odometry_chain;
 mod offline;
 mod online;
+pub mod selfcal;
 mod smoother;
 
 pub use covariance::{PackedCovariance, PackedEstimate, chain};
