@@ -462,6 +462,7 @@ impl RosBridge {
                 bump: self.bump,
                 tracker: pose,
                 ground_truth: self.best_pose,
+                gyro_z_rad_s: None,
             },
             fresh_ranges_m: fresh,
             blocked: self.stall,

@@ -3,7 +3,7 @@
 //! Columns, in order: `t` (seconds), `cmd_left_rad_s`, `cmd_right_rad_s`,
 //! `left_rad_s`, `right_rad_s`, `left_ticks`, `right_ticks`, `bump` (0/1),
 //! `tracker_x`, `tracker_y`, `tracker_theta`, `gt_x`, `gt_y`, `gt_theta`, then
-//! one column per range beam: `range_<name>` for a single-beam sensor,
+//! `gyro_z_rad_s` when the header has a gyro, then one column per range beam: `range_<name>` for a single-beam sensor,
 //! `range_<name>_<beam>` otherwise. Empty cells mean "did not sample".
 //! Floats are written in their shortest exact form, so a read-back is bit-identical.
 
@@ -31,8 +31,15 @@ const FIXED_COLUMNS: [&str; 14] = [
     "gt_theta",
 ];
 
-fn range_columns(header: &LogHeader) -> Vec<String> {
+/// The gyro's column, present only in logs of a robot with a gyro.
+const GYRO_COLUMN: &str = "gyro_z_rad_s";
+
+/// The columns after the fixed ones: the gyro's, if any, then the range beams.
+fn sensor_columns(header: &LogHeader) -> Vec<String> {
     let mut cols = Vec::new();
+    if header.gyro.is_some() {
+        cols.push(GYRO_COLUMN.to_string());
+    }
     for s in &header.range_sensors {
         if s.beams == 1 {
             cols.push(format!("range_{}", s.name));
@@ -46,15 +53,16 @@ fn range_columns(header: &LogHeader) -> Vec<String> {
 /// Writes the log's rows (the header belongs in its JSON sidecar).
 pub fn write_csv<W: Write>(log: &MissionLog, out: W) -> std::io::Result<()> {
     let mut w = csv::Writer::from_writer(out);
-    let ranges = range_columns(&log.header);
+    let sensors = sensor_columns(&log.header);
     w.write_record(
         FIXED_COLUMNS
             .iter()
             .copied()
-            .chain(ranges.iter().map(String::as_str)),
+            .chain(sensors.iter().map(String::as_str)),
     )?;
+    let gyro = log.header.gyro.is_some();
     let per_step = log.beams_per_step();
-    let mut fields: Vec<String> = Vec::with_capacity(FIXED_COLUMNS.len() + per_step);
+    let mut fields: Vec<String> = Vec::with_capacity(FIXED_COLUMNS.len() + 1 + per_step);
     let opt = |v: Option<String>| v.unwrap_or_default();
     for (k, s) in log.steps.iter().enumerate() {
         fields.clear();
@@ -73,6 +81,9 @@ pub fn write_csv<W: Write>(log: &MissionLog, out: W) -> std::io::Result<()> {
         fields.push(opt(s.tracker.map(|p| p.heading_rad.to_string())));
         let gt = &s.ground_truth;
         fields.extend([gt.x_m, gt.y_m, gt.heading_rad].iter().map(f64::to_string));
+        if gyro {
+            fields.push(opt(s.gyro_z_rad_s.map(|w| w.to_string())));
+        }
         for r in &log.ranges[k * per_step..(k + 1) * per_step] {
             fields.push(if r.is_nan() {
                 String::new()
@@ -110,8 +121,10 @@ pub fn read_csv_from<R: Read>(
     let expected: Vec<String> = FIXED_COLUMNS
         .iter()
         .map(|c| c.to_string())
-        .chain(range_columns(header))
+        .chain(sensor_columns(header))
         .collect();
+    let gyro_column = header.gyro.as_ref().map(|_| FIXED_COLUMNS.len());
+    let first_range = FIXED_COLUMNS.len() + usize::from(gyro_column.is_some());
     for (i, want) in expected.iter().enumerate() {
         match names.get(i) {
             Some(got) if got == want => {}
@@ -201,8 +214,12 @@ pub fn read_csv_from<R: Read>(
             bump,
             tracker,
             ground_truth: Pose::new(cell.parse(11)?, cell.parse(12)?, cell.parse(13)?),
+            gyro_z_rad_s: match gyro_column {
+                Some(c) => cell.optional(c)?,
+                None => None,
+            },
         });
-        for c in FIXED_COLUMNS.len()..names.len() {
+        for c in first_range..names.len() {
             log.ranges.push(cell.optional(c)?.unwrap_or(f64::NAN));
         }
     }
@@ -293,6 +310,51 @@ mod tests {
                 .next()
                 .unwrap()
                 .ends_with("range_side_ir,range_scan_0,range_scan_1,range_scan_2,range_scan_3")
+        );
+    }
+
+    #[test]
+    fn the_gyro_column_is_there_only_with_a_gyro() {
+        let log = crate::testutil::sample_log_with_gyro();
+        let mut bytes = Vec::new();
+        write_csv(&log, &mut bytes).unwrap();
+        let back = read_csv_from(bytes.as_slice(), Path::new("mem.csv"), &log.header).unwrap();
+        assert_same(&log, &back);
+        let text = String::from_utf8(bytes).unwrap();
+        let mut lines = text.lines();
+        assert!(
+            lines
+                .next()
+                .unwrap()
+                .contains(",gt_theta,gyro_z_rad_s,range_side_ir,")
+        );
+        let first: Vec<&str> = lines.next().unwrap().split(',').collect();
+        assert_eq!(first[14], "-0.03333333333333333");
+        let second: Vec<&str> = text.lines().nth(2).unwrap().split(',').collect();
+        assert_eq!(second[14], "");
+
+        // A gyro column the header does not announce, and one it misses.
+        let err = parse(&text).unwrap_err().to_string();
+        assert!(
+            err.contains("column 15 is `gyro_z_rad_s`, expected `range_side_ir`"),
+            "{err}"
+        );
+        let mut plain = Vec::new();
+        write_csv(&sample_log(), &mut plain).unwrap();
+        let err = read_csv_from(plain.as_slice(), Path::new("x.csv"), &log.header)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("column 15 is `range_side_ir`, expected `gyro_z_rad_s`"),
+            "{err}"
+        );
+        let bad = text.replacen("-0.03333333333333333", "fast", 1);
+        let err = read_csv_from(bad.as_bytes(), Path::new("x.csv"), &log.header)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("line 2, column `gyro_z_rad_s`: expected a finite number"),
+            "{err}"
         );
     }
 

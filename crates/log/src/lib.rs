@@ -89,6 +89,21 @@ pub struct LogHeader {
     /// known, unlike the path that followed.
     pub start: Pose,
     pub range_sensors: Vec<RangeSensorInfo>,
+    /// The robot's gyro, if it has one; its readings are
+    /// [`StepRecord::gyro_z_rad_s`]. Absent from headers without one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gyro: Option<GyroInfo>,
+}
+
+/// A yaw-rate gyro as the operator knows it: its name and rate. A simulated
+/// gyro's bias, scale error and noise are the twin's hidden truth (like its
+/// true wheel parameters) and stay in the scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GyroInfo {
+    pub name: String,
+    /// Sampling rate (Hz).
+    pub rate_hz: f64,
 }
 
 impl LogHeader {
@@ -132,6 +147,9 @@ pub struct StepRecord {
     /// External tracker pose; `None` when it did not sample or dropped out.
     pub tracker: Option<Pose>,
     pub ground_truth: Pose,
+    /// Gyro reading of the yaw rate (rad/s, counter-clockwise positive);
+    /// `None` when there is no gyro or it did not sample.
+    pub gyro_z_rad_s: Option<f64>,
 }
 
 impl StepRecord {
@@ -204,6 +222,13 @@ impl MissionLog {
             .filter_map(|s| s.tracker.map(|p| (s.t_s(), p)))
     }
 
+    /// `(t_s, rad_s)` of every gyro sample.
+    pub fn gyro_rates(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.steps
+            .iter()
+            .filter_map(|s| s.gyro_z_rad_s.map(|w| (s.t_s(), w)))
+    }
+
     /// Ground-truth path length in metres.
     pub fn ground_truth_distance_m(&self) -> f64 {
         self.steps
@@ -249,6 +274,7 @@ pub(crate) mod testutil {
                     max_range_m: 5.0,
                 },
             ],
+            gyro: None,
         };
         let mut log = MissionLog::new(header);
         for k in 0..7u64 {
@@ -261,6 +287,7 @@ pub(crate) mod testutil {
                 bump: k == 4,
                 tracker: (k % 3 == 0).then_some(Pose::new(x, -x, 3.0)),
                 ground_truth: Pose::new(x, 2.0 * x, -0.1 * k as f64),
+                gyro_z_rad_s: None,
             });
             let sampled = k % 2 == 1;
             log.ranges.push(if sampled {
@@ -275,6 +302,19 @@ pub(crate) mod testutil {
                     f64::NAN
                 });
             }
+        }
+        log
+    }
+
+    /// [`sample_log`] with a gyro that samples on some steps.
+    pub fn sample_log_with_gyro() -> MissionLog {
+        let mut log = sample_log();
+        log.header.gyro = Some(GyroInfo {
+            name: "gyro".into(),
+            rate_hz: 50.0,
+        });
+        for (k, s) in log.steps.iter_mut().enumerate() {
+            s.gyro_z_rad_s = (k % 2 == 0).then_some(-0.1 / 3.0 + k as f64 * 1e-7);
         }
         log
     }
@@ -312,6 +352,19 @@ mod tests {
         )
         .unwrap();
         testutil::assert_same(&log, &read_log_dir(dir.path()).unwrap());
+        let with_gyro = testutil::sample_log_with_gyro();
+        let gyro_dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            gyro_dir.path().join("log.meta.json"),
+            serde_json::to_string(&with_gyro.header).unwrap(),
+        )
+        .unwrap();
+        write_csv(
+            &with_gyro,
+            std::fs::File::create(gyro_dir.path().join("log.csv")).unwrap(),
+        )
+        .unwrap();
+        testutil::assert_same(&with_gyro, &read_log_dir(gyro_dir.path()).unwrap());
         std::fs::write(dir.path().join("log.meta.json"), "{\"format\": 3}").unwrap();
         let err = read_log_dir(dir.path()).unwrap_err().to_string();
         assert!(err.contains("log.meta.json, line 1"), "{err}");
@@ -324,6 +377,31 @@ mod tests {
         assert_eq!(log.range_reading(1, 0).unwrap(), &[0.123456789]);
         assert_eq!(log.range_reading(1, 1).unwrap().len(), 4);
         assert!(log.range_reading(5, 1).is_none());
+    }
+
+    #[test]
+    fn the_gyro_is_in_the_header_only_when_there_is_one() {
+        let plain = serde_json::to_string(&testutil::sample_log().header).unwrap();
+        assert!(!plain.contains("gyro"), "{plain}");
+        let log = testutil::sample_log_with_gyro();
+        let json = serde_json::to_string(&log.header).unwrap();
+        assert!(
+            json.ends_with(r#""gyro":{"name":"gyro","rate_hz":50.0}}"#),
+            "{json}"
+        );
+        assert_eq!(
+            serde_json::from_str::<LogHeader>(&json).unwrap(),
+            log.header
+        );
+        let hidden = json.replace(r#""rate_hz":50.0"#, r#""rate_hz":50.0,"bias_rad_s":0.01"#);
+        let err = serde_json::from_str::<LogHeader>(&hidden).unwrap_err();
+        assert!(
+            err.to_string().contains("unknown field `bias_rad_s`"),
+            "{err}"
+        );
+        let rates: Vec<(f64, f64)> = log.gyro_rates().collect();
+        assert_eq!(rates.len(), 4);
+        assert_eq!(rates[1], (0.02, -0.1 / 3.0 + 2e-7));
     }
 
     #[test]

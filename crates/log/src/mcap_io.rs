@@ -3,7 +3,8 @@
 //! Topics: `/ground_truth` and `/tracker` (`foxglove.PoseInFrame`, plus an
 //! exact `heading_rad`), `/tf` (`foxglove.FrameTransform`, world -> base_link),
 //! `/range/<name>` (`foxglove.LaserScan` in frame `base_link`), `/wheels`,
-//! `/encoders` and `/bump` (twindrive schemas), and with a map the world's
+//! `/encoders` and `/bump` (twindrive schemas), `/gyro` (`twindrive.Gyro`)
+//! when the robot has a gyro, and with a map the world's
 //! walls on `/map` ([`crate::map_topic`]). The log header is the metadata
 //! record `twindrive.log_header`.
 
@@ -128,6 +129,12 @@ struct Bump {
     pressed: bool,
 }
 
+#[derive(Serialize, Deserialize)]
+struct Gyro {
+    timestamp: Stamp,
+    z_rad_s: f64,
+}
+
 fn time_schema() -> serde_json::Value {
     json!({"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}})
 }
@@ -227,6 +234,7 @@ struct Channels {
     encoders: u16,
     bump: u16,
     ranges: Vec<u16>,
+    gyro: Option<u16>,
 }
 
 fn add_channels<W: Write + Seek>(
@@ -278,6 +286,18 @@ fn add_channels<W: Write + Seek>(
         "jsonschema",
         &object_schema("twindrive.Bump", json!({"pressed": {"type": "boolean"}})),
     )?;
+    // Added last, and only with a gyro, so logs without one keep their bytes.
+    let gyro = match &header.gyro {
+        None => None,
+        Some(_) => {
+            let schema = w.add_schema(
+                "twindrive.Gyro",
+                "jsonschema",
+                &object_schema("twindrive.Gyro", json!({"z_rad_s": num})),
+            )?;
+            Some(w.add_channel(schema, "/gyro", "json", &none)?)
+        }
+    };
     Ok(Channels {
         ground_truth: w.add_channel(pose_in_frame, "/ground_truth", "json", &none)?,
         tracker: w.add_channel(pose_in_frame, "/tracker", "json", &none)?,
@@ -290,6 +310,7 @@ fn add_channels<W: Write + Seek>(
             .iter()
             .map(|s| w.add_channel(laser_scan, &format!("/range/{}", s.name), "json", &none))
             .collect::<Result<_, _>>()?,
+        gyro,
     })
 }
 
@@ -391,6 +412,17 @@ pub fn write_mcap_with_map<W: Write + Seek>(
                     frame_id: "world".into(),
                     pose: PoseMsg::planar(p),
                     heading_rad: p.heading_rad,
+                },
+            )?;
+        }
+        if let (Some(channel), Some(z)) = (ch.gyro, s.gyro_z_rad_s) {
+            emitter.emit(
+                &mut w,
+                channel,
+                t,
+                &Gyro {
+                    timestamp: stamp,
+                    z_rad_s: z,
                 },
             )?;
         }
@@ -565,6 +597,7 @@ pub fn read_mcap_bytes(bytes: &[u8], path: &Path) -> Result<MissionLog, LogError
                 bump: false,
                 tracker: None,
                 ground_truth: Pose::new(msg.pose.position.x, msg.pose.position.y, msg.heading_rad),
+                gyro_z_rad_s: None,
             });
             log.ranges.resize(log.ranges.len() + per_step, f64::NAN);
             continue;
@@ -598,6 +631,10 @@ pub fn read_mcap_bytes(bytes: &[u8], path: &Path) -> Result<MissionLog, LogError
                     m.pose.position.y,
                     m.heading_rad,
                 ));
+            }
+            "/gyro" if log.header.gyro.is_some() => {
+                let m: Gyro = serde_json::from_slice(&message.data).map_err(parse_err)?;
+                step.gyro_z_rad_s = Some(m.z_rad_s);
             }
             other => {
                 let &i = range_topics
@@ -636,6 +673,57 @@ mod tests {
         let mut again = std::io::Cursor::new(Vec::new());
         write_mcap(&log, &mut again).unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), again.into_inner());
+    }
+
+    #[test]
+    fn a_gyro_round_trips_on_its_own_channel() {
+        let log = crate::testutil::sample_log_with_gyro();
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        write_mcap(&log, &mut bytes).unwrap();
+        let bytes = bytes.into_inner();
+        assert_same(&log, &read_mcap_bytes(&bytes, Path::new("g.mcap")).unwrap());
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let gyro: Vec<_> = summary
+            .channels
+            .values()
+            .filter(|c| c.topic == "/gyro")
+            .collect();
+        assert_eq!(gyro.len(), 1);
+        assert_eq!(gyro[0].schema.as_ref().unwrap().name, "twindrive.Gyro");
+
+        // Without a gyro there is no channel, and a stray one is refused.
+        let plain = sample_log();
+        let mut plain_bytes = std::io::Cursor::new(Vec::new());
+        write_mcap(&plain, &mut plain_bytes).unwrap();
+        let plain_summary = mcap::Summary::read(plain_bytes.get_ref()).unwrap().unwrap();
+        assert!(plain_summary.channels.values().all(|c| c.topic != "/gyro"));
+        let mut stray = log.clone();
+        stray.header.gyro = None;
+        let mut stray_bytes = std::io::Cursor::new(Vec::new());
+        let json = serde_json::to_string(&stray.header).unwrap();
+        let mut w = writer(&mut stray_bytes).unwrap();
+        write_json_metadata(&mut w, HEADER_METADATA, json).unwrap();
+        let ch = add_channels(&mut w, &log.header).unwrap();
+        let mut emitter = Emitter::new();
+        let stamp = Stamp::new(0);
+        let gt = PoseInFrame {
+            timestamp: stamp,
+            frame_id: "world".into(),
+            pose: PoseMsg::planar(&Pose::default()),
+            heading_rad: 0.0,
+        };
+        emitter.emit(&mut w, ch.ground_truth, 0, &gt).unwrap();
+        let z = Gyro {
+            timestamp: stamp,
+            z_rad_s: 0.5,
+        };
+        emitter.emit(&mut w, ch.gyro.unwrap(), 0, &z).unwrap();
+        w.finish().unwrap();
+        drop(w);
+        let err = read_mcap_bytes(stray_bytes.get_ref(), Path::new("s.mcap"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("unexpected topic /gyro"), "{err}");
     }
 
     #[test]

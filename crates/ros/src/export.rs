@@ -12,7 +12,8 @@
 //! | `/bump` | `irobot_create_msgs/msg/HazardDetectionVector` (one `BUMP` while pressed) | each encoder sample |
 //! | `/<sensor>` | `sensor_msgs/msg/Range` (`INFRARED`) for one beam, else `sensor_msgs/msg/LaserScan` | each reading |
 //! | `/tf` | `tf2_msgs/msg/TFMessage`: `odom` → `base_link`; `map` → `odom` from the tracker | encoder / tracker samples |
-//! | `/tf_static` | `base_link` → `<sensor>_link` | once, latched |
+//! | `/imu` | `sensor_msgs/msg/Imu` in `imu_link`: the gyro's yaw rate as `angular_velocity.z`, no orientation or acceleration (covariance −1) | each gyro sample, when the log has a gyro |
+//! | `/tf_static` | `base_link` → `<sensor>_link`, and `imu_link` (identity) with a gyro | once, latched |
 //! | `/map` | `nav_msgs/msg/OccupancyGrid` | once, latched |
 //! | `/plan` | `nav_msgs/msg/Path` | once, latched, when a plan is given |
 //!
@@ -24,7 +25,7 @@ use twindrive_log::{MissionLog, WorldMap};
 
 use crate::bag::{BagWriter, WriteError};
 use crate::msgs::{
-    Covariance, Distro, HazardDetection, HazardDetectionVector, Header, JointState, LaserScan,
+    Covariance, Distro, HazardDetection, HazardDetectionVector, Header, Imu, JointState, LaserScan,
     MapMetaData, OccupancyGrid, Odometry, Path, PoseStamped, PoseWithCovariance, Range, TFMessage,
     Time, TransformStamped, Twist, TwistWithCovariance,
 };
@@ -33,6 +34,9 @@ use crate::qos::Qos;
 /// Joint names of the wheels in `/joint_states` (as TurtleBot 3 names them).
 pub const LEFT_WHEEL_JOINT: &str = "wheel_left_joint";
 pub const RIGHT_WHEEL_JOINT: &str = "wheel_right_joint";
+
+/// The frame of the gyro's `/imu` messages; `base_link` → it is the identity.
+pub const IMU_FRAME: &str = "imu_link";
 
 /// Cell size of the `/map` grid drawn from wall segments (m).
 const MAP_RESOLUTION_M: f64 = 0.05;
@@ -117,8 +121,12 @@ pub fn write_log_bag(
             }
         })
         .collect::<Result<_, _>>()?;
+    let imu = match h.gyro {
+        Some(_) => Some(bag.topic::<Imu>("/imu", Qos::DEFAULT)?),
+        None => None,
+    };
 
-    let transforms = h
+    let mut transforms: Vec<_> = h
         .range_sensors
         .iter()
         .map(|s| {
@@ -132,6 +140,16 @@ pub fn write_log_bag(
             )
         })
         .collect();
+    if imu.is_some() {
+        transforms.push(TransformStamped::planar(
+            t0,
+            "base_link",
+            IMU_FRAME,
+            0.0,
+            0.0,
+            0.0,
+        ));
+    }
     bag.write(tf_static, t0, &TFMessage { transforms })?;
     if let (Some(topic), Some(map)) = (map_topic, options.map) {
         bag.write(topic, t0, &occupancy_grid(map, t0))?;
@@ -288,6 +306,9 @@ pub fn write_log_bag(
                 },
             )?;
         }
+        if let (Some(topic), Some(z)) = (imu, s.gyro_z_rad_s) {
+            bag.write(topic, t, &Imu::yaw_rate(Header::new(t, IMU_FRAME), z))?;
+        }
         for (i, info) in h.range_sensors.iter().enumerate() {
             let Some(reading) = log.range_reading(k, i) else {
                 continue;
@@ -420,6 +441,138 @@ mod tests {
         let back = compose(&inverse(&a), &ab);
         assert!((back.x_m - b.x_m).abs() < 1e-12 && (back.y_m - b.y_m).abs() < 1e-12);
         assert!((back.heading_rad - b.heading_rad).abs() < 1e-12);
+    }
+
+    /// A short log with a gyro sampling every other step.
+    fn gyro_log(gyro: bool) -> MissionLog {
+        let mut log = MissionLog::new(twindrive_log::LogHeader {
+            format: twindrive_log::LOG_FORMAT.into(),
+            version: twindrive_log::LOG_VERSION,
+            scenario: "gyro".into(),
+            seed: 1,
+            dt_s: 0.01,
+            ticks_per_rev: 512,
+            nominal: DiffDriveParams::new(0.066, 0.066, 0.26),
+            footprint_radius_m: 0.15,
+            max_wheel_speed_rad_s: 12.0,
+            max_wheel_accel_rad_s2: 30.0,
+            start: Pose::new(1.0, 2.0, 0.5),
+            range_sensors: Vec::new(),
+            gyro: gyro.then(|| twindrive_log::GyroInfo {
+                name: "gyro".into(),
+                rate_hz: 50.0,
+            }),
+        });
+        for k in 0..10u64 {
+            log.steps.push(twindrive_log::StepRecord {
+                t_ns: k * 10_000_000,
+                cmd_wheel_rad_s: [1.0, 2.0],
+                wheel_rad_s: [1.0, 2.0],
+                encoder_ticks: Some([k as i64, 2 * k as i64]),
+                bump: false,
+                tracker: None,
+                ground_truth: Pose::new(1.0, 2.0, 0.5 + 0.01 * k as f64),
+                gyro_z_rad_s: (gyro && k % 2 == 0).then_some(1.0 / 3.0 - k as f64 * 1e-3),
+            });
+        }
+        log
+    }
+
+    /// Writes `log` as a bag in `dir` and opens it with the project's reader.
+    fn write_and_open(log: &MissionLog, dir: &std::path::Path, sqlite3: bool) -> crate::Bag {
+        let options = ExportOptions::default();
+        let summary = if sqlite3 {
+            let bag = BagWriter::sqlite3(&dir.join("g_0.db3"), "g_0.db3", Distro::Jazzy).unwrap();
+            write_log_bag(log, &options, bag).unwrap()
+        } else {
+            let file = std::fs::File::create(dir.join("g_0.mcap")).unwrap();
+            let bag =
+                BagWriter::mcap(std::io::BufWriter::new(file), "g_0.mcap", Distro::Jazzy).unwrap();
+            write_log_bag(log, &options, bag).unwrap()
+        };
+        std::fs::write(dir.join("metadata.yaml"), &summary.metadata_yaml).unwrap();
+        crate::Bag::open(dir).unwrap()
+    }
+
+    /// `/tf_static`'s transforms: child frame, [x, y, qz, qw].
+    fn static_frames(bag: &crate::Bag) -> Vec<(String, [f64; 4])> {
+        let schema = bag.schema("/tf_static").unwrap();
+        let transforms = schema.path("transforms").unwrap();
+        let crate::schema::Base::Message(ts) = transforms.ty.base else {
+            panic!("`transforms` is not a list of messages");
+        };
+        let inner = |dotted: &str| schema.path_from(ts, dotted).unwrap();
+        let child = inner("child_frame_id");
+        let nums = [
+            inner("transform.translation.x"),
+            inner("transform.translation.y"),
+            inner("transform.rotation.z"),
+            inner("transform.rotation.w"),
+        ];
+        let mut frames = Vec::new();
+        bag.for_each("/tf_static", |m| {
+            for t in m.value.at(&transforms).unwrap().as_array().unwrap() {
+                let name = t.at(&child).unwrap().as_str().unwrap().to_string();
+                frames.push((
+                    name,
+                    nums.each_ref().map(|p| t.at(p).unwrap().as_f64().unwrap()),
+                ));
+            }
+            Ok(())
+        })
+        .unwrap();
+        frames
+    }
+
+    #[test]
+    fn a_gyro_goes_to_imu_and_reads_back_exactly() {
+        let log = gyro_log(true);
+        for sqlite3 in [false, true] {
+            let dir = tempfile::tempdir().unwrap();
+            let bag = write_and_open(&log, dir.path(), sqlite3);
+            assert_eq!(bag.topic("/imu").unwrap().type_name, "sensor_msgs/msg/Imu");
+            let schema = bag.schema("/imu").unwrap();
+            let path = |p: &str| schema.path(p).unwrap();
+            let (z, frame, stamp) = (
+                path("angular_velocity.z"),
+                path("header.frame_id"),
+                path("header.stamp.nanosec"),
+            );
+            let covariances = [
+                path("orientation_covariance"),
+                path("angular_velocity_covariance"),
+                path("linear_acceleration_covariance"),
+            ];
+            let mut read = Vec::new();
+            bag.for_each("/imu", |m| {
+                let v = m.value;
+                assert_eq!(v.at(&frame).unwrap().as_str(), Some(IMU_FRAME));
+                let firsts: Vec<f64> = covariances
+                    .iter()
+                    .map(|c| v.at(c).unwrap().as_array().unwrap()[0].as_f64().unwrap())
+                    .collect();
+                assert_eq!(firsts, [-1.0, 0.0, -1.0]);
+                let ns = v.at(&stamp).unwrap().as_i64().unwrap() as u64;
+                assert_eq!(ns, m.log_time_ns);
+                read.push((
+                    twindrive_log::seconds_from_ns(ns),
+                    v.at(&z).unwrap().as_f64().unwrap(),
+                ));
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(read, log.gyro_rates().collect::<Vec<_>>());
+            assert_eq!(read.len(), 5);
+            assert_eq!(
+                static_frames(&bag),
+                [(IMU_FRAME.to_string(), [0.0, 0.0, 0.0, 1.0])]
+            );
+        }
+
+        let dir = tempfile::tempdir().unwrap();
+        let plain = write_and_open(&gyro_log(false), dir.path(), false);
+        assert!(plain.topic("/imu").is_none());
+        assert!(static_frames(&plain).is_empty());
     }
 
     #[test]

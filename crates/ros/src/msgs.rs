@@ -642,6 +642,43 @@ impl Serialize for Range {
     }
 }
 
+/// `sensor_msgs/msg/Imu`. A covariance whose first element is −1 marks
+/// its quantity as not measured; all zeros, as measured with an unknown
+/// covariance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Imu {
+    pub header: Header,
+    pub orientation: Quaternion,
+    pub orientation_covariance: [f64; 9],
+    pub angular_velocity: Vector3,
+    pub angular_velocity_covariance: [f64; 9],
+    pub linear_acceleration: Vector3,
+    pub linear_acceleration_covariance: [f64; 9],
+}
+message!(Imu, "sensor_msgs/msg/Imu");
+
+impl Imu {
+    /// `[-1, 0, …]`: the quantity is not measured.
+    pub const NOT_MEASURED: [f64; 9] = [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+
+    /// A yaw-rate gyro's reading: angular velocity about z (covariance
+    /// unknown), no orientation, no linear acceleration.
+    pub fn yaw_rate(header: Header, z_rad_s: f64) -> Self {
+        Self {
+            header,
+            orientation: Quaternion::default(),
+            orientation_covariance: Self::NOT_MEASURED,
+            angular_velocity: Vector3 {
+                z: z_rad_s,
+                ..Vector3::default()
+            },
+            angular_velocity_covariance: [0.0; 9],
+            linear_acceleration: Vector3::default(),
+            linear_acceleration_covariance: Self::NOT_MEASURED,
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LaserScan {
     pub header: Header,
@@ -772,6 +809,25 @@ mod tests {
             ..r
         };
         assert!(humble.decode(&encode(&old)).is_ok());
+    }
+
+    #[test]
+    fn imu_encodes_as_its_definition_and_back() {
+        let imu = Imu::yaw_rate(Header::new(2_250_000_000, "imu_link"), -0.375);
+        let bytes = encode(&imu);
+        let s = Schema::parse(Imu::TYPE, &definition(Imu::TYPE, Distro::Jazzy).unwrap()).unwrap();
+        let v = s.decode(&bytes).unwrap();
+        let get = |p: &str| v.at(&s.path(p).unwrap()).unwrap().clone();
+        assert_eq!(get("header.frame_id").as_str(), Some("imu_link"));
+        assert_eq!(get("angular_velocity.z").as_f64(), Some(-0.375));
+        assert_eq!(get("orientation.w").as_f64(), Some(1.0));
+        let first = |p: &str| get(p).as_array().unwrap()[0].as_f64();
+        assert_eq!(first("orientation_covariance"), Some(-1.0));
+        assert_eq!(first("angular_velocity_covariance"), Some(0.0));
+        assert_eq!(first("linear_acceleration_covariance"), Some(-1.0));
+        let (back, _) =
+            cdr_encoding::from_bytes::<Imu, byteorder::LittleEndian>(&bytes[4..]).unwrap();
+        assert_eq!(back, imu);
     }
 
     #[test]

@@ -6,12 +6,14 @@ use std::path::{Path, PathBuf};
 use parry2d_f64::bounding_volume::Aabb;
 use parry2d_f64::math::Vector;
 use twindrive_kinematics::{DiffDriveParams, EncoderSpec, Pose};
-use twindrive_log::{LOG_FORMAT, LOG_VERSION, LogHeader, RangeSensorInfo, ns_from_seconds};
+use twindrive_log::{
+    GyroInfo, LOG_FORMAT, LOG_VERSION, LogHeader, RangeSensorInfo, ns_from_seconds,
+};
 
 use crate::manual::{ManualCommand, read_manual_commands};
 use crate::scenario::{
-    BumpSection, ControllerSection, ScenarioFile, ScriptedSpec, TrackerSection, WallFollowerSpec,
-    require_finite, require_non_negative, require_positive, validate_params,
+    BumpSection, ControllerSection, GyroSection, ScenarioFile, ScriptedSpec, TrackerSection,
+    WallFollowerSpec, require_finite, require_non_negative, require_positive, validate_params,
 };
 use crate::world::{World, polyline_segments, rectangle_segments};
 use crate::{SimError, map};
@@ -30,6 +32,7 @@ pub struct Scenario {
     pub range_sensors: Vec<RangeSensorConfig>,
     pub bump: BumpSection,
     pub tracker: Option<TrackerConfig>,
+    pub gyro: Option<GyroConfig>,
     pub controller: ControllerConfig,
 }
 
@@ -50,6 +53,8 @@ pub struct RangeSensorConfig {
     pub info: RangeSensorInfo,
     pub noise_std_m: f64,
     pub period_ns: u64,
+    /// Probability that a beam returns nothing (read as the maximum range).
+    pub dropout_probability: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -58,6 +63,17 @@ pub struct TrackerConfig {
     pub position_noise_std_m: f64,
     pub heading_noise_std_rad: f64,
     pub dropout_probability: f64,
+}
+
+/// A simulated gyro: what the log tells of it (`info`) and its hidden
+/// errors, which stay with the twin like the true wheel parameters.
+#[derive(Debug, Clone)]
+pub struct GyroConfig {
+    pub info: GyroInfo,
+    pub period_ns: u64,
+    pub noise_std_rad_s: f64,
+    pub bias_rad_s: f64,
+    pub scale_error: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -125,12 +141,7 @@ impl Scenario {
         let mut range_sensors = Vec::new();
         for (i, s) in file.range_sensors.iter().enumerate() {
             let f = |name: &str| format!("range_sensors[{i}].{name}");
-            if s.name.is_empty()
-                || !s
-                    .name
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '_')
-            {
+            if !valid_sensor_name(&s.name) {
                 return Err(SimError::field(
                     path,
                     &f("name"),
@@ -154,6 +165,7 @@ impl Scenario {
                 ));
             }
             require_non_negative(path, &f("noise_std_m"), s.noise_std_m)?;
+            require_probability(path, &f("dropout_probability"), s.dropout_probability)?;
             require_finite(
                 path,
                 &f("mount"),
@@ -187,6 +199,7 @@ impl Scenario {
                 },
                 noise_std_m: s.noise_std_m,
                 period_ns: period(&f("rate_hz"), s.rate_hz)?,
+                dropout_probability: s.dropout_probability,
             });
         }
 
@@ -234,6 +247,15 @@ impl Scenario {
                 t,
                 path,
                 period("tracker.rate_hz", Some(t.rate_hz))?,
+            )?),
+        };
+
+        let gyro = match &file.gyro {
+            None => None,
+            Some(g) => Some(resolve_gyro(
+                g,
+                path,
+                period("gyro.rate_hz", Some(g.rate_hz))?,
             )?),
         };
 
@@ -354,6 +376,7 @@ impl Scenario {
             range_sensors,
             bump: file.bump,
             tracker,
+            gyro,
             controller,
         })
     }
@@ -398,6 +421,7 @@ impl Scenario {
             max_wheel_accel_rad_s2: self.robot.max_wheel_accel_rad_s2,
             start: self.robot.start,
             range_sensors: self.range_sensors.iter().map(|s| s.info.clone()).collect(),
+            gyro: self.gyro.as_ref().map(|g| g.info.clone()),
         }
     }
 }
@@ -470,19 +494,63 @@ fn resolve_tracker(
         "tracker.heading_noise_std_rad",
         t.heading_noise_std_rad,
     )?;
-    if !(0.0..1.0).contains(&t.dropout_probability) {
-        return Err(SimError::field(
-            path,
-            "tracker.dropout_probability",
-            format!("must be in [0, 1), got {}", t.dropout_probability),
-        ));
-    }
+    require_probability(path, "tracker.dropout_probability", t.dropout_probability)?;
     Ok(TrackerConfig {
         period_ns,
         position_noise_std_m: t.position_noise_std_m,
         heading_noise_std_rad: t.heading_noise_std_rad,
         dropout_probability: t.dropout_probability,
     })
+}
+
+/// Checks a dropout probability: in [0, 1).
+fn require_probability(path: &Path, field: &str, p: f64) -> Result<(), SimError> {
+    if (0.0..1.0).contains(&p) {
+        Ok(())
+    } else {
+        Err(SimError::field(
+            path,
+            field,
+            format!("must be in [0, 1), got {p}"),
+        ))
+    }
+}
+
+fn resolve_gyro(g: &GyroSection, path: &Path, period_ns: u64) -> Result<GyroConfig, SimError> {
+    if !valid_sensor_name(&g.name) {
+        return Err(SimError::field(
+            path,
+            "gyro.name",
+            format!("must be non-empty letters, digits or `_`, got `{}`", g.name),
+        ));
+    }
+    require_non_negative(path, "gyro.noise_std_rad_s", g.noise_std_rad_s)?;
+    require_finite(path, "gyro.bias_rad_s", &[g.bias_rad_s])?;
+    if !(g.scale_error.is_finite() && g.scale_error.abs() < 1.0) {
+        return Err(SimError::field(
+            path,
+            "gyro.scale_error",
+            format!(
+                "must be a fraction in (-1, 1) (0.01 reads 1 % high), got {}",
+                g.scale_error
+            ),
+        ));
+    }
+    Ok(GyroConfig {
+        info: GyroInfo {
+            name: g.name.clone(),
+            rate_hz: g.rate_hz,
+        },
+        period_ns,
+        noise_std_rad_s: g.noise_std_rad_s,
+        bias_rad_s: g.bias_rad_s,
+        scale_error: g.scale_error,
+    })
+}
+
+/// Names of sensors (they become column, topic and frame names).
+fn valid_sensor_name(name: &str) -> bool {
+    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
 fn build_world(file: &ScenarioFile, path: &Path, base: &Path) -> Result<World, SimError> {

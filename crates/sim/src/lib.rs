@@ -1,6 +1,6 @@
 //! The digital twin: a 2D world, a differential-drive robot with hidden true
-//! kinematics, encoders, range sensors, a bump sensor and an external pose
-//! tracker, driven by a controller, recorded as a [`MissionLog`].
+//! kinematics, encoders, range sensors, a bump sensor, a gyro and an
+//! external pose tracker, driven by a controller, recorded as a [`MissionLog`].
 //!
 //! ```no_run
 //! use twindrive_sim::{Scenario, Simulator};
@@ -23,7 +23,9 @@ mod simulator;
 mod summary;
 mod world;
 
-pub use config::{ControllerConfig, RangeSensorConfig, RobotConfig, Scenario, TrackerConfig};
+pub use config::{
+    ControllerConfig, GyroConfig, RangeSensorConfig, RobotConfig, Scenario, TrackerConfig,
+};
 pub use scan::{Fan, ScanKernel};
 pub use simulator::{Contacts, RangeModel, Sensed, SensorModel, Simulator, StepOutput};
 pub use summary::MissionSummary;

@@ -25,6 +25,7 @@ pub struct ScenarioFile {
     #[serde(default)]
     pub bump: BumpSection,
     pub tracker: Option<TrackerSection>,
+    pub gyro: Option<GyroSection>,
     pub controller: ControllerSection,
     /// A robot site's ROS 2 drivers (`twindrive robot` reads this section
     /// itself; the simulator ignores it).
@@ -124,6 +125,9 @@ pub struct RangeSensorSection {
     pub noise_std_m: f64,
     /// Sampling rate; absent means every simulation step.
     pub rate_hz: Option<f64>,
+    /// Probability that any one beam returns nothing (read as `max_range_m`).
+    #[serde(default)]
+    pub dropout_probability: f64,
 }
 
 fn one() -> u32 {
@@ -170,6 +174,26 @@ pub struct TrackerSection {
     /// Probability that any one sample is lost.
     #[serde(default)]
     pub dropout_probability: f64,
+}
+
+/// A yaw-rate gyro: measured = (1 + `scale_error`) · true + `bias_rad_s` + noise.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GyroSection {
+    #[serde(default = "default_gyro_name")]
+    pub name: String,
+    pub rate_hz: f64,
+    #[serde(default)]
+    pub noise_std_rad_s: f64,
+    #[serde(default)]
+    pub bias_rad_s: f64,
+    /// Relative error of the rate scale (0.01: reads 1 % high).
+    #[serde(default)]
+    pub scale_error: f64,
+}
+
+fn default_gyro_name() -> String {
+    "gyro".into()
 }
 
 #[derive(Debug, Clone, Deserialize)]

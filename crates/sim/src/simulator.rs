@@ -17,9 +17,12 @@ const CONTACT_BISECTIONS: u32 = 30;
 
 /// Random streams, one per noise source so that adding a sensor does not
 /// change the noise of the others. Range sensors use a stream named after
-/// the sensor, so their order in the file does not matter either.
+/// the sensor, so their order in the file does not matter either, and their
+/// dropouts one named after the sensor too (`<name>.dropout`: no sensor
+/// name has a dot), so dropouts leave the range noise as it was.
 const STREAM_SLIP: u64 = 1;
 const STREAM_TRACKER: u64 = 2;
+const STREAM_GYRO: u64 = 3;
 
 /// FNV-1a of the sensor name, with the top bit set to stay clear of the
 /// fixed streams above.
@@ -101,6 +104,7 @@ impl StepOutput {
                 bump: false,
                 tracker: None,
                 ground_truth: Pose::default(),
+                gyro_z_rad_s: None,
             },
             ranges: vec![f64::NAN; beams],
             wall_mode: None,
@@ -112,6 +116,7 @@ impl StepOutput {
 struct RangeState {
     kernel: Option<ScanKernel>,
     rng: ChaCha8Rng,
+    dropout_rng: ChaCha8Rng,
     next_ns: u64,
     offset: usize,
 }
@@ -303,10 +308,14 @@ pub struct Simulator {
     controller: Controller,
     slip_rng: ChaCha8Rng,
     tracker_rng: ChaCha8Rng,
+    gyro_rng: ChaCha8Rng,
     ranges: Vec<RangeState>,
     latest_range_m: Vec<f64>,
     next_encoder_ns: u64,
     next_tracker_ns: u64,
+    next_gyro_ns: u64,
+    /// The true yaw rate over the last step (heading change / dt).
+    yaw_rate_rad_s: f64,
     beams: usize,
 }
 
@@ -338,6 +347,10 @@ impl Simulator {
                 let state = RangeState {
                     kernel: range_kernel(&s.info),
                     rng: stream(scenario.seed, named_stream(&s.info.name)),
+                    dropout_rng: stream(
+                        scenario.seed,
+                        named_stream(&format!("{}.dropout", s.info.name)),
+                    ),
                     next_ns: 0,
                     offset,
                 };
@@ -353,6 +366,7 @@ impl Simulator {
             controller: Controller::new(&scenario.controller),
             slip_rng: stream(scenario.seed, STREAM_SLIP),
             tracker_rng: stream(scenario.seed, STREAM_TRACKER),
+            gyro_rng: stream(scenario.seed, STREAM_GYRO),
             latest_range_m: scenario
                 .range_sensors
                 .iter()
@@ -361,6 +375,8 @@ impl Simulator {
             ranges,
             next_encoder_ns: 0,
             next_tracker_ns: 0,
+            next_gyro_ns: 0,
+            yaw_rate_rad_s: 0.0,
             beams: offset,
             scenario,
         }
@@ -418,6 +434,7 @@ impl Simulator {
             ]
         });
         let tracker = self.sense_tracker(t_ns);
+        let gyro_z_rad_s = self.sense_gyro(t_ns);
 
         let external_control = external.is_some();
         let mut cmd = match external {
@@ -453,6 +470,7 @@ impl Simulator {
             bump,
             tracker,
             ground_truth: self.pose,
+            gyro_z_rad_s,
         };
         let (reached, blocked) = self.advance(cmd);
         out.record.wheel_rad_s = reached;
@@ -513,6 +531,13 @@ impl Simulator {
                     };
                     *r = (*r + noise).clamp(cfg.info.min_range_m, max);
                 }
+                // Every beam draws, hit or miss, so the dropouts do not
+                // depend on what the sensor sees.
+                if cfg.dropout_probability > 0.0
+                    && st.dropout_rng.random::<f64>() < cfg.dropout_probability
+                {
+                    *r = max;
+                }
             }
             self.latest_range_m[i] = beams[0];
         }
@@ -535,6 +560,21 @@ impl Simulator {
         let dropped =
             cfg.dropout_probability > 0.0 && rng.random::<f64>() < cfg.dropout_probability;
         (!dropped).then_some(noisy)
+    }
+
+    /// The gyro's reading of the true yaw rate over the last step, when it
+    /// samples at `t_ns`.
+    fn sense_gyro(&mut self, t_ns: u64) -> Option<f64> {
+        let cfg = self.scenario.gyro.as_ref()?;
+        if !due(&mut self.next_gyro_ns, cfg.period_ns, t_ns) {
+            return None;
+        }
+        let noise = if cfg.noise_std_rad_s > 0.0 {
+            cfg.noise_std_rad_s * self.gyro_rng.sample::<f64, _>(StandardNormal)
+        } else {
+            0.0
+        };
+        Some((1.0 + cfg.scale_error) * self.yaw_rate_rad_s + cfg.bias_rad_s + noise)
     }
 
     /// Applies the wheel limits, moves the robot along the exact arc and stops
@@ -593,6 +633,7 @@ impl Simulator {
         self.wheel_angle_rad[0] += rotation[0] * fraction;
         self.wheel_angle_rad[1] += rotation[1] * fraction;
         self.wheel_rad_s = w;
+        self.yaw_rate_rad_s = fraction * dtheta / dt_s;
         (w, fraction < 1.0)
     }
 }

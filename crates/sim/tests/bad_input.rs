@@ -134,3 +134,54 @@ fn duration_overrides_are_checked_like_the_file() {
     sc.set_duration_s(2.5).unwrap();
     assert_eq!(sc.steps, 250);
 }
+
+#[test]
+fn gyro_and_dropout_fields_are_named() {
+    let with_gyro =
+        |gyro: &str| base().replace("[encoders]", &format!("[gyro]\n{gyro}\n[encoders]"));
+    assert!(common::parse(&with_gyro("rate_hz = 100.0")).is_ok());
+    for (gyro, want) in [
+        (
+            "rate_hz = 0.0",
+            "field `gyro.rate_hz` must be a finite number > 0, got 0",
+        ),
+        ("noise_std_rad_s = 0.1", "missing field `rate_hz`"),
+        ("rate_hz = 100.0\nbias = 0.1", "unknown field `bias`"),
+        (
+            "rate_hz = 100.0\nnoise_std_rad_s = -0.1",
+            "field `gyro.noise_std_rad_s` must be a finite number >= 0, got -0.1",
+        ),
+        (
+            "rate_hz = 100.0\nbias_rad_s = inf",
+            "field `gyro.bias_rad_s` must be finite, got inf",
+        ),
+        (
+            "rate_hz = 100.0\nscale_error = -1.0",
+            "field `gyro.scale_error` must be a fraction in (-1, 1) (0.01 reads 1 % high), got -1",
+        ),
+        (
+            "rate_hz = 100.0\nname = \"yaw rate\"",
+            "field `gyro.name` must be non-empty letters, digits or `_`, got `yaw rate`",
+        ),
+    ] {
+        let err = error_of(&with_gyro(gyro));
+        assert!(err.contains(want), "{gyro}: {err}");
+    }
+
+    let sensor = |dropout: &str| {
+        base().replace(
+            "[encoders]",
+            &format!(
+                "[[range_sensors]]\nname = \"scan\"\nmount = {{ x_m = 0.0, y_m = 0.0, heading_rad = 0.0 }}\nmax_range_m = 5.0\n{dropout}\n[encoders]"
+            ),
+        )
+    };
+    assert!(common::parse(&sensor("dropout_probability = 0.25")).is_ok());
+    for p in ["1.0", "-0.1", "nan"] {
+        let err = error_of(&sensor(&format!("dropout_probability = {p}")));
+        assert!(
+            err.contains("field `range_sensors[0].dropout_probability` must be in [0, 1), got"),
+            "{p}: {err}"
+        );
+    }
+}

@@ -172,8 +172,9 @@ pub enum Command {
     /// reckoning with the nominal parameters), /ground_truth (Odometry),
     /// /tracker/pose (PoseStamped), /cmd_vel (Twist), /bump
     /// (irobot_create_msgs HazardDetectionVector), one Range (INFRARED) or
-    /// LaserScan topic per range sensor, /tf (odom->base_link,
-    /// map->odom), /tf_static (base_link-><sensor>_link), /map
+    /// LaserScan topic per range sensor, /imu (Imu, the gyro's yaw rate)
+    /// when the log has a gyro, /tf (odom->base_link, map->odom),
+    /// /tf_static (base_link-><sensor>_link, base_link->imu_link), /map
     /// (OccupancyGrid, latched) and /plan (Path, latched) with --plan.
     /// Writes DIR/metadata.yaml and DIR/<name>_0.mcap (or <name>_0.db3 with
     /// --storage sqlite3); `ros2 bag play DIR` plays it.
