@@ -38,11 +38,15 @@
 mod closed_form;
 mod fit;
 mod identifiability;
+mod laser_odometry;
 mod model;
 
 pub use closed_form::{ClosedFormConfig, Estimate6, closed_form, closed_form_with};
 pub use fit::{GyroCalibration, LaserNoise, SelfCalConfig, SelfCalResult, fit};
 pub use identifiability::{PARAMETER_NAMES, SCALE_NOTE, identifiability};
+pub use laser_odometry::{
+    LaserOdometry, LaserOdometrySettings, gyro_turn, laser_odometry, wheel_steps,
+};
 pub use model::predict_laser_motion;
 
 use serde::{Deserialize, Serialize};
