@@ -103,3 +103,47 @@ pub fn calibration_figures(
     .write(&dir.join(format!("{stem}_innovations")))?;
     Ok(())
 }
+
+/// A self-calibration's laser residuals (measured minus predicted motion of
+/// the lidar over each interval, with the calibrated parameters) over time.
+pub fn laser_residual_figure(
+    residuals: &[(f64, [f64; 3])],
+    dir: &Path,
+    stem: &str,
+) -> anyhow::Result<()> {
+    let k = stride(residuals.len());
+    let comp = |c: usize| -> Vec<(f64, f64)> {
+        residuals
+            .iter()
+            .step_by(k)
+            .map(|(t, r)| (*t, r[c]))
+            .collect()
+    };
+    let (x, y, th) = (comp(0), comp(1), comp(2));
+    TimeFigure {
+        title: "Laser odometry against the calibrated model",
+        x_label: "t [s]",
+        y_label: "residual [m, rad]",
+        series: &[
+            Series {
+                label: "x [m]",
+                points: &x,
+                color: palette::TRUTH,
+            },
+            Series {
+                label: "y [m]",
+                points: &y,
+                color: palette::ALT,
+            },
+            Series {
+                label: "θ [rad]",
+                points: &th,
+                color: palette::GOOD,
+            },
+        ],
+        markers: &[],
+        bands: &[],
+    }
+    .write(&dir.join(format!("{stem}_laser_residuals")))?;
+    Ok(())
+}

@@ -69,23 +69,7 @@ pub fn read(
                 time_origin_s,
             })
         }
-        Source::LogDir(dir) => {
-            let log = read_log_dir(dir)?;
-            let mut wheels = wheels_from_log(&log);
-            for w in &mut wheels {
-                w.left_rad *= signs[0];
-                w.right_rad *= signs[1];
-            }
-            let n = log.header.nominal;
-            Ok(Recording {
-                wheels,
-                poses: poses_from_log(&log),
-                nominal: Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
-                ticks_per_rev: Some(log.header.ticks_per_rev),
-                truth: Some(truth_from_log(&log)),
-                time_origin_s: 0.0,
-            })
-        }
+        Source::LogDir(dir) => Ok(recording_from_log(&read_log_dir(dir)?, signs)),
         Source::Csv { encoders, poses } => {
             // The two files are read side by side.
             let (e, p) = std::thread::scope(|scope| {
@@ -107,6 +91,30 @@ pub fn read(
             })
         }
     }
+}
+
+/// A simulator log's wheels (`signs` flip counters that run backwards),
+/// tracker poses, nominal parameters and true track.
+pub fn recording_from_log(log: &MissionLog, signs: [f64; 2]) -> Recording {
+    let n = log.header.nominal;
+    Recording {
+        wheels: signed_wheels_from_log(log, signs),
+        poses: poses_from_log(log),
+        nominal: Some([n.left_diameter_m, n.right_diameter_m, n.wheelbase_m]),
+        ticks_per_rev: Some(log.header.ticks_per_rev),
+        truth: Some(truth_from_log(log)),
+        time_origin_s: 0.0,
+    }
+}
+
+/// [`wheels_from_log`] with `signs` applied.
+pub fn signed_wheels_from_log(log: &MissionLog, signs: [f64; 2]) -> Vec<WheelSample> {
+    let mut wheels = wheels_from_log(log);
+    for w in &mut wheels {
+        w.left_rad *= signs[0];
+        w.right_rad *= signs[1];
+    }
+    wheels
 }
 
 /// Encoder ticks of a simulated log as cumulative wheel angles.
@@ -259,9 +267,9 @@ pub fn from_bag(
 pub const INPUTS: &str = "give a simulator output directory (log.csv + log.meta.json from `twindrive simulate`), \
      both --encoders E.csv and --poses P.csv, or --bag BAG (a rosbag2 directory or one .mcap/.db3 file)";
 
-/// A simulator output directory; any other directory is refused with what
-/// `calibrate` expects.
-fn read_log_dir(dir: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
+/// A simulator output directory's log; any other directory is refused with
+/// what `calibrate` expects.
+pub fn read_log_dir(dir: &Path) -> anyhow::Result<twindrive_log::MissionLog> {
     if !dir.join("log.meta.json").is_file() {
         let what = if !dir.exists() {
             "does not exist"

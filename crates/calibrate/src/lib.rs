@@ -14,7 +14,10 @@
 //! - [`figures`]: the parameter and innovation figures;
 //! - [`drive`]: the built-in calibration drive ([`calibrate_like`]);
 //! - [`bag_info`]: what a rosbag2 recording holds and which of it a
-//!   calibration can use (`twindrive bag info`).
+//!   calibration can use (`twindrive bag info`);
+//! - [`self_cal`]: self-calibration with no pose reference: the wheels and
+//!   the lidar's mount (and a gyro) from encoders and scans
+//!   ([`self_calibrate`]), its inputs from logs ([`scan_inputs`]).
 
 pub mod bag_info;
 pub mod drive;
@@ -24,9 +27,12 @@ pub mod job;
 pub mod output;
 pub mod report;
 pub mod run;
+pub mod scan_inputs;
+pub mod self_cal;
 
 pub use drive::{calibrate_like, calibration_job};
 pub use job::{Job, Method, Offset};
-pub use output::write_outputs;
+pub use output::{write_outputs, write_scan_outputs};
 pub use report::{Artefacts, Report, print_report};
 pub use run::calibrate;
+pub use self_cal::{ScanJob, ScanReport, print_scan_report, self_calibrate};

@@ -829,6 +829,20 @@ pub enum MethodArg {
     Batch,
 }
 
+/// What `calibrate` measures the robot's motion against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ReferenceArg {
+    /// Scans when a simulator log has a lidar and no tracker sample, the
+    /// pose reference otherwise.
+    Auto,
+    /// An absolute pose reference (a tracker, motion capture, a localizer).
+    Poses,
+    /// No pose reference: the lidar's scans matched to each other
+    /// (self-calibration: the wheels and the lidar's mount, and a gyro's
+    /// bias and scale when the log has one).
+    Scans,
+}
+
 #[derive(Debug, clap::Args)]
 pub struct CalibrateArgs {
     /// Simulator output directory (instead of --encoders/--poses or --bag).
@@ -925,4 +939,21 @@ pub struct CalibrateArgs {
     /// Length of the batch estimator's relative-motion windows.
     #[arg(long, default_value_t = 1.0, value_parser = usage::seconds)]
     pub batch_window_s: f64,
+    /// What the motion is measured against (simulator logs; CSV and bag
+    /// inputs give poses).
+    #[arg(long, value_enum, default_value_t = ReferenceArg::Auto)]
+    pub reference: ReferenceArg,
+    /// The lidar whose scans self-calibrate (default: the log's first range
+    /// sensor with at least 30 beams).
+    #[arg(long, value_name = "NAME")]
+    pub scan_sensor: Option<String>,
+    /// The lidar's mount X,Y,HEADING (m, m, rad) as believed, for the scan
+    /// matcher's priors (default: the log's). The estimate does not start
+    /// from it: Censi's closed form needs no guess.
+    #[arg(long, value_name = "X,Y,HEADING", allow_hyphen_values = true)]
+    pub mount: Option<String>,
+    /// Length of a self-calibration's intervals (scans this far apart are
+    /// matched directly).
+    #[arg(long, default_value_t = 1.0, value_parser = usage::seconds)]
+    pub interval_s: f64,
 }

@@ -461,3 +461,76 @@ fn bad_inputs_fail_cleanly() {
         &["--left-sign <LEFT_SIGN>': 1 or -1, got 2"],
     );
 }
+
+#[test]
+fn a_log_with_a_lidar_and_no_tracker_self_calibrates_with_the_lidar_mount() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = tmp.path().join("sim");
+    simulate(
+        &repo().join("scenarios/self_calibration_drive.toml"),
+        &sim,
+        "120",
+    );
+    let out = tmp.path().join("res/calib.json");
+    // No --reference: the log has a lidar and no tracker, so its scans are
+    // used; the mount guess says nothing of the true one.
+    let (o, json, _) = calibrate(&[
+        sim.to_str().unwrap(),
+        "--mount",
+        "0,0,0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let j = json.unwrap();
+    assert_eq!(j["reference"], "scans");
+    let truth = [0.0652, 0.0671, 0.2655];
+    let p = params(&j);
+    for i in 0..3 {
+        assert!((p[i] / truth[i] - 1.0).abs() < 0.003, "{p:?}");
+    }
+    let m = &j["lidar_mount"];
+    let (x, y, h) = (
+        m["x_m"].as_f64().unwrap(),
+        m["y_m"].as_f64().unwrap(),
+        m["heading_rad"].as_f64().unwrap(),
+    );
+    assert!((x + 0.03).hypot(y - 0.02) < 0.01 && (h - 0.4).abs() < 0.5f64.to_radians(), "{m}");
+    assert!(j["lidar_mount_std"]["x_m"].as_f64().unwrap() > 0.0);
+    assert_eq!(j["lidar_mount_guess_source"], "--mount");
+    let g = &j["gyro"];
+    assert!((g["bias_rad_s"].as_f64().unwrap() - 0.004).abs() < 0.001, "{g}");
+    assert!((g["scale_error"].as_f64().unwrap() - 0.01).abs() < 0.002, "{g}");
+    let stdout = text(&o.stdout);
+    assert!(stdout.contains("lidar mount"), "{stdout}");
+    for f in [
+        "calib_laser_residuals.svg",
+        "calib_laser_residuals.png",
+        "calib_dead_reckoning_calibrated.tum",
+    ] {
+        assert!(tmp.path().join("res").join(f).is_file(), "{f}");
+    }
+    // Asking for the poses the log does not have is an error, not a guess.
+    let out2 = tmp.path().join("res2/calib.json");
+    let (o, json, _) = calibrate(&[
+        sim.to_str().unwrap(),
+        "--reference",
+        "poses",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success() && json.is_none());
+    assert!(text(&o.stderr).contains("no samples"), "{}", text(&o.stderr));
+    // A sensor the log does not have is named with those it has.
+    let (o, _, _) = calibrate(&[
+        sim.to_str().unwrap(),
+        "--reference",
+        "scans",
+        "--scan-sensor",
+        "laser",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("lidar (360 beams)"), "{}", text(&o.stderr));
+}

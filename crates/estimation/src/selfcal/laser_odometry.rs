@@ -31,7 +31,7 @@ pub struct LaserOdometrySettings {
 impl Default for LaserOdometrySettings {
     fn default() -> Self {
         Self {
-            interval_s: 0.5,
+            interval_s: 1.0,
             min_wheel_turn_rad: 0.05,
             matcher: MatchSettings::scan_to_scan(),
         }

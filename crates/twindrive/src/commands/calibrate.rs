@@ -1,20 +1,43 @@
 //! `twindrive calibrate`: wheel diameters and wheelbase from encoders plus an
-//! absolute pose reference (the work is `twindrive-calibrate`'s).
+//! absolute pose reference, or with the lidar's mount from encoders and
+//! scans alone (the work is `twindrive-calibrate`'s).
 
 use std::time::Instant;
 
 use anyhow::{Context, bail};
 use twindrive_calibrate::inputs::{self, BagSource, INPUTS, Source};
-use twindrive_calibrate::{Job, Method, Offset};
+use twindrive_calibrate::scan_inputs::{self, ScanRecording};
+use twindrive_calibrate::{Job, Method, Offset, ScanJob};
+use twindrive_estimation::selfcal::LaserOdometrySettings;
+use twindrive_kinematics::Pose;
 use twindrive_estimation::FilterConfig;
 use twindrive_ros::extract::{JointSignal, PoseSource, Stamps, WheelSource};
 
-use crate::cli::{CalibrateArgs, JointSignalArg, MethodArg, StampsArg};
+use crate::cli::{CalibrateArgs, JointSignalArg, MethodArg, ReferenceArg, StampsArg};
 use crate::usage::{OrUsage, usage};
 
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let started = Instant::now();
-    let job = resolve(args)?;
+    let log = match (&args.log_dir, args.reference) {
+        (Some(dir), _) => Some(inputs::read_log_dir(dir)?),
+        (None, ReferenceArg::Scans) => {
+            return Err(usage(
+                "--reference scans needs a simulator output directory (LOG_DIR)",
+            ));
+        }
+        (None, _) => None,
+    };
+    if let Some(log) = &log {
+        let scans = match args.reference {
+            ReferenceArg::Scans => true,
+            ReferenceArg::Poses => false,
+            ReferenceArg::Auto => scan_inputs::prefers_scans(log),
+        };
+        if scans {
+            return run_scans(args, log, started);
+        }
+    }
+    let job = resolve(args, log.as_ref())?;
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "read inputs");
     let total = job.wheels.len() + job.poses.len();
     let bar = twindrive_progress::bar(total as u64, "calibrating");
@@ -84,18 +107,71 @@ fn source(args: &CalibrateArgs) -> anyhow::Result<Source> {
     )
 }
 
-/// Reads the inputs named on the command line into a [`Job`].
-fn resolve(args: &CalibrateArgs) -> anyhow::Result<Job> {
+/// A self-calibration of a simulator log from its lidar's scans.
+fn run_scans(
+    args: &CalibrateArgs,
+    log: &twindrive_log::MissionLog,
+    started: Instant,
+) -> anyhow::Result<()> {
+    let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
+    let rec = ScanRecording::from_log(log, args.scan_sensor.as_deref(), signs)?;
+    check_ticks(args.ticks_per_rev, rec.ticks_per_rev)?;
+    let initial = match (&args.initial, rec.nominal) {
+        (Some(text), _) => parse_initial(text).or_usage()?,
+        (None, Some(i)) => i,
+        (None, None) => return Err(usage("--initial DL,DR,B (metres) is needed")),
+    };
+    let (mount_guess, mount_source) = match &args.mount {
+        Some(text) => (parse_mount(text).or_usage()?, "--mount".to_string()),
+        None => (rec.lidar.mount, "the log header".to_string()),
+    };
+    let job = ScanJob {
+        wheels: rec.wheels,
+        scans: rec.scans,
+        gyro: rec.gyro,
+        initial,
+        lidar: rec.lidar.name.clone(),
+        mount_guess,
+        mount_source,
+        settings: LaserOdometrySettings {
+            interval_s: args.interval_s,
+            ..LaserOdometrySettings::default()
+        },
+        ticks_per_rev: rec.ticks_per_rev,
+        time_origin_s: rec.time_origin_s,
+    };
+    tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "read inputs");
+    let bar = twindrive_progress::bar(job.scans.len() as u64, "matching scans");
+    let (report, artefacts) =
+        twindrive_calibrate::self_calibrate(job, |done, _| bar.set_position(done as u64))?;
+    bar.finish_and_clear();
+    twindrive_calibrate::write_scan_outputs(&report, &artefacts, &args.out)?;
+    tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "self-calibrated");
+    twindrive_calibrate::print_scan_report(&report, &args.out, &mut std::io::stdout().lock())?;
+    Ok(())
+}
+
+/// `--ticks-per-rev` must agree with a log header's.
+fn check_ticks(given: Option<u32>, header: Option<u32>) -> anyhow::Result<()> {
+    match (given, header) {
+        (Some(t), Some(tpr)) if t != tpr => Err(usage(format!(
+            "--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}"
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Reads the inputs named on the command line into a [`Job`]; a log
+/// directory already read is `log`.
+fn resolve(args: &CalibrateArgs, log: Option<&twindrive_log::MissionLog>) -> anyhow::Result<Job> {
     let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
     let source = source(args)?;
-    let recording = inputs::read(&source, args.ticks_per_rev, signs)?;
-    if let (Source::LogDir(_), Some(t), Some(tpr)) =
-        (&source, args.ticks_per_rev, recording.ticks_per_rev)
-        && t != tpr
-    {
-        return Err(usage(format!(
-            "--ticks-per-rev {t} contradicts the log header's ticks_per_rev {tpr}"
-        )));
+    let recording = match (&source, log) {
+        (Source::LogDir(_), Some(log)) => inputs::recording_from_log(log, signs),
+        _ => inputs::read(&source, args.ticks_per_rev, signs)?,
+    };
+    if let Source::LogDir(_) = &source {
+        check_ticks(args.ticks_per_rev, recording.ticks_per_rev)?;
     }
     if recording.wheels.len() < 2 {
         bail!(
@@ -172,4 +248,20 @@ fn parse_initial(text: &str) -> anyhow::Result<[f64; 3]> {
             })?;
     }
     Ok(out)
+}
+
+fn parse_mount(text: &str) -> anyhow::Result<Pose> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [x, y, h] = parts[..] else {
+        bail!("--mount: expected three numbers X,Y,HEADING (m, m, rad), got `{text}`");
+    };
+    let mut out = [0.0; 3];
+    for (i, (p, name)) in [x, y, h].iter().zip(["x", "y", "heading"]).enumerate() {
+        out[i] = p
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .with_context(|| format!("--mount: the {name} must be a finite number, got `{p}`"))?;
+    }
+    Ok(Pose::new(out[0], out[1], out[2]))
 }
