@@ -1,5 +1,12 @@
 //! What calibration needs from a recording: cumulative wheel angles and a
-//! reference pose track, each on its own clock.
+//! reference pose track, each on its own clock; for self-calibration
+//! without a pose reference, lidar scans ([`scan_track`]), gyro yaw rates
+//! ([`imu_rate_track`]) and sensor mounts from the TF tree
+//! ([`static_transform`]).
+//!
+//! Times are seconds on the clock [`Stamps`] picks, as the recording has
+//! them (Unix time for a robot's bag; nothing is subtracted), the same for
+//! every track.
 //!
 //! Wheels come from `sensor_msgs/msg/JointState` (two named joints; the
 //! position in radians, or the velocity integrated) or from any message
@@ -9,9 +16,19 @@
 //! are found by name in the definition stored in the file, so a message only
 //! has to have the fields, not a particular version of the type.
 
+mod imu;
+mod scan;
+#[cfg(test)]
+mod sensor_tests;
+mod tf;
+
+pub use imu::{IMU, ImuRateTrack, imu_rate_track};
+pub use scan::{LASER_SCAN, ScanData, ScanTrack, scan_track};
+pub use tf::{PlanarMount, TF_MESSAGE, base_frame_guess, static_transform, tf_frames};
+
 use crate::bag::{Bag, BagError};
 use crate::live::{JointPaths, Joints};
-use crate::schema::{Arity, Base, FieldPath, Primitive, Schema};
+use crate::schema::{Arity, Base, FieldPath, Primitive, Schema, normalize_type_name};
 use crate::value::Value;
 
 /// Where message times come from.
@@ -114,13 +131,18 @@ fn message_time(
 }
 
 /// Header stamps that are all zero were never filled in by the publisher.
-fn check_stamped<T>(
+fn check_stamped(
     bag: &Bag,
     topic: &str,
-    samples: &[(f64, T)],
+    times: impl IntoIterator<Item = f64>,
     stamps: Stamps,
 ) -> Result<(), BagError> {
-    if stamps == Stamps::Header && samples.len() > 1 && samples.iter().all(|(t, _)| *t == 0.0) {
+    let (mut n, mut all_zero) = (0usize, true);
+    for t in times {
+        n += 1;
+        all_zero &= t == 0.0;
+    }
+    if stamps == Stamps::Header && n > 1 && all_zero {
         return Err(topic_error(
             bag,
             topic,
@@ -164,6 +186,73 @@ fn topic_error(bag: &Bag, topic: &str, message: String) -> BagError {
         path: bag.path().to_path_buf(),
         topic: topic.to_string(),
         message,
+    }
+}
+
+/// The schema of `topic`, which must have type `want` (`pkg/msg/Type`);
+/// otherwise an error that says what the topic is (missing, or its type)
+/// and lists the bag's topics of type `want`.
+fn typed_schema(bag: &Bag, topic: &str, want: &str) -> Result<Schema, BagError> {
+    let found = bag.topic(topic).map(|t| normalize_type_name(&t.type_name));
+    if found.as_deref() == Some(want) {
+        return bag.schema(topic);
+    }
+    let same: Vec<String> = bag
+        .topics()
+        .iter()
+        .filter(|t| normalize_type_name(&t.type_name) == want)
+        .map(|t| format!("{} ({} messages)", t.name, t.message_count))
+        .collect();
+    let what = match found.as_deref() {
+        None => "not in the bag".to_string(),
+        Some("") => format!("has no type in the file, and {want} is wanted"),
+        Some(other) => format!("is {other}, not {want}"),
+    };
+    let have = if same.is_empty() {
+        format!(
+            "the bag has no {want} topic; its topics: {}",
+            match bag.describe_topics() {
+                d if d.is_empty() => "none".to_string(),
+                d => d,
+            }
+        )
+    } else {
+        format!("the {want} topics are: {}", same.join(", "))
+    };
+    Err(topic_error(bag, topic, format!("{what}; {have}")))
+}
+
+/// A sensor topic's readings `(t, frame_id, reading)`, as read, put in
+/// time order (stable) and narrowed to one sensor: the frame of the
+/// earliest reading, and one reading per time (the first; a later one at
+/// the same time is a republished copy).
+struct OneSensor<T> {
+    readings: Vec<(f64, T)>,
+    frame_id: String,
+    other_frame: u64,
+    repeated: u64,
+}
+
+fn one_sensor<T>(mut raw: Vec<(f64, String, T)>) -> OneSensor<T> {
+    raw.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let frame_id = raw.first().map(|r| r.1.clone()).unwrap_or_default();
+    let same = |f: &str| f.trim_start_matches('/') == frame_id.trim_start_matches('/');
+    let (mut other_frame, mut repeated) = (0, 0);
+    let mut readings: Vec<(f64, T)> = Vec::with_capacity(raw.len());
+    for (t, f, r) in raw {
+        if !same(&f) {
+            other_frame += 1;
+        } else if readings.last().is_some_and(|(last, _)| *last == t) {
+            repeated += 1;
+        } else {
+            readings.push((t, r));
+        }
+    }
+    OneSensor {
+        readings,
+        frame_id,
+        other_frame,
+        repeated,
     }
 }
 
@@ -220,7 +309,7 @@ fn joints(
             ),
         ));
     }
-    check_stamped(bag, topic, &raw, stamps)?;
+    check_stamped(bag, topic, raw.iter().map(|s| s.0), stamps)?;
     let raw = ordered(raw);
     let has_position = raw.iter().all(|(_, (p, _))| p.is_some());
     let has_velocity = raw.iter().all(|(_, (_, v))| v.is_some());
@@ -410,7 +499,7 @@ pub fn pose_track(
         raw.push((t, crate::live::planar_pose(&v)?));
         Ok(())
     })?;
-    check_stamped(bag, topic, &raw, stamps)?;
+    check_stamped(bag, topic, raw.iter().map(|s| s.0), stamps)?;
     finish_poses(bag, topic, raw, skipped, type_name)
 }
 
@@ -493,7 +582,7 @@ fn tf_track(
             }
         )));
     }
-    check_stamped(bag, topic, &raw, stamps)?;
+    check_stamped(bag, topic, raw.iter().map(|s| s.0), stamps)?;
     finish_poses(bag, topic, raw, skipped, "tf2_msgs/msg/TFMessage".into())
 }
 
