@@ -267,6 +267,8 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
     let mut wheel_odometry: Vec<String> = Vec::new();
     let mut scans = Vec::new();
     let mut imus = Vec::new();
+    let mut scan_topics: Vec<String> = Vec::new();
+    let mut imu_topics: Vec<String> = Vec::new();
     let mut ticks: Vec<(String, String, Vec<String>)> = Vec::new();
     let mut unreadable: Vec<String> = Vec::new();
     let mut decode: Vec<&str> = Vec::new();
@@ -284,8 +286,18 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
                     count: t.message_count,
                     hinted: hinted(&t.name),
                 }),
-            "sensor_msgs/msg/LaserScan" => scans.push(format!("{} ({ty})", t.name)),
-            "sensor_msgs/msg/Imu" => imus.push(format!("{} ({ty})", t.name)),
+            "sensor_msgs/msg/LaserScan" => {
+                scans.push(format!("{} ({ty})", t.name));
+                if t.message_count > 0 {
+                    scan_topics.push(t.name.clone());
+                }
+            }
+            "sensor_msgs/msg/Imu" => {
+                imus.push(format!("{} ({ty})", t.name));
+                if t.message_count > 0 {
+                    imu_topics.push(t.name.clone());
+                }
+            }
             _ if t.message_count > 0 && !standard_non_tick(ty) => {
                 if let Ok(schema) = bag.schema(&t.name) {
                     let fields: Vec<String> = schema
@@ -463,12 +475,41 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
         ),
         None => format!(" --pose-topic {}", r.topic),
     });
+    // Without a pose reference: the wheels and the lidar's mount (and the
+    // gyro) from the scans.
+    let self_cal = match (&wheel_flags, scan_topics.first()) {
+        (Some(w), Some(scan)) => {
+            let imu = imu_topics
+                .first()
+                .map(|t| format!(" --imu-topic {t}"))
+                .unwrap_or_default();
+            Some(format!(
+                "twindrive calibrate --bag {}{w} --scan-topic {scan}{imu} --initial DL,DR,B --out calib.json",
+                shell_quote(&path.display().to_string())
+            ))
+        }
+        _ => None,
+    };
     match (wheel_flags, reference) {
         (Some(w), Some(p)) => {
             let _ = writeln!(
                 o,
                 "\nSuggested (DL,DR,B: your robot's nominal wheel diameters and wheelbase in metres):\n  twindrive calibrate --bag {}{w}{p} --time-offset auto --initial DL,DR,B --out calib.json",
                 shell_quote(&path.display().to_string())
+            );
+            if let Some(c) = &self_cal {
+                let _ = writeln!(
+                    o,
+                    "Without the pose reference (self-calibration, the lidar's mount too):\n  {c}"
+                );
+            }
+        }
+        (Some(_), None) if self_cal.is_some() => {
+            let _ = writeln!(
+                o,
+                "\nSuggested, with no pose reference (self-calibration of the wheels and the lidar's mount; \
+                 DL,DR,B: your robot's nominal wheel diameters and wheelbase in metres):\n  {}",
+                self_cal.as_deref().unwrap_or_default()
             );
         }
         (w, p) => {

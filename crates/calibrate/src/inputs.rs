@@ -204,6 +204,19 @@ pub fn poses_from_csv(p: &PoseCsv) -> Vec<PoseSample> {
         .collect()
 }
 
+/// A bag's wheel track `(t, left, right)` as samples, times less `origin`,
+/// `signs` applied.
+pub fn bag_wheels(samples: &[(f64, f64, f64)], origin: f64, signs: [f64; 2]) -> Vec<WheelSample> {
+    samples
+        .iter()
+        .map(|&(t, l, r)| WheelSample {
+            t_s: t - origin,
+            left_rad: signs[0] * l,
+            right_rad: signs[1] * r,
+        })
+        .collect()
+}
+
 /// Wheel angles and reference poses from a rosbag2 recording, with times
 /// counted from the first pose's whole second (returned third).
 pub fn from_bag(
@@ -240,15 +253,7 @@ pub fn from_bag(
     );
     let origin = poses.samples[0].0.floor();
     Ok((
-        wheels
-            .samples
-            .iter()
-            .map(|&(t, l, r)| WheelSample {
-                t_s: t - origin,
-                left_rad: signs[0] * l,
-                right_rad: signs[1] * r,
-            })
-            .collect(),
+        bag_wheels(&wheels.samples, origin, signs),
         poses
             .samples
             .iter()

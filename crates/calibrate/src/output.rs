@@ -56,7 +56,11 @@ pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Re
 /// laser residual figure and the dead-reckoned tracks with the initial and
 /// the calibrated parameters (`<stem>_dead_reckoning_*.tum`, in the frame
 /// of the drive's start).
-pub fn write_scan_outputs(report: &ScanReport, art: &ScanArtefacts, out: &Path) -> anyhow::Result<()> {
+pub fn write_scan_outputs(
+    report: &ScanReport,
+    art: &ScanArtefacts,
+    out: &Path,
+) -> anyhow::Result<()> {
     let (dir, stem, file_name) = twindrive_files::split_out_path(out, "calib")?;
     let staging = Staging::new(&dir, &format!("calibrate:{stem}"))?;
     staging.write_with(&file_name, |w| {
@@ -75,7 +79,8 @@ pub fn write_scan_outputs(report: &ScanReport, art: &ScanArtefacts, out: &Path) 
         );
         staging.write_with(&format!("{stem}_{suffix}.tum"), |w| {
             let ns = |t: f64| (t * 1e9).round().max(0.0) as u64;
-            twindrive_log::write_tum(track.into_iter().map(|(t, p)| (ns(t), p)), w).map_err(Into::into)
+            twindrive_log::write_tum(track.into_iter().map(|(t, p)| (ns(t), p)), w)
+                .map_err(Into::into)
         })?;
     }
     figures::laser_residual_figure(&art.residuals, staging.dir(), &stem)?;

@@ -139,32 +139,16 @@ pub fn print_report(r: &Report, out: &Path, o: &mut impl Write) -> std::io::Resu
         "method {:?}, clock offset {:.3} s ({})",
         r.method, r.clock_offset_s, r.clock_offset_source
     )?;
-    for (name, v, s, init) in [
-        (
-            "left diameter ",
-            r.left_diameter_m,
+    write_parameters(
+        o,
+        [r.left_diameter_m, r.right_diameter_m, r.wheelbase_m],
+        [
             r.left_diameter_std_m,
-            r.initial[0],
-        ),
-        (
-            "right diameter",
-            r.right_diameter_m,
             r.right_diameter_std_m,
-            r.initial[1],
-        ),
-        (
-            "wheelbase     ",
-            r.wheelbase_m,
             r.wheelbase_std_m,
-            r.initial[2],
-        ),
-    ] {
-        writeln!(
-            o,
-            "  {name} {v:.6} m ± {s:.6} (initial {init:.6}, {:+.3} %)",
-            100.0 * (v / init - 1.0)
-        )?;
-    }
+        ],
+        r.initial,
+    )?;
     writeln!(
         o,
         "  EKF vs batch: largest difference {:.3} %; mean NIS {:.2}; {} poses rejected",
@@ -185,5 +169,29 @@ pub fn print_report(r: &Report, out: &Path, o: &mut impl Write) -> std::io::Resu
         "wrote {} and its figures and trajectories beside it",
         out.display()
     )?;
+    Ok(())
+}
+
+/// The three parameters with their deviations and their change from the
+/// initial values, one line each.
+pub(crate) fn write_parameters(
+    o: &mut impl Write,
+    values: [f64; 3],
+    stds: [f64; 3],
+    initial: [f64; 3],
+) -> std::io::Result<()> {
+    for (i, name) in ["left diameter ", "right diameter", "wheelbase     "]
+        .iter()
+        .enumerate()
+    {
+        writeln!(
+            o,
+            "  {name} {:.6} m ± {:.6} (initial {:.6}, {:+.3} %)",
+            values[i],
+            stds[i],
+            initial[i],
+            100.0 * (values[i] / initial[i] - 1.0)
+        )?;
+    }
     Ok(())
 }

@@ -1,10 +1,12 @@
-//! A self-calibration's inputs from a simulator log: the wheels, the
-//! scans of one lidar in its own frame and the gyro's rates.
+//! A self-calibration's inputs from a simulator log or a rosbag2
+//! recording: the wheels, the scans of one lidar in its own frame and the
+//! gyro's rates.
 
-use anyhow::bail;
+use anyhow::{Context, bail};
 use twindrive_estimation::WheelSample;
 use twindrive_estimation::localize::Scan;
 use twindrive_log::{MissionLog, RangeSensorInfo};
+use twindrive_ros::extract::{self, Stamps, WheelSource};
 
 use crate::inputs;
 
@@ -26,7 +28,10 @@ pub struct ScanRecording {
 
 /// The range sensor called `name`, or the first with at least
 /// [`MIN_SCAN_BEAMS`] beams; an error names the sensors the log has.
-pub fn lidar_of<'a>(log: &'a MissionLog, name: Option<&str>) -> anyhow::Result<(usize, &'a RangeSensorInfo)> {
+pub fn lidar_of<'a>(
+    log: &'a MissionLog,
+    name: Option<&str>,
+) -> anyhow::Result<(usize, &'a RangeSensorInfo)> {
     let sensors = &log.header.range_sensors;
     let found = match name {
         Some(n) => sensors.iter().position(|s| s.name == n),
@@ -39,7 +44,11 @@ pub fn lidar_of<'a>(log: &'a MissionLog, name: Option<&str>) -> anyhow::Result<(
                 .iter()
                 .map(|s| format!("{} ({} beams)", s.name, s.beams))
                 .collect();
-            let have = if have.is_empty() { "none".to_string() } else { have.join(", ") };
+            let have = if have.is_empty() {
+                "none".to_string()
+            } else {
+                have.join(", ")
+            };
             match name {
                 Some(n) => bail!(
                     "--scan-sensor {n}: the log has no range sensor of that name with at least {MIN_SCAN_BEAMS} beams; \
@@ -83,7 +92,11 @@ impl ScanRecording {
     /// A simulator log's wheels (`signs` flip counters that run
     /// backwards), the scans of its lidar `sensor` (or the first with
     /// enough beams) and its gyro. Never its true track.
-    pub fn from_log(log: &MissionLog, sensor: Option<&str>, signs: [f64; 2]) -> anyhow::Result<Self> {
+    pub fn from_log(
+        log: &MissionLog,
+        sensor: Option<&str>,
+        signs: [f64; 2],
+    ) -> anyhow::Result<Self> {
         let (index, lidar) = lidar_of(log, sensor)?;
         let n = log.header.nominal;
         Ok(Self {
@@ -96,4 +109,124 @@ impl ScanRecording {
             time_origin_s: 0.0,
         })
     }
+}
+
+/// What to read from a rosbag2 recording for a self-calibration.
+#[derive(Debug, Clone)]
+pub struct BagScanSource {
+    pub path: std::path::PathBuf,
+    pub stamps: Stamps,
+    pub wheels: WheelSource,
+    /// The `sensor_msgs/msg/LaserScan` topic.
+    pub scan_topic: String,
+    /// The `sensor_msgs/msg/Imu` topic, if the robot's gyro is to be used.
+    pub imu_topic: Option<String>,
+    /// The robot's frame in the TF tree (default: `base_link`, else
+    /// `base_footprint`).
+    pub base_frame: Option<String>,
+}
+
+/// A self-calibration's inputs from a bag, and the mount `/tf_static`
+/// gives the lidar's frame (the matcher's first guess), if any.
+pub fn from_bag(
+    source: &BagScanSource,
+    signs: [f64; 2],
+) -> anyhow::Result<(ScanRecording, Option<twindrive_kinematics::Pose>)> {
+    let bag = twindrive_ros::Bag::open(&source.path).context("--bag")?;
+    for d in bag.damage() {
+        tracing::warn!("{d}; calibrating from what was read");
+    }
+    let stamps = source.stamps;
+    let (wheels, scans, imu) = std::thread::scope(|scope| {
+        let w = scope.spawn(|| extract::wheel_track(&bag, &source.wheels, stamps));
+        let i = source
+            .imu_topic
+            .as_ref()
+            .map(|t| extract::imu_rate_track(&bag, t, stamps));
+        let s = extract::scan_track(&bag, &source.scan_topic, stamps);
+        (w.join(), s, i)
+    });
+    let wheels = wheels.map_err(|_| anyhow::anyhow!("reading the wheels panicked"))??;
+    let scans = scans.context("--scan-topic")?;
+    let imu = imu.transpose().context("--imu-topic")?;
+    let base = source
+        .base_frame
+        .clone()
+        .or_else(|| extract::base_frame_guess(&bag))
+        .unwrap_or_else(|| "base_link".into());
+    let mount = extract::static_transform(&bag, &base, &scans.frame_id)?;
+    let mut flip_scans = false;
+    let mount = mount.map(|m| {
+        if m.upside_down {
+            tracing::warn!(
+                frame = %scans.frame_id,
+                "the lidar is mounted upside down (roll {:.2} rad): its beams are mirrored",
+                m.roll_rad
+            );
+            flip_scans = true;
+        }
+        twindrive_kinematics::Pose::new(m.x_m, m.y_m, m.heading_rad)
+    });
+    let mut gyro_sign = 1.0;
+    if let Some(imu) = &imu
+        && let Ok(Some(m)) = extract::static_transform(&bag, &base, &imu.frame_id)
+        && m.upside_down
+    {
+        tracing::warn!(frame = %imu.frame_id, "the IMU is mounted upside down: its yaw rate is negated");
+        gyro_sign = -1.0;
+    }
+    tracing::info!(
+        wheel_samples = wheels.samples.len(),
+        scans = scans.scans.len(),
+        malformed_scans = scans.malformed,
+        gyro_samples = imu.as_ref().map_or(0, |i| i.samples.len()),
+        "read the bag"
+    );
+    let origin = scans.scans[0].t_s.floor();
+    let first = &scans.scans[0];
+    let beams = first.ranges_m.len() as u32;
+    let lidar = RangeSensorInfo {
+        name: scans.frame_id.clone(),
+        mount: mount.unwrap_or(twindrive_kinematics::Pose::new(0.0, 0.0, 0.0)),
+        beams,
+        fov_rad: first.increment_rad.abs() * f64::from(beams),
+        min_range_m: first.range_min_m,
+        max_range_m: first.range_max_m,
+    };
+    let recording = ScanRecording {
+        wheels: inputs::bag_wheels(&wheels.samples, origin, signs),
+        scans: scans
+            .scans
+            .iter()
+            .map(|s| {
+                // Mirrored beams: bearing a seen upside down is −a.
+                let (angle_min_rad, increment_rad) = if flip_scans {
+                    (-s.angle_min_rad, -s.increment_rad)
+                } else {
+                    (s.angle_min_rad, s.increment_rad)
+                };
+                Scan {
+                    t_s: s.t_s - origin,
+                    angle_min_rad,
+                    increment_rad,
+                    range_min_m: s.range_min_m,
+                    range_max_m: s.range_max_m,
+                    ranges_m: s.ranges_m.clone(),
+                }
+            })
+            .collect(),
+        gyro: imu
+            .map(|i| {
+                i.samples
+                    .iter()
+                    .map(|&(t, z)| (t - origin, gyro_sign * z))
+                    .collect()
+            })
+            .unwrap_or_default(),
+        lidar,
+        nominal: None,
+        ticks_per_rev: None,
+        time_origin_s: origin,
+    };
+    Ok((recording, mount))
 }

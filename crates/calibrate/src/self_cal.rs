@@ -160,7 +160,11 @@ pub fn self_calibrate(
             job.initial[i]
         );
     }
-    let usable = job.scans.iter().filter(|s| s.points().len() >= job.settings.matcher.min_points).count();
+    let usable = job
+        .scans
+        .iter()
+        .filter(|s| s.points().len() >= job.settings.matcher.min_points)
+        .count();
     if usable < 2 {
         bail!(
             "no usable scans: {} scans from {}, {usable} with at least {} returns (all max-range, dropouts or \
@@ -363,17 +367,16 @@ pub fn print_scan_report(
         "self-calibration from {} ({} intervals matched of {:.1} s, {} trimmed; no pose reference)",
         r.lidar, r.laser_odometry.intervals, r.laser_odometry.interval_s, r.laser_odometry.trimmed
     )?;
-    for (name, v, s, init) in [
-        ("left diameter ", r.left_diameter_m, r.left_diameter_std_m, r.initial[0]),
-        ("right diameter", r.right_diameter_m, r.right_diameter_std_m, r.initial[1]),
-        ("wheelbase     ", r.wheelbase_m, r.wheelbase_std_m, r.initial[2]),
-    ] {
-        writeln!(
-            o,
-            "  {name} {v:.6} m ± {s:.6} (initial {init:.6}, {:+.3} %)",
-            100.0 * (v / init - 1.0)
-        )?;
-    }
+    crate::report::write_parameters(
+        o,
+        [r.left_diameter_m, r.right_diameter_m, r.wheelbase_m],
+        [
+            r.left_diameter_std_m,
+            r.right_diameter_std_m,
+            r.wheelbase_std_m,
+        ],
+        r.initial,
+    )?;
     let (m, s) = (&r.lidar_mount, &r.lidar_mount_std);
     writeln!(
         o,

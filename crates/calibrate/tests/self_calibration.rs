@@ -140,14 +140,17 @@ scale_error = {scale:.5}
     );
     Site {
         toml,
-        truth: [truth_w[0], truth_w[1], truth_w[2], mount[0], mount[1], mount[2]],
+        truth: [
+            truth_w[0], truth_w[1], truth_w[2], mount[0], mount[1], mount[2],
+        ],
         gyro_bias_rad_s: bias,
     }
 }
 
 fn job(site: &Site) -> ScanJob {
-    let scenario = twindrive_sim::Scenario::from_toml(&site.toml, std::path::Path::new("held_out.toml"))
-        .expect("the scenario is valid");
+    let scenario =
+        twindrive_sim::Scenario::from_toml(&site.toml, std::path::Path::new("held_out.toml"))
+            .expect("the scenario is valid");
     let log = twindrive_sim::Simulator::new(scenario).run(|_, _| {});
     let rec = ScanRecording::from_log(&log, None, [1.0, 1.0]).expect("a lidar");
     ScanJob {
@@ -174,8 +177,8 @@ fn self_calibration_meets_its_targets_on_held_out_sites() {
     let mut worst = [0.0f64; 3];
     for seed in FIRST_SEED..FIRST_SEED + sites {
         let site = site(seed, DRIVE, true);
-        let (r, _) = self_calibrate(job(&site), |_, _| {})
-            .unwrap_or_else(|e| panic!("seed {seed}: {e:#}"));
+        let (r, _) =
+            self_calibrate(job(&site), |_, _| {}).unwrap_or_else(|e| panic!("seed {seed}: {e:#}"));
         let est = [
             r.left_diameter_m,
             r.right_diameter_m,
@@ -185,7 +188,9 @@ fn self_calibration_meets_its_targets_on_held_out_sites() {
             r.lidar_mount.heading_rad,
         ];
         let t = site.truth;
-        let wheels = (0..3).map(|i| (est[i] / t[i] - 1.0).abs()).fold(0.0, f64::max);
+        let wheels = (0..3)
+            .map(|i| (est[i] / t[i] - 1.0).abs())
+            .fold(0.0, f64::max);
         let xy = (est[3] - t[3]).hypot(est[4] - t[4]);
         let heading = wrap_angle(est[5] - t[5]).abs();
         eprintln!(
@@ -195,10 +200,26 @@ fn self_calibration_meets_its_targets_on_held_out_sites() {
             heading.to_degrees(),
             r.laser_odometry.intervals
         );
-        worst = [worst[0].max(wheels), worst[1].max(xy), worst[2].max(heading)];
-        assert!(wheels < 0.003, "seed {seed}: a wheel parameter {:.3} % off", 100.0 * wheels);
-        assert!(xy < 0.01, "seed {seed}: the mount is {:.1} mm off", 1e3 * xy);
-        assert!(heading < 0.5f64.to_radians(), "seed {seed}: the mount's heading is {:.2} deg off", heading.to_degrees());
+        worst = [
+            worst[0].max(wheels),
+            worst[1].max(xy),
+            worst[2].max(heading),
+        ];
+        assert!(
+            wheels < 0.003,
+            "seed {seed}: a wheel parameter {:.3} % off",
+            100.0 * wheels
+        );
+        assert!(
+            xy < 0.01,
+            "seed {seed}: the mount is {:.1} mm off",
+            1e3 * xy
+        );
+        assert!(
+            heading < 0.5f64.to_radians(),
+            "seed {seed}: the mount's heading is {:.2} deg off",
+            heading.to_degrees()
+        );
         // The gyro's bias within three of its standard deviations.
         let g = r.gyro.expect("the log has a gyro");
         assert!(
@@ -209,8 +230,15 @@ fn self_calibration_meets_its_targets_on_held_out_sites() {
         );
         // Each reported standard deviation covers the error (within 4σ).
         for i in 0..3 {
-            let s = [r.left_diameter_std_m, r.right_diameter_std_m, r.wheelbase_std_m][i];
-            assert!((est[i] - t[i]).abs() < 4.0 * s, "seed {seed}: parameter {i} off by more than 4σ");
+            let s = [
+                r.left_diameter_std_m,
+                r.right_diameter_std_m,
+                r.wheelbase_std_m,
+            ][i];
+            assert!(
+                (est[i] - t[i]).abs() < 4.0 * s,
+                "seed {seed}: parameter {i} off by more than 4σ"
+            );
         }
     }
     eprintln!(
@@ -226,9 +254,15 @@ fn a_straight_drive_is_refused_with_what_it_cannot_separate() {
     let site = site(FIRST_SEED + 1000, STRAIGHT, true);
     let e = self_calibrate(job(&site), |_, _| {}).expect_err("a straight drive pins nothing");
     let text = format!("{e:#}");
-    assert!(text.contains("calibration refused, nothing written"), "{text}");
+    assert!(
+        text.contains("calibration refused, nothing written"),
+        "{text}"
+    );
     assert!(text.contains("does not pin every parameter"), "{text}");
-    assert!(text.contains("turn in place") || text.contains("arcs"), "the remedy: {text}");
+    assert!(
+        text.contains("turn in place") || text.contains("arcs"),
+        "the remedy: {text}"
+    );
 }
 
 #[test]

@@ -51,7 +51,7 @@ pub enum Command {
     /// beside it, figures of each parameter over time with its ±3σ band and
     /// of the innovations, and TUM trajectories of the reference and of dead
     /// reckoning with the initial and calibrated parameters.
-    Calibrate(CalibrateArgs),
+    Calibrate(Box<CalibrateArgs>),
     /// Turn a mission run on the twin into a plan for the real robot.
     ///
     /// The executed path from the log's encoders and the calibrated
@@ -853,7 +853,7 @@ pub struct CalibrateArgs {
     /// --pose-topic (`twindrive bag info` suggests them). Times count from
     /// the first reference pose's whole second (`data.time_origin_s` in the
     /// output).
-    #[arg(long, value_name = "BAG", conflicts_with_all = ["log_dir", "encoders", "poses"], requires = "pose_topic")]
+    #[arg(long, value_name = "BAG", conflicts_with_all = ["log_dir", "encoders", "poses"], requires = "bag_reference")]
     pub bag: Option<PathBuf>,
     /// sensor_msgs/msg/JointState topic with the wheel joints.
     #[arg(long, default_value = "/joint_states", requires = "bag")]
@@ -879,8 +879,26 @@ pub struct CalibrateArgs {
     pub right_field: Option<String>,
     /// Reference pose topic: geometry_msgs PoseStamped or
     /// PoseWithCovarianceStamped, nav_msgs Odometry, or tf2_msgs TFMessage.
-    #[arg(long, requires = "bag")]
+    #[arg(long, requires = "bag", group = "bag_reference")]
     pub pose_topic: Option<String>,
+    /// No pose reference: self-calibrate from this sensor_msgs/msg/LaserScan
+    /// topic (the wheels, the lidar's mount; its frame's mount in
+    /// /tf_static is the matcher's first guess).
+    #[arg(
+        long,
+        requires = "bag",
+        group = "bag_reference",
+        conflicts_with = "pose_topic"
+    )]
+    pub scan_topic: Option<String>,
+    /// With --scan-topic: a sensor_msgs/msg/Imu topic whose angular
+    /// velocity z is the gyro (its bias and scale are estimated too).
+    #[arg(long, requires = "scan_topic")]
+    pub imu_topic: Option<String>,
+    /// With --scan-topic: the robot's frame in the TF tree (default
+    /// base_link, else base_footprint).
+    #[arg(long, requires = "scan_topic")]
+    pub base_frame: Option<String>,
     /// The robot's child frame on a TF topic (checked against
     /// child_frame_id for Odometry).
     #[arg(long, requires = "pose_topic")]

@@ -495,12 +495,21 @@ fn a_log_with_a_lidar_and_no_tracker_self_calibrates_with_the_lidar_mount() {
         m["y_m"].as_f64().unwrap(),
         m["heading_rad"].as_f64().unwrap(),
     );
-    assert!((x + 0.03).hypot(y - 0.02) < 0.01 && (h - 0.4).abs() < 0.5f64.to_radians(), "{m}");
+    assert!(
+        (x + 0.03).hypot(y - 0.02) < 0.01 && (h - 0.4).abs() < 0.5f64.to_radians(),
+        "{m}"
+    );
     assert!(j["lidar_mount_std"]["x_m"].as_f64().unwrap() > 0.0);
     assert_eq!(j["lidar_mount_guess_source"], "--mount");
     let g = &j["gyro"];
-    assert!((g["bias_rad_s"].as_f64().unwrap() - 0.004).abs() < 0.001, "{g}");
-    assert!((g["scale_error"].as_f64().unwrap() - 0.01).abs() < 0.002, "{g}");
+    assert!(
+        (g["bias_rad_s"].as_f64().unwrap() - 0.004).abs() < 0.001,
+        "{g}"
+    );
+    assert!(
+        (g["scale_error"].as_f64().unwrap() - 0.01).abs() < 0.002,
+        "{g}"
+    );
     let stdout = text(&o.stdout);
     assert!(stdout.contains("lidar mount"), "{stdout}");
     for f in [
@@ -520,7 +529,11 @@ fn a_log_with_a_lidar_and_no_tracker_self_calibrates_with_the_lidar_mount() {
         out2.to_str().unwrap(),
     ]);
     assert!(!o.status.success() && json.is_none());
-    assert!(text(&o.stderr).contains("no samples"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("no samples"),
+        "{}",
+        text(&o.stderr)
+    );
     // A sensor the log does not have is named with those it has.
     let (o, _, _) = calibrate(&[
         sim.to_str().unwrap(),
@@ -532,5 +545,9 @@ fn a_log_with_a_lidar_and_no_tracker_self_calibrates_with_the_lidar_mount() {
         out2.to_str().unwrap(),
     ]);
     assert!(!o.status.success());
-    assert!(text(&o.stderr).contains("lidar (360 beams)"), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("lidar (360 beams)"),
+        "{}",
+        text(&o.stderr)
+    );
 }

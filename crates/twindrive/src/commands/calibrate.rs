@@ -6,11 +6,11 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use twindrive_calibrate::inputs::{self, BagSource, INPUTS, Source};
-use twindrive_calibrate::scan_inputs::{self, ScanRecording};
+use twindrive_calibrate::scan_inputs::{self, BagScanSource, ScanRecording};
 use twindrive_calibrate::{Job, Method, Offset, ScanJob};
+use twindrive_estimation::FilterConfig;
 use twindrive_estimation::selfcal::LaserOdometrySettings;
 use twindrive_kinematics::Pose;
-use twindrive_estimation::FilterConfig;
 use twindrive_ros::extract::{JointSignal, PoseSource, Stamps, WheelSource};
 
 use crate::cli::{CalibrateArgs, JointSignalArg, MethodArg, ReferenceArg, StampsArg};
@@ -18,11 +18,31 @@ use crate::usage::{OrUsage, usage};
 
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let started = Instant::now();
+    if let (Some(path), Some(scan_topic)) = (&args.bag, &args.scan_topic) {
+        let source = BagScanSource {
+            path: path.clone(),
+            stamps: stamps(args.stamps),
+            wheels: wheel_source(args)?.ok_or_else(|| {
+                usage("--scan-topic: name the wheels with --left-joint and --right-joint, or --ticks-topic")
+            })?,
+            scan_topic: scan_topic.clone(),
+            imu_topic: args.imu_topic.clone(),
+            base_frame: args.base_frame.clone(),
+        };
+        let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
+        let (rec, mount) = scan_inputs::from_bag(&source, signs)?;
+        let source = if mount.is_some() {
+            "/tf_static"
+        } else {
+            "none in the bag"
+        };
+        return run_scans(args, rec, source, started);
+    }
     let log = match (&args.log_dir, args.reference) {
         (Some(dir), _) => Some(inputs::read_log_dir(dir)?),
         (None, ReferenceArg::Scans) => {
             return Err(usage(
-                "--reference scans needs a simulator output directory (LOG_DIR)",
+                "--reference scans needs a simulator output directory (LOG_DIR) or --bag with --scan-topic",
             ));
         }
         (None, _) => None,
@@ -34,7 +54,10 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             ReferenceArg::Auto => scan_inputs::prefers_scans(log),
         };
         if scans {
-            return run_scans(args, log, started);
+            let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
+            let rec = ScanRecording::from_log(log, args.scan_sensor.as_deref(), signs)?;
+            check_ticks(args.ticks_per_rev, rec.ticks_per_rev)?;
+            return run_scans(args, rec, "the log header", started);
         }
     }
     let job = resolve(args, log.as_ref())?;
@@ -62,35 +85,46 @@ impl From<MethodArg> for Method {
     }
 }
 
+fn stamps(s: StampsArg) -> Stamps {
+    match s {
+        StampsArg::Header => Stamps::Header,
+        StampsArg::Log => Stamps::LogTime,
+    }
+}
+
+/// The wheels a bag is read for, as the command line names them.
+fn wheel_source(args: &CalibrateArgs) -> anyhow::Result<Option<WheelSource>> {
+    Ok(
+        match (&args.ticks_topic, &args.left_joint, &args.right_joint) {
+            (Some(topic), _, _) => Some(WheelSource::Ticks {
+                topic: topic.clone(),
+                left_field: args.left_field.clone().context("--left-field")?,
+                right_field: args.right_field.clone().context("--right-field")?,
+                ticks_per_rev: args.ticks_per_rev.context("--ticks-per-rev")?,
+            }),
+            (None, Some(l), Some(r)) => Some(WheelSource::Joints {
+                topic: args.joint_topic.clone(),
+                left: l.clone(),
+                right: r.clone(),
+                signal: match args.joint_signal {
+                    JointSignalArg::Auto => JointSignal::Auto,
+                    JointSignalArg::Position => JointSignal::Position,
+                    JointSignalArg::Velocity => JointSignal::Velocity,
+                },
+            }),
+            _ => None,
+        },
+    )
+}
+
 /// Where the command line says the samples are.
 fn source(args: &CalibrateArgs) -> anyhow::Result<Source> {
     Ok(
         match (&args.log_dir, &args.encoders, &args.poses, &args.bag) {
             (None, None, None, Some(path)) => Source::Bag(BagSource {
                 path: path.clone(),
-                stamps: match args.stamps {
-                    StampsArg::Header => Stamps::Header,
-                    StampsArg::Log => Stamps::LogTime,
-                },
-                wheels: match (&args.ticks_topic, &args.left_joint, &args.right_joint) {
-                    (Some(topic), _, _) => Some(WheelSource::Ticks {
-                        topic: topic.clone(),
-                        left_field: args.left_field.clone().context("--left-field")?,
-                        right_field: args.right_field.clone().context("--right-field")?,
-                        ticks_per_rev: args.ticks_per_rev.context("--ticks-per-rev")?,
-                    }),
-                    (None, Some(l), Some(r)) => Some(WheelSource::Joints {
-                        topic: args.joint_topic.clone(),
-                        left: l.clone(),
-                        right: r.clone(),
-                        signal: match args.joint_signal {
-                            JointSignalArg::Auto => JointSignal::Auto,
-                            JointSignalArg::Position => JointSignal::Position,
-                            JointSignalArg::Velocity => JointSignal::Velocity,
-                        },
-                    }),
-                    _ => None,
-                },
+                stamps: stamps(args.stamps),
+                wheels: wheel_source(args)?,
                 poses: PoseSource {
                     topic: args.pose_topic.clone().context("--pose-topic")?,
                     frame: args.pose_frame.clone(),
@@ -107,23 +141,24 @@ fn source(args: &CalibrateArgs) -> anyhow::Result<Source> {
     )
 }
 
-/// A self-calibration of a simulator log from its lidar's scans.
+/// A self-calibration from a recording's scans; `mount_source` says where
+/// the recording's mount of the lidar came from.
 fn run_scans(
     args: &CalibrateArgs,
-    log: &twindrive_log::MissionLog,
+    rec: ScanRecording,
+    mount_source: &str,
     started: Instant,
 ) -> anyhow::Result<()> {
-    let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
-    let rec = ScanRecording::from_log(log, args.scan_sensor.as_deref(), signs)?;
-    check_ticks(args.ticks_per_rev, rec.ticks_per_rev)?;
     let initial = match (&args.initial, rec.nominal) {
         (Some(text), _) => parse_initial(text).or_usage()?,
         (None, Some(i)) => i,
-        (None, None) => return Err(usage("--initial DL,DR,B (metres) is needed")),
+        (None, None) => {
+            return Err(usage("--initial DL,DR,B (metres) is needed for bag inputs"));
+        }
     };
     let (mount_guess, mount_source) = match &args.mount {
         Some(text) => (parse_mount(text).or_usage()?, "--mount".to_string()),
-        None => (rec.lidar.mount, "the log header".to_string()),
+        None => (rec.lidar.mount, mount_source.to_string()),
     };
     let job = ScanJob {
         wheels: rec.wheels,
@@ -146,7 +181,10 @@ fn run_scans(
         twindrive_calibrate::self_calibrate(job, |done, _| bar.set_position(done as u64))?;
     bar.finish_and_clear();
     twindrive_calibrate::write_scan_outputs(&report, &artefacts, &args.out)?;
-    tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "self-calibrated");
+    tracing::info!(
+        elapsed_s = started.elapsed().as_secs_f64(),
+        "self-calibrated"
+    );
     twindrive_calibrate::print_scan_report(&report, &args.out, &mut std::io::stdout().lock())?;
     Ok(())
 }
