@@ -11,12 +11,19 @@ clocks.
                       /joint_states with joint velocities only (rad/s), the
                       reference as geometry_msgs/msg/PoseStamped on
                       /mocap/pose.
+  --scans             (rosbags only) also the log's lidar (its first range
+                      sensor with at least 30 beams) as
+                      sensor_msgs/msg/LaserScan on /scan in frame `laser`,
+                      its gyro as sensor_msgs/msg/Imu on /imu in frame
+                      `imu_link`, and /tf_static with the lidar's mount as a
+                      two-link chain base_link -> base_scan (the offset, 10 cm
+                      up) -> laser (the yaw), and base_link -> imu_link.
 
 Header stamps: the reference on the capture system's clock (Unix time
 1.7e9 s + log time), the joints on the robot's clock, --robot-clock-lag-s
 behind it.
 
-usage: make_bag.py LOG_DIR OUT --writer rosbags|mcap_ros2 [--robot-clock-lag-s S]
+usage: make_bag.py LOG_DIR OUT --writer rosbags|mcap_ros2 [--robot-clock-lag-s S] [--scans]
 """
 
 import argparse
@@ -50,6 +57,25 @@ def read_log(log_dir: Path):
     return wheels, poses
 
 
+def read_sensors(log_dir: Path):
+    """The lidar's description and (t_ns, ranges) at its samples, and
+    (t_ns, z_rad_s) at the gyro's."""
+    import json
+
+    meta = json.loads((log_dir / "log.meta.json").read_text())
+    lidar = next(s for s in meta["range_sensors"] if s["beams"] >= 30)
+    cols = [f"range_{lidar['name']}_{i}" for i in range(lidar["beams"])]
+    scans, gyro = [], []
+    with open(log_dir / "log.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            t_ns = round(float(row["t"]) * 1e9)
+            if row[cols[0]] not in ("", "nan", "NaN"):
+                scans.append((t_ns, [float(row[c]) for c in cols]))
+            if row.get("gyro_z_rad_s"):
+                gyro.append((t_ns, float(row["gyro_z_rad_s"])))
+    return lidar, scans, gyro
+
+
 def stamp(ns: int):
     return ns // 1_000_000_000, ns % 1_000_000_000
 
@@ -60,17 +86,21 @@ def main():
     ap.add_argument("out", type=Path)
     ap.add_argument("--writer", choices=["rosbags", "mcap_ros2"], required=True)
     ap.add_argument("--robot-clock-lag-s", type=float, default=0.0)
+    ap.add_argument("--scans", action="store_true")
     a = ap.parse_args()
     wheels, poses = read_log(a.log_dir)
     lag_ns = round(a.robot_clock_lag_s * 1e9)
     store = get_typestore(Stores.ROS2_JAZZY)
+    if a.scans and a.writer != "rosbags":
+        ap.error("--scans needs --writer rosbags")
     if a.writer == "rosbags":
-        write_rosbags(a.out, store, wheels, poses, lag_ns)
+        sensors = read_sensors(a.log_dir) if a.scans else None
+        write_rosbags(a.out, store, wheels, poses, lag_ns, sensors)
     else:
         write_mcap_ros2(a.out, store, wheels, poses, lag_ns)
 
 
-def write_rosbags(out: Path, store, wheels, poses, lag_ns):
+def write_rosbags(out: Path, store, wheels, poses, lag_ns, sensors=None):
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     T = store.types
@@ -109,9 +139,61 @@ def write_rosbags(out: Path, store, wheels, poses, lag_ns):
             msg = TFMessage(transforms=[transform(ns, "odom", "base_link", 0.1, 0.2, 0.3),
                                         transform(ns, "world", "robot", x, y, th)])
             events.append((ns, 1, tf, store.serialize_cdr(msg, TFMessage.__msgtype__)))
+        if sensors is not None:
+            events.extend(sensor_events(w, store, sensors, lag_ns, header, transform))
         events.sort(key=lambda e: (e[0], e[1]))
         for t, _, conn, raw in events:
             w.write(conn, t, raw)
+
+
+def sensor_events(w, store, sensors, lag_ns, header, transform):
+    """/scan, /imu and /tf_static messages, serialized by rosbags."""
+    import numpy as np
+
+    T = store.types
+    LaserScan = T["sensor_msgs/msg/LaserScan"]
+    Imu = T["sensor_msgs/msg/Imu"]
+    TFMessage = T["tf2_msgs/msg/TFMessage"]
+    Vector3 = T["geometry_msgs/msg/Vector3"]
+    Quaternion = T["geometry_msgs/msg/Quaternion"]
+    lidar, scans, gyro = sensors
+    beams = lidar["beams"]
+    if lidar["fov_rad"] >= 2 * math.pi - 1e-9:
+        angle_min, inc = -math.pi, 2 * math.pi / beams
+    else:
+        angle_min, inc = -0.5 * lidar["fov_rad"], lidar["fov_rad"] / (beams - 1)
+    sc = w.add_connection("/scan", LaserScan.__msgtype__, typestore=store)
+    im = w.add_connection("/imu", Imu.__msgtype__, typestore=store)
+    st = w.add_connection("/tf_static", TFMessage.__msgtype__, typestore=store)
+    m = lidar["mount"]
+    first = EPOCH_NS + (scans[0][0] if scans else 0)
+    # The mount as a chain: the offset (10 cm up), then the yaw.
+    offset = transform(first, "base_link", "base_scan", m["x_m"], m["y_m"], 0.0)
+    offset.transform.translation.z = 0.1
+    events = [(first - 1, 2, st, store.serialize_cdr(TFMessage(transforms=[
+        offset,
+        transform(first, "base_scan", "laser", 0.0, 0.0, m["heading_rad"]),
+        transform(first, "base_link", "imu_link", 0.0, 0.0, 0.0),
+    ]), TFMessage.__msgtype__))]
+    for (t, ranges) in scans:
+        ns = EPOCH_NS + t - lag_ns
+        msg = LaserScan(header=header(ns, "laser"), angle_min=angle_min,
+                        angle_max=angle_min + inc * (beams - 1), angle_increment=inc,
+                        time_increment=0.0, scan_time=0.1, range_min=lidar["min_range_m"],
+                        range_max=lidar["max_range_m"], ranges=np.array(ranges, dtype=np.float32),
+                        intensities=np.array([], dtype=np.float32))
+        events.append((EPOCH_NS + t, 3, sc, store.serialize_cdr(msg, LaserScan.__msgtype__)))
+    unknown = np.zeros(9)
+    unknown[0] = -1.0
+    for (t, z) in gyro:
+        ns = EPOCH_NS + t - lag_ns
+        msg = Imu(header=header(ns, "imu_link"),
+                  orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=unknown,
+                  angular_velocity=Vector3(x=0.0, y=0.0, z=z), angular_velocity_covariance=np.zeros(9),
+                  linear_acceleration=Vector3(x=0.0, y=0.0, z=0.0),
+                  linear_acceleration_covariance=unknown)
+        events.append((EPOCH_NS + t, 4, im, store.serialize_cdr(msg, Imu.__msgtype__)))
+    return events
 
 
 def write_mcap_ros2(out: Path, store, wheels, poses, lag_ns):

@@ -1155,9 +1155,10 @@ fn calibrations_the_bag_does_not_support_fail_and_write_nothing() {
 
 /// Self-calibration from a bag with no pose topic: the self-calibration
 /// drive exported by `twindrive rosbag` (joint states, /lidar scans, /imu,
-/// /tf_static with the lidar's mount) and rewritten by rosbags in sqlite3
-/// (its v9 writer and Humble's layout) calibrates as its log directory
-/// does; a wrong topic names those the bag has.
+/// /tf_static with the lidar's mount), rewritten by rosbags in sqlite3 (its
+/// v9 writer and Humble's layout), and written by rosbags from the log
+/// (`make_bag.py --scans`: rosbags' own CDR serializer) calibrates as its
+/// log directory does; a wrong topic names those the bag has.
 #[test]
 fn a_bag_self_calibrates_from_its_scans_as_its_log_does() {
     let tmp = tempfile::tempdir().unwrap();
@@ -1189,14 +1190,14 @@ fn a_bag_self_calibrates_from_its_scans_as_its_log_does() {
     let o = twindrive(&["calibrate", s(&sim), "--out", s(&log_out)]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let from_log = read(&log_out);
-    let by_bag = |bag: &Path, name: &str| -> [f64; 9] {
+    let by_bag = |bag: &Path, name: &str, scan_topic: &str| -> [f64; 9] {
         let out = tmp.path().join(name).join("calib.json");
         let mut args = vec![
             "calibrate",
             "--bag",
             s(bag),
             "--scan-topic",
-            "/lidar",
+            scan_topic,
             "--imu-topic",
             "/imu",
         ];
@@ -1213,15 +1214,24 @@ fn a_bag_self_calibrates_from_its_scans_as_its_log_does() {
     };
     let variants = tmp.path().join("variants");
     py("bag_variants.py", &[s(&bag), s(&variants)]);
-    for (name, path) in [
-        ("mcap", bag.clone()),
-        ("sqlite3_v9", variants.join("sqlite3_v9")),
-        ("sqlite3_humble", variants.join("sqlite3_humble")),
+    // And the same log recorded by rosbags' own writer and serializer: the
+    // scans in frame `laser` under a two-link /tf_static chain, the
+    // stamps in Unix time.
+    let rosbags = tmp.path().join("rosbags");
+    py(
+        "make_bag.py",
+        &[s(&sim), s(&rosbags), "--writer", "rosbags", "--scans"],
+    );
+    for (name, path, topic) in [
+        ("mcap", bag.clone(), "/lidar"),
+        ("sqlite3_v9", variants.join("sqlite3_v9"), "/lidar"),
+        ("sqlite3_humble", variants.join("sqlite3_humble"), "/lidar"),
+        ("rosbags", rosbags.clone(), "/scan"),
     ] {
         // The same numbers up to the matcher's convergence (10 µm steps):
         // the mount guess from /tf_static's quaternion differs from the log
         // header's in the last bit, so the priors do.
-        let p = by_bag(&path, name);
+        let p = by_bag(&path, name, topic);
         for i in 0..9 {
             assert!(
                 (p[i] - from_log[i]).abs() < 1e-6,

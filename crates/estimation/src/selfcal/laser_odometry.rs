@@ -201,7 +201,10 @@ pub fn laser_odometry(
     while a + 1 < scans.len() {
         let mut b = a + 1;
         let mut prior = step_motion[b];
-        while b + 1 < scans.len() && scans[b].t_s - scans[a].t_s < settings.interval_s {
+        // A microsecond's slack: stamps rounded on their way through a
+        // recording (a Unix time in f64 is good to 0.2 µs) must not move an
+        // interval's end by a scan.
+        while b + 1 < scans.len() && scans[b].t_s - scans[a].t_s < settings.interval_s - 1e-6 {
             b += 1;
             prior = compose(prior, step_motion[b]);
         }
