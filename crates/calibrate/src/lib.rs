@@ -17,7 +17,9 @@
 //!   calibration can use (`twindrive bag info`);
 //! - [`self_cal`]: self-calibration with no pose reference: the wheels and
 //!   the lidar's mount (and a gyro) from encoders and scans
-//!   ([`self_calibrate`]), its inputs from logs ([`scan_inputs`]).
+//!   ([`self_calibrate`]), its inputs from logs ([`scan_inputs`]);
+//! - [`site_map`]: the site's map from the same inputs and the calibration
+//!   (`twindrive map`): map_server files and `site.toml` for the twin.
 
 pub mod bag_info;
 pub mod drive;
@@ -29,6 +31,7 @@ pub mod report;
 pub mod run;
 pub mod scan_inputs;
 pub mod self_cal;
+pub mod site_map;
 
 pub use drive::{calibrate_like, calibration_job};
 pub use job::{Job, Method, Offset};

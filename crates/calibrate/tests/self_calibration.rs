@@ -147,12 +147,17 @@ scale_error = {scale:.5}
     }
 }
 
+fn scenario(site: &Site) -> twindrive_sim::Scenario {
+    twindrive_sim::Scenario::from_toml(&site.toml, std::path::Path::new("held_out.toml"))
+        .expect("the scenario is valid")
+}
+
 fn job(site: &Site) -> ScanJob {
-    let scenario =
-        twindrive_sim::Scenario::from_toml(&site.toml, std::path::Path::new("held_out.toml"))
-            .expect("the scenario is valid");
-    let log = twindrive_sim::Simulator::new(scenario).run(|_, _| {});
-    let rec = ScanRecording::from_log(&log, None, [1.0, 1.0]).expect("a lidar");
+    job_of(&twindrive_sim::Simulator::new(scenario(site)).run(|_, _| {}))
+}
+
+fn job_of(log: &twindrive_log::MissionLog) -> ScanJob {
+    let rec = ScanRecording::from_log(log, None, [1.0, 1.0]).expect("a lidar");
     ScanJob {
         wheels: rec.wheels,
         scans: rec.scans,
@@ -272,4 +277,104 @@ fn a_lidar_that_sees_nothing_gives_a_clear_error() {
     let text = format!("{e:#}");
     assert!(text.starts_with("no usable scans"), "{text}");
     assert!(text.contains("from lidar"), "{text}");
+}
+
+/// Where the lidar's beams truly met the walls: true poses and mount, no
+/// noise.
+fn seen(log: &twindrive_log::MissionLog, site: &twindrive_sim::Scenario) -> Vec<[f64; 2]> {
+    let info = &site.range_sensors[0].info;
+    let (a0, da) = info.angle_min_and_increment();
+    let mut out = Vec::new();
+    for (i, step) in log.steps.iter().enumerate() {
+        let Some(ranges) = log.range_reading(i, 0) else {
+            continue;
+        };
+        let t = step.ground_truth;
+        let m = info.mount;
+        let (s, c) = t.heading_rad.sin_cos();
+        let o = [t.x_m + c * m.x_m - s * m.y_m, t.y_m + s * m.x_m + c * m.y_m];
+        for (k, r) in ranges.iter().enumerate() {
+            if !(r.is_finite() && *r < info.max_range_m && *r > info.min_range_m) {
+                continue;
+            }
+            let a = t.heading_rad + m.heading_rad + a0 + k as f64 * da;
+            let dir = twindrive_sim::Vector::new(a.cos(), a.sin());
+            let d = site.world.cast_ray(
+                twindrive_sim::Vector::new(o[0], o[1]),
+                dir,
+                info.max_range_m,
+            );
+            if d < info.max_range_m {
+                out.push([o[0] + d * dir.x, o[1] + d * dir.y]);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_site_is_mapped_from_the_self_calibrated_drive_on_held_out_sites() {
+    use twindrive_calibrate::site_map::{MapJob, map_site};
+    use twindrive_estimation::mapping::{MappingSettings, score};
+    let sites: u64 = std::env::var("TWINDRIVE_HELD_OUT")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2);
+    for seed in FIRST_SEED + 500..FIRST_SEED + 500 + sites {
+        let site = site(seed, DRIVE, true);
+        let truth = scenario(&site);
+        let log = twindrive_sim::Simulator::new(truth.clone()).run(|_, _| {});
+        let (r, _) = self_calibrate(job_of(&log), |_, _| {})
+            .unwrap_or_else(|e| panic!("seed {seed}: {e:#}"));
+        let rec = ScanRecording::from_log(&log, None, [1.0, 1.0]).unwrap();
+        let mut lidar = rec.lidar;
+        lidar.mount = Pose::new(
+            r.lidar_mount.x_m,
+            r.lidar_mount.y_m,
+            r.lidar_mount.heading_rad,
+        );
+        let map = map_site(
+            &MapJob {
+                wheels: rec.wheels,
+                scans: rec.scans,
+                lidar,
+                params: twindrive_kinematics::DiffDriveParams::new(
+                    r.left_diameter_m,
+                    r.right_diameter_m,
+                    r.wheelbase_m,
+                ),
+                start: log.header.start,
+                settings: MappingSettings::default(),
+                prior: None,
+            },
+            |_, _| {},
+        )
+        .unwrap_or_else(|e| panic!("seed {seed}: {e:#}"));
+        let s = score(&map.grid(), &truth.world.walls(), &seen(&log, &truth), 0.05);
+        eprintln!(
+            "seed {seed}: {} occupied cells, {:.1} % within 5 cm of a wall (worst {:.1} cm), \
+             {:.1} % of {:.1} m seen drawn; {}/{} scans matched",
+            s.occupied_cells,
+            100.0 * s.on_a_wall,
+            100.0 * s.worst_m,
+            100.0 * s.seen_drawn,
+            s.seen_wall_m,
+            map.mapping.matched,
+            map.mapping.poses.len()
+        );
+        assert!(s.on_a_wall >= 0.95, "seed {seed}: {s:?}");
+        assert!(s.seen_drawn >= 0.90, "seed {seed}: {s:?}");
+        // The matches' residual is the lidar's noise, about.
+        let noise = site
+            .toml
+            .lines()
+            .find_map(|l| l.strip_prefix("noise_std_m = "))
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap();
+        let est = map.range_noise_m.unwrap();
+        assert!(
+            est > 0.5 * noise && est < 2.0 * noise,
+            "seed {seed}: noise {est} for {noise}"
+        );
+    }
 }

@@ -22,6 +22,7 @@ mod ekf;
 pub mod ellipse_fit;
 pub mod evaluation;
 pub mod localize;
+pub mod mapping;
 mod odometry_chain;
 mod offline;
 mod online;

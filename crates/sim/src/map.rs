@@ -235,6 +235,62 @@ pub fn load_map(yaml_path: &Path) -> Result<OccupancyGrid, SimError> {
     })
 }
 
+/// A map to write as map_server files: each cell's probability of being
+/// occupied, row-major from the bottom row, `None` for unknown.
+#[derive(Debug, Clone, Copy)]
+pub struct MapImage<'a> {
+    pub width: usize,
+    pub height: usize,
+    pub resolution_m: f64,
+    /// The lower-left corner of the lower-left cell in the world.
+    pub origin_m: [f64; 2],
+    pub occupancy: &'a [Option<f64>],
+}
+
+/// The PGM pixel of a cell for map_server's trinary reading with the
+/// default thresholds: `(1 - p) * 255`, nudged so that the loader puts the
+/// cell on the same side of `occupied_thresh` and `free_thresh` as `p`;
+/// 205 (map_saver's grey) for unknown.
+fn pixel(p: Option<f64>) -> u8 {
+    let Some(p) = p else { return 205 };
+    let v = ((1.0 - p.clamp(0.0, 1.0)) * 255.0).round();
+    let v = if p > default_occupied() {
+        v.min(89.0)
+    } else if p < default_free() {
+        v.max(206.0)
+    } else {
+        v.clamp(90.0, 205.0)
+    };
+    v as u8
+}
+
+/// The map_server files of `map`: `(image bytes, YAML text)`, the image a
+/// binary PGM named `image_name` (row 0 of the image is the top of the
+/// map), the YAML with the default thresholds and trinary mode. [`load_map`]
+/// reads them back to the same free, occupied and unknown cells.
+pub fn encode_map(map: &MapImage<'_>, image_name: &str) -> (Vec<u8>, String) {
+    let (w, h) = (map.width, map.height);
+    let mut pgm = format!("P5\n{w} {h}\n255\n").into_bytes();
+    pgm.reserve(w * h);
+    for y in 0..h {
+        let row = h - 1 - y;
+        pgm.extend(
+            map.occupancy[row * w..(row + 1) * w]
+                .iter()
+                .map(|p| pixel(*p)),
+        );
+    }
+    let yaml = format!(
+        "image: {image_name}\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: {}\nfree_thresh: {}\nmode: trinary\n",
+        map.resolution_m,
+        map.origin_m[0],
+        map.origin_m[1],
+        default_occupied(),
+        default_free()
+    );
+    (pgm, yaml)
+}
+
 /// The small office floor plan shipped in `scenarios/maps/office.{pgm,yaml}`:
 /// 8 m x 6 m at 5 cm, two rooms joined by a door, a corridor and a table.
 /// Returns (PGM bytes, YAML text).
@@ -360,6 +416,39 @@ mod tests {
             err.contains("c.yaml") && err.contains("unknown field `colour`"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn an_encoded_map_loads_back_to_the_same_cells() {
+        // Probabilities across the whole range, either side of both
+        // thresholds, and unknown cells.
+        let (w, h) = (7usize, 5usize);
+        let occupancy: Vec<Option<f64>> = (0..w * h)
+            .map(|k| (k % 6 != 5).then(|| k as f64 / (w * h - 1) as f64))
+            .collect();
+        let map = MapImage {
+            width: w,
+            height: h,
+            resolution_m: 0.05,
+            origin_m: [-1.25, 2.5],
+            occupancy: &occupancy,
+        };
+        let (pgm, yaml) = encode_map(&map, "m.pgm");
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("m.pgm"), pgm).unwrap();
+        std::fs::write(dir.path().join("m.yaml"), yaml).unwrap();
+        let grid = load_map(&dir.path().join("m.yaml")).unwrap();
+        assert_eq!((grid.width, grid.height), (w, h));
+        assert_eq!((grid.origin_x_m, grid.origin_y_m), (-1.25, 2.5));
+        for (k, p) in occupancy.iter().enumerate() {
+            let want = match p {
+                None => Cell::Unknown,
+                Some(p) if *p > 0.65 => Cell::Occupied,
+                Some(p) if *p < 0.196 => Cell::Free,
+                Some(_) => Cell::Unknown,
+            };
+            assert_eq!(grid.cells[k], want, "cell {k}: p {p:?}");
+        }
     }
 
     #[test]

@@ -52,6 +52,20 @@ pub enum Command {
     /// of the innovations, and TUM trajectories of the reference and of dead
     /// reckoning with the initial and calibrated parameters.
     Calibrate(Box<CalibrateArgs>),
+    /// Draw the site's map from a drive's encoders and lidar scans.
+    ///
+    /// Input: a simulator output directory with a lidar, or --bag BAG with
+    /// --scan-topic and the wheel joints. The calibrated odometry (from
+    /// --calibration: the wheels, and the lidar's mount when it is a
+    /// self-calibration) places each scan; each scan is matched against
+    /// the map drawn so far, so a drive that comes back to where it started
+    /// does not draw the walls twice. Writes into --out a ROS map_server map
+    /// (map.pgm, map.yaml: occupancy from log-odds, unknown where no beam
+    /// reached), site.toml (a scenario on that map that simulate, plan,
+    /// verify-plan, console and robot take as the twin's site), poses.tum
+    /// (the drive in the map) and map_report.json. The map's frame is the
+    /// log's (its start pose), or the robot's first pose in a bag.
+    Map(Box<MapArgs>),
     /// Turn a mission run on the twin into a plan for the real robot.
     ///
     /// The executed path from the log's encoders and the calibrated
@@ -104,8 +118,11 @@ pub enum Command {
     /// site has a box the twin lacks, with hand-backs, twin updates and
     /// continuations in virtual time (decoupled/), a short version of
     /// `experiment latency` (direct against decoupled operation at 0, 0.5
-    /// and 2 s one way: experiment/), and report.md / report.html that tell
-    /// the story with the figures.
+    /// and 2 s one way: experiment/), the twin built from the robot's own
+    /// sensors on a site it has never seen (self-calibration from encoders,
+    /// lidar and gyro, the site's map, the mission planned on the mapped
+    /// twin and executed on the true site: mapped_site/), and report.md /
+    /// report.html that tell the story with the figures.
     Demo {
         /// Output directory.
         #[arg(long, default_value = "twindrive-out")]
@@ -974,4 +991,71 @@ pub struct CalibrateArgs {
     /// matched directly).
     #[arg(long, default_value_t = 1.0, value_parser = usage::seconds)]
     pub interval_s: f64,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct MapArgs {
+    /// Simulator output directory with a lidar's scans (instead of --bag).
+    #[arg(required_unless_present = "bag")]
+    pub log_dir: Option<PathBuf>,
+    /// A rosbag2 recording (MCAP or sqlite3): wheels from
+    /// --left-joint/--right-joint, scans from --scan-topic.
+    #[arg(long, value_name = "BAG", conflicts_with = "log_dir", requires_all = ["scan_topic", "left_joint", "right_joint"])]
+    pub bag: Option<PathBuf>,
+    /// sensor_msgs/msg/LaserScan topic.
+    #[arg(long, requires = "bag")]
+    pub scan_topic: Option<String>,
+    /// sensor_msgs/msg/JointState topic with the wheel joints.
+    #[arg(long, default_value = "/joint_states", requires = "bag")]
+    pub joint_topic: String,
+    /// Name of the left wheel's joint.
+    #[arg(long, requires = "bag")]
+    pub left_joint: Option<String>,
+    /// Name of the right wheel's joint.
+    #[arg(long, requires = "bag")]
+    pub right_joint: Option<String>,
+    /// Joint position (rad) or velocity (rad/s, integrated).
+    #[arg(long, value_enum, default_value_t = JointSignalArg::Auto)]
+    pub joint_signal: JointSignalArg,
+    /// The robot's frame in the TF tree (default base_link, else base_footprint).
+    #[arg(long, requires = "bag")]
+    pub base_frame: Option<String>,
+    /// Message times: header stamps, or the recorder's receive times.
+    #[arg(long, value_enum, default_value_t = StampsArg::Header)]
+    pub stamps: StampsArg,
+    /// -1 for a left counter that runs backwards when driving forward.
+    #[arg(long, default_value_t = 1, value_parser = usage::wheel_sign)]
+    pub left_sign: i8,
+    /// -1 for a right counter that runs backwards when driving forward.
+    #[arg(long, default_value_t = 1, value_parser = usage::wheel_sign)]
+    pub right_sign: i8,
+    /// The lidar (simulator logs; default: the first range sensor with at
+    /// least 30 beams).
+    #[arg(long, value_name = "NAME")]
+    pub scan_sensor: Option<String>,
+    /// calib.json from `twindrive calibrate`: its wheels, and its
+    /// lidar_mount when it has one (a self-calibration; else the log's or
+    /// /tf_static's mount).
+    #[arg(long, value_name = "calib.json")]
+    pub calibration: PathBuf,
+    /// A mission scenario whose robot, sensors and controller site.toml
+    /// puts on the map (with the calibrated wheels and mount); without it
+    /// the robot stands where the drive started and holds still.
+    #[arg(long, value_name = "SCENARIO")]
+    pub mission: Option<PathBuf>,
+    /// The grid's cell size.
+    #[arg(long, default_value_t = 0.05, value_parser = usage::positive)]
+    pub resolution_m: f64,
+    /// The robot's footprint radius for site.toml (bags; a log gives its own).
+    #[arg(long, default_value_t = 0.2, value_parser = usage::positive)]
+    pub footprint_radius_m: f64,
+    /// The wheels' speed limit for site.toml (bags; a log gives its own).
+    #[arg(long, default_value_t = 10.0, value_parser = usage::positive)]
+    pub max_wheel_speed_rad_s: f64,
+    /// The wheels' acceleration limit for site.toml (bags; a log gives its own).
+    #[arg(long, default_value_t = 20.0, value_parser = usage::positive)]
+    pub max_wheel_accel_rad_s2: f64,
+    /// Output directory (map.pgm, map.yaml, site.toml, poses.tum, map_report.json).
+    #[arg(long)]
+    pub out: PathBuf,
 }

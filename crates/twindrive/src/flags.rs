@@ -65,3 +65,40 @@ pub fn signing_key(
         .map(Some)
         .map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))
 }
+
+/// `--stamps`, as the bag reader takes it.
+pub fn stamps(s: crate::cli::StampsArg) -> twindrive_ros::extract::Stamps {
+    match s {
+        crate::cli::StampsArg::Header => twindrive_ros::extract::Stamps::Header,
+        crate::cli::StampsArg::Log => twindrive_ros::extract::Stamps::LogTime,
+    }
+}
+
+/// `--joint-signal`, as the bag reader takes it.
+pub fn joint_signal(s: crate::cli::JointSignalArg) -> twindrive_ros::extract::JointSignal {
+    use twindrive_ros::extract::JointSignal;
+    match s {
+        crate::cli::JointSignalArg::Auto => JointSignal::Auto,
+        crate::cli::JointSignalArg::Position => JointSignal::Position,
+        crate::cli::JointSignalArg::Velocity => JointSignal::Velocity,
+    }
+}
+
+/// The lidar's mount in a self-calibration's `calib.json`, if it has one.
+#[derive(Debug, Deserialize)]
+struct MountFile {
+    lidar: Option<String>,
+    lidar_mount: Option<twindrive_kinematics::Pose>,
+}
+
+/// The lidar named in `calib.json` and its calibrated mount; `None` for a
+/// calibration against poses, which has none.
+pub fn read_lidar_mount(
+    path: &Path,
+) -> anyhow::Result<Option<(Option<String>, twindrive_kinematics::Pose)>> {
+    let m: MountFile = twindrive_files::json::read(
+        path,
+        "a calibration (calib.json from `twindrive calibrate`)",
+    )?;
+    Ok(m.lidar_mount.map(|mount| (m.lidar, mount)))
+}

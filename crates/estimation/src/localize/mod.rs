@@ -21,7 +21,7 @@ mod scan_match;
 mod scan_ref;
 mod segment_map;
 #[cfg(test)]
-mod testkit;
+pub(crate) mod testkit;
 
 pub use point_map::PointMap;
 pub use reference::{Anchor, Reference};

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
-use super::reference::{Anchor, Reference};
+use super::reference::{Anchor, Moments, Reference};
 
 /// Map points within this of a point shape its tangent line (m).
 const NEIGHBOURHOOD_M: f64 = 0.25;
@@ -21,6 +21,8 @@ pub struct PointMap {
     /// Sum of the points in each voxel and their number.
     voxels: HashMap<(i32, i32), ([f64; 2], u32)>,
     points: Vec<[f64; 2]>,
+    /// How many returns each point averages.
+    counts: Vec<u32>,
     anchors: Vec<Anchor>,
     tree: Option<ImmutableKdTree<f64, 2>>,
 }
@@ -44,6 +46,7 @@ impl PointMap {
             reach_m,
             voxels: HashMap::new(),
             points: Vec::new(),
+            counts: Vec::new(),
             anchors: Vec::new(),
             tree: None,
         }
@@ -71,6 +74,7 @@ impl PointMap {
         // Voxels in a fixed order, so the same points give the same map.
         let mut keys: Vec<&(i32, i32)> = self.voxels.keys().collect();
         keys.sort_unstable();
+        self.counts = keys.iter().map(|k| self.voxels[*k].1).collect();
         self.points = keys
             .into_iter()
             .map(|k| {
@@ -83,22 +87,24 @@ impl PointMap {
             self.anchors.clear();
             return;
         };
-        let mut hood = Vec::new();
+        // Each point's neighbourhood summed as it is visited (no result
+        // list, no sort): the reading first, then its neighbours.
         self.anchors = self
             .points
             .iter()
             .map(|p| {
-                hood.clear();
-                hood.push(*p);
-                hood.extend(
-                    tree.query(p)
-                        .within::<SquaredEuclidean<f64>>(NEIGHBOURHOOD_M * NEIGHBOURHOOD_M)
-                        .execute()
-                        .into_iter()
-                        .map(|hit| self.points[hit.item as usize])
-                        .filter(|q| q != p),
-                );
-                Anchor::fit(&hood, MAX_FLATNESS)
+                let mut m = Moments::default();
+                m.add(*p);
+                tree.query(p)
+                    .within::<SquaredEuclidean<f64>>(NEIGHBOURHOOD_M * NEIGHBOURHOOD_M)
+                    .unsorted()
+                    .visit(|hit| {
+                        let q = self.points[hit.item as usize];
+                        if q != *p {
+                            m.add(q);
+                        }
+                    });
+                Anchor::from_moments(&m, *p, MAX_FLATNESS)
             })
             .collect();
     }
@@ -106,6 +112,49 @@ impl PointMap {
     /// The map's points (voxel averages), in a fixed order.
     pub fn points(&self) -> &[[f64; 2]] {
         &self.points
+    }
+
+    /// The distance from (x, y) to the nearest map point, if one is within
+    /// the map's reach.
+    pub fn distance_to_nearest(&self, x: f64, y: f64) -> Option<f64> {
+        let tree = self.tree.as_ref()?;
+        let hit = tree
+            .query(&[x, y])
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        (!hit.distance.is_nan() && hit.distance <= self.reach_m * self.reach_m)
+            .then(|| hit.distance.sqrt())
+    }
+
+    /// The map point nearest (x, y) within the map's reach: its index, its
+    /// anchor (the line its neighbours lie along, if they do) and how many
+    /// returns it averages.
+    pub fn nearest(&self, x: f64, y: f64) -> Option<(usize, Anchor, u32)> {
+        let tree = self.tree.as_ref()?;
+        let hit = tree
+            .query(&[x, y])
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        if hit.distance.is_nan() || hit.distance > self.reach_m * self.reach_m {
+            return None;
+        }
+        let i = hit.item as usize;
+        Some((i, self.anchors[i], self.counts[i]))
+    }
+
+    /// Calls `visit(index)` for every map point within `radius_m` of (x, y).
+    pub fn within(&self, x: f64, y: f64, radius_m: f64, mut visit: impl FnMut(usize)) {
+        if let Some(tree) = &self.tree {
+            tree.query(&[x, y])
+                .within::<SquaredEuclidean<f64>>(radius_m * radius_m)
+                .unsorted()
+                .visit(|hit| visit(hit.item as usize));
+        }
+    }
+
+    /// How many returns each point averages, in the order of [`points`](Self::points).
+    pub fn counts(&self) -> &[u32] {
+        &self.counts
     }
 
     pub fn len(&self) -> usize {
@@ -127,15 +176,7 @@ impl Reference for PointMap {
 
     #[inline]
     fn associate(&self, x: f64, y: f64) -> Option<Anchor> {
-        let tree = self.tree.as_ref()?;
-        let hit = tree
-            .query(&[x, y])
-            .nearest_one::<SquaredEuclidean<f64>>()
-            .execute();
-        if hit.distance.is_nan() || hit.distance > self.reach_m * self.reach_m {
-            return None;
-        }
-        Some(self.anchors[hit.item as usize])
+        self.nearest(x, y).map(|(_, a, _)| a)
     }
 }
 

@@ -76,6 +76,7 @@ impl Anchor {
     /// reading being anchored; no line when they do not lie along one:
     /// fewer than three, or spread across more than `max_flatness`
     /// (smallest over largest variance: a corner, a clump).
+    #[cfg(test)]
     pub(crate) fn fit(points: &[[f64; 2]], max_flatness: f64) -> Self {
         let mut m = Moments::default();
         for p in points {

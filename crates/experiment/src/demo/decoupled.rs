@@ -40,13 +40,48 @@ pub fn run(
     world_toml: &[u8],
     out: &Path,
 ) -> anyhow::Result<Decoupled> {
+    // The robot's site: the twin's world and the box.
+    let mut site = twin.clone();
+    site.world = site.world.with_blocks(&[SITE_BOX]);
+    let (min, max) = SITE_BOX;
+    let site_box = [
+        (min[0], min[1]),
+        (max[0], min[1]),
+        (max[0], max[1]),
+        (min[0], max[1]),
+    ];
+    run_on_site(
+        plan,
+        plan_json,
+        twin,
+        world_toml,
+        &site,
+        &[Outline {
+            label: "the site's box (the twin lacked it)",
+            corners: &site_box,
+            color: palette::BAD,
+        }],
+        out,
+    )
+}
+
+/// `plan`, rehearsed and verified on `twin` (whose world file is
+/// `world_toml`), signed and sent over the lunar link to a robot on
+/// `site`; the figure outlines `differences` (what the site has that the
+/// twin lacks).
+pub fn run_on_site(
+    plan: &MissionPlan,
+    plan_json: &[u8],
+    twin: &Scenario,
+    world_toml: &[u8],
+    site: &Scenario,
+    differences: &[Outline<'_>],
+    out: &Path,
+) -> anyhow::Result<Decoupled> {
     // A fixed key: the demo is deterministic (same seed, same bytes); a
     // real master's key comes from `twindrive keygen`.
     let key = SigningKey::from_bytes(&[7; 32]);
     let profile: LinkProfile = PROFILE.parse().expect("a named profile");
-    // The robot's site: the twin's world and the box.
-    let mut site = twin.clone();
-    site.world = site.world.with_blocks(&[SITE_BOX]);
     let backend = SimBackend::new(site.clone(), plan.samples[0].pose(), 3_600.0)
         .map_err(|e| anyhow::anyhow!("the demo site: {e}"))?;
     std::fs::create_dir_all(out.parent().unwrap_or(Path::new(".")))?;
@@ -109,13 +144,6 @@ pub fn run(
         .twin()
         .map(|t| t.scenario.world.clone())
         .unwrap_or_else(|| twin.world.clone());
-    let (min, max) = SITE_BOX;
-    let site_box = [
-        (min[0], min[1]),
-        (max[0], min[1]),
-        (max[0], max[1]),
-        (min[0], max[1]),
-    ];
     let labels: Vec<String> = (0..plans.len())
         .map(|k| {
             if k == 0 {
@@ -161,11 +189,7 @@ pub fn run(
             points: &handbacks,
             color: palette::BAD,
         }],
-        outlines: &[Outline {
-            label: "the site's box (the twin lacked it)",
-            corners: &site_box,
-            color: palette::BAD,
-        }],
+        outlines: differences,
     }
     .write(&dir.join("twin"))?;
     timeline_figure(&op.report, &dir.join("timeline"))?;

@@ -23,6 +23,7 @@ use crate::rehearsal::{Rehearsal, site_like};
 mod case_study;
 pub mod decoupled;
 pub mod evidence;
+pub mod mapped_site;
 pub mod report;
 
 use case_study::{CaseStudy, case_study_report};
@@ -194,7 +195,14 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         )?;
     }
 
-    let report = case_study_report(&CaseStudy {
+    // The twin from the robot's own sensors: a site the twin has never
+    // seen, self-calibration and its map from one drive, the mission
+    // planned on the mapped twin and executed on the true site.
+    let mapped_dir = out.join("mapped_site");
+    let mapped = mapped_site::run(&mapped_dir, stdout)?;
+    mapped_site::print(&mapped, &mapped_dir, stdout)?;
+
+    let mut report = case_study_report(&CaseStudy {
         nominal,
         calibrated,
         truth: [
@@ -213,6 +221,7 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         decoupled: &decoupled,
         experiment: (&exp_settings, &exp_cells),
     });
+    mapped_site::add_to(&mut report, &mapped);
     let md = report.markdown(out)?;
     let staging = Staging::new(out, "demo-report")?;
     staging.write_with("report.md", |w| Ok(w.write_all(md.as_bytes())?))?;

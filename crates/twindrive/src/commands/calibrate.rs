@@ -11,9 +11,10 @@ use twindrive_calibrate::{Job, Method, Offset, ScanJob};
 use twindrive_estimation::FilterConfig;
 use twindrive_estimation::selfcal::LaserOdometrySettings;
 use twindrive_kinematics::Pose;
-use twindrive_ros::extract::{JointSignal, PoseSource, Stamps, WheelSource};
+use twindrive_ros::extract::{PoseSource, WheelSource};
 
-use crate::cli::{CalibrateArgs, JointSignalArg, MethodArg, ReferenceArg, StampsArg};
+use crate::cli::{CalibrateArgs, MethodArg, ReferenceArg};
+use crate::flags::{joint_signal, stamps};
 use crate::usage::{OrUsage, usage};
 
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
@@ -85,13 +86,6 @@ impl From<MethodArg> for Method {
     }
 }
 
-fn stamps(s: StampsArg) -> Stamps {
-    match s {
-        StampsArg::Header => Stamps::Header,
-        StampsArg::Log => Stamps::LogTime,
-    }
-}
-
 /// The wheels a bag is read for, as the command line names them.
 fn wheel_source(args: &CalibrateArgs) -> anyhow::Result<Option<WheelSource>> {
     Ok(
@@ -106,11 +100,7 @@ fn wheel_source(args: &CalibrateArgs) -> anyhow::Result<Option<WheelSource>> {
                 topic: args.joint_topic.clone(),
                 left: l.clone(),
                 right: r.clone(),
-                signal: match args.joint_signal {
-                    JointSignalArg::Auto => JointSignal::Auto,
-                    JointSignalArg::Position => JointSignal::Position,
-                    JointSignalArg::Velocity => JointSignal::Velocity,
-                },
+                signal: joint_signal(args.joint_signal),
             }),
             _ => None,
         },

@@ -7,6 +7,7 @@ mod demo;
 mod draw_map;
 mod experiment;
 mod keys;
+mod map;
 mod ops;
 mod plan;
 mod prune;
@@ -26,6 +27,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             duration_s,
         } => simulate::run(&scenario, &out, seed, duration_s),
         Command::Calibrate(a) => calibrate::run(&a),
+        Command::Map(a) => map::run(&a),
         Command::Plan(a) => plan::run(&a),
         Command::VerifyPlan {
             plan,

@@ -1,0 +1,483 @@
+//! Where the robot was while it drew the map: each scan matched against
+//! the map drawn so far ([`PointMap`], the project's one matcher), from
+//! the pose the calibrated odometry predicts since the last scan. A drive
+//! that comes back to where it started is matched against the walls it
+//! drew on the way out, so it does not draw them a second time.
+//!
+//! Then the occupancy grid: each scan's beams from the pose found, each
+//! return drawn where the surface it fell on lies. The map's points
+//! average every view of a wall, so a return is moved onto the local line
+//! of its nearest map point (when it lies within `snap_m` of it): the walls
+//! are drawn a cell thick where the raw returns, 1-3 cm of noise either
+//! side, would mark the cells behind the wall occupied too.
+
+use crate::localize::{MatchSettings, PointMap, Refusal, Scan, ScanMatch, register};
+
+use super::grid::{Beam, LogOdds, LogOddsGrid};
+
+/// A return that lies on no line is drawn only where the surface point
+/// near it averages at least this many returns.
+const MIN_SUPPORT: u32 = 3;
+
+/// How a map is drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MappingSettings {
+    /// The occupancy grid's cell (m).
+    pub resolution_m: f64,
+    /// The matcher's map averages returns per voxel of this size (m).
+    pub voxel_m: f64,
+    /// A scan adds its points to the matcher's map once the robot has
+    /// moved this far (m) or turned this much (rad) since the last that did,
+    /// if at least `novel_fraction` of its returns lie farther than
+    /// `novel_m` from every map point (it sees something new), or the robot
+    /// has moved `refresh_m` since (the map's averages keep improving).
+    pub keyframe_m: f64,
+    pub keyframe_rad: f64,
+    pub novel_m: f64,
+    pub novel_fraction: f64,
+    pub refresh_m: f64,
+    /// After this much travel (m) with no match, a scan's points are added
+    /// from the odometry's pose, so a drive into a place the map has not
+    /// seen (a new room through a door) keeps drawing.
+    pub bridge_m: f64,
+    /// A match that moves the odometry's prediction further than this (m,
+    /// rad) is not believed.
+    pub max_correction_m: f64,
+    pub max_correction_rad: f64,
+    pub matching: MatchSettings,
+    /// A return within this of the map's local line is drawn on it (m).
+    pub snap_m: f64,
+    /// Returns farther than this are left out of the grid (m): their
+    /// angular error spreads them over several cells.
+    pub max_range_m: f64,
+    pub log_odds: LogOdds,
+}
+
+impl Default for MappingSettings {
+    fn default() -> Self {
+        Self {
+            resolution_m: 0.05,
+            voxel_m: 0.025,
+            keyframe_m: 0.1,
+            keyframe_rad: 0.1,
+            novel_m: 0.1,
+            novel_fraction: 0.02,
+            refresh_m: 1.0,
+            bridge_m: 0.5,
+            max_correction_m: 0.3,
+            max_correction_rad: 0.2,
+            matching: MatchSettings {
+                // A map being drawn has places it has not seen yet: the
+                // matcher keeps the directions the map pins and leaves the
+                // rest to the odometry, rather than refusing.
+                min_information_ratio: 0.0,
+                ..MatchSettings::scan_to_scan()
+            },
+            snap_m: 0.1,
+            max_range_m: 10.0,
+            log_odds: LogOdds::default(),
+        }
+    }
+}
+
+/// Where one scan was taken, and how that was found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Located {
+    /// The robot's pose in the map's frame (x, y in m, heading in rad).
+    pub pose: [f64; 3],
+    /// The match against the map, or why there was none (the pose is then
+    /// the odometry's prediction).
+    pub matched: Result<ScanMatch, MatchFailure>,
+}
+
+/// Why a scan's pose is the odometry's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MatchFailure {
+    /// The first scan: it defines the map.
+    First,
+    Refused(Refusal),
+    /// The match moved the prediction by more than the settings allow.
+    TooFar {
+        moved_m: f64,
+        turned_rad: f64,
+    },
+}
+
+impl std::fmt::Display for MatchFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::First => write!(f, "the first scan"),
+            Self::Refused(r) => write!(f, "{r}"),
+            Self::TooFar {
+                moved_m,
+                turned_rad,
+            } => write!(
+                f,
+                "the match moved the odometry's pose by {:.2} m and {:.1} deg, more than believed",
+                moved_m,
+                turned_rad.to_degrees()
+            ),
+        }
+    }
+}
+
+/// The poses of a drive in the map being drawn.
+#[derive(Debug)]
+pub struct Mapper {
+    settings: MappingSettings,
+    /// The lidar's pose on the robot.
+    mount: [f64; 3],
+    points: PointMap,
+    /// The last scan's odometry pose and map pose.
+    last: Option<([f64; 3], [f64; 3])>,
+    /// Where the last scan that added points was taken.
+    last_key: Option<[f64; 3]>,
+    /// Travel since the last match (m).
+    unmatched_m: f64,
+}
+
+impl Mapper {
+    /// A mapper for a lidar mounted at `mount` (x, y, heading on the robot).
+    pub fn new(mount: [f64; 3], settings: MappingSettings) -> Self {
+        Self {
+            settings,
+            mount,
+            points: PointMap::new(settings.voxel_m, settings.matching.outlier_m),
+            last: None,
+            last_key: None,
+            unmatched_m: 0.0,
+        }
+    }
+
+    /// A mapper that starts from a map already drawn (its occupied cells'
+    /// centres): the drive is located in that map's frame from its first
+    /// scan, and the odometry's first pose must be in that frame too.
+    pub fn with_map(mount: [f64; 3], settings: MappingSettings, points: &[[f64; 2]]) -> Self {
+        let mut m = Self::new(mount, settings);
+        m.points.extend(points.iter().copied());
+        m
+    }
+
+    /// The matcher's map: voxel-averaged returns.
+    pub fn points(&self) -> &PointMap {
+        &self.points
+    }
+
+    /// The next scan, with the robot's pose by odometry at its time
+    /// (any frame; the first scan's odometry pose is its map pose).
+    pub fn locate(&mut self, odometry: [f64; 3], scan: &Scan) -> Located {
+        let predicted = match self.last {
+            None => odometry,
+            Some((o, m)) => compose(m, between(o, odometry)),
+        };
+        if let Some((o, _)) = self.last {
+            self.unmatched_m += (odometry[0] - o[0]).hypot(odometry[1] - o[1]);
+        }
+        let points = scan.points();
+        let matched = if self.points.is_empty() {
+            Err(MatchFailure::First)
+        } else {
+            let prior = compose(predicted, self.mount);
+            match register(&self.points, &points, prior, &self.settings.matching) {
+                Err(r) => Err(MatchFailure::Refused(r)),
+                Ok(m) => {
+                    let moved_m = (m.pose[0] - prior[0]).hypot(m.pose[1] - prior[1]);
+                    let turned_rad = wrap(m.pose[2] - prior[2]).abs();
+                    if moved_m > self.settings.max_correction_m
+                        || turned_rad > self.settings.max_correction_rad
+                    {
+                        Err(MatchFailure::TooFar {
+                            moved_m,
+                            turned_rad,
+                        })
+                    } else {
+                        Ok(m)
+                    }
+                }
+            }
+        };
+        let pose = match &matched {
+            Ok(m) => compose(m.pose, inverse(self.mount)),
+            Err(_) => predicted,
+        };
+        if matched.is_ok() {
+            self.unmatched_m = 0.0;
+        }
+        self.last = Some((odometry, pose));
+        let sensor = compose(pose, self.mount);
+        let add = match matched {
+            Ok(_) => self.last_key.is_none_or(|k| {
+                let moved = (pose[0] - k[0]).hypot(pose[1] - k[1]);
+                (moved >= self.settings.keyframe_m
+                    || wrap(pose[2] - k[2]).abs() >= self.settings.keyframe_rad)
+                    && (moved >= self.settings.refresh_m || self.novel(sensor, &points))
+            }),
+            Err(MatchFailure::First) => true,
+            Err(_) => self.unmatched_m >= self.settings.bridge_m,
+        };
+        if add {
+            self.points.extend(points.iter().map(|p| apply(sensor, *p)));
+            self.last_key = Some(pose);
+            self.unmatched_m = 0.0;
+        }
+        Located { pose, matched }
+    }
+
+    /// Whether enough of `points` (sensor frame, the sensor at `sensor`)
+    /// lie away from every map point to be something new.
+    fn novel(&self, sensor: [f64; 3], points: &[[f64; 2]]) -> bool {
+        let needed = (self.settings.novel_fraction * points.len() as f64).ceil() as usize;
+        let mut new = 0;
+        for p in points {
+            let w = apply(sensor, *p);
+            if self
+                .points
+                .distance_to_nearest(w[0], w[1])
+                .is_none_or(|d| d > self.settings.novel_m)
+            {
+                new += 1;
+                if new >= needed.max(1) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+/// The surfaces a drive saw: every return at its scan's final pose,
+/// averaged per voxel, each with the line its neighbours lie along. What
+/// the grid is drawn from.
+#[derive(Debug)]
+pub struct Surfaces {
+    settings: MappingSettings,
+    mount: [f64; 3],
+    points: PointMap,
+    /// Whether each point, where it lies on no line, is drawn: it averages
+    /// at least [`MIN_SUPPORT`] returns and a quarter of the most any point
+    /// within three voxels does (the tails of the range noise behind a
+    /// corner are not).
+    drawn: Vec<bool>,
+}
+
+impl Surfaces {
+    /// The surfaces of `scans` taken at `poses` (the robot's, in the map).
+    pub fn new(
+        scans: &[(Scan, [f64; 3])],
+        poses: &[[f64; 3]],
+        mount: [f64; 3],
+        settings: MappingSettings,
+    ) -> Self {
+        let mut points = PointMap::new(settings.voxel_m, settings.matching.outlier_m);
+        points.extend(scans.iter().zip(poses).flat_map(|((scan, _), pose)| {
+            let sensor = compose(*pose, mount);
+            scan.endpoints().flatten().map(move |p| apply(sensor, p))
+        }));
+        let counts = points.counts();
+        let drawn = points
+            .points()
+            .iter()
+            .zip(counts)
+            .map(|(p, &n)| {
+                let mut most = n;
+                points.within(p[0], p[1], 3.0 * settings.voxel_m, |i| {
+                    most = most.max(counts[i]);
+                });
+                n >= MIN_SUPPORT && 4 * n >= most
+            })
+            .collect();
+        Self {
+            settings,
+            mount,
+            points,
+            drawn,
+        }
+    }
+
+    /// No surfaces: every return is drawn where it fell.
+    pub fn none(mount: [f64; 3], settings: MappingSettings) -> Self {
+        Self {
+            settings,
+            mount,
+            points: PointMap::new(settings.voxel_m, settings.matching.outlier_m),
+            drawn: Vec::new(),
+        }
+    }
+
+    /// Draws one scan taken at `pose` (the robot's, in the map) into
+    /// `grid`: each return moved onto the local line of the surface it fell
+    /// on, and the cells its beam crossed cleared only where the beam ran
+    /// more than a cell from that surface. A return on no line is drawn where
+    /// the returns near it average, if enough fell there; a stray one (noise
+    /// past a corner) is not drawn, though its beam clears what it crossed.
+    pub fn draw(&self, grid: &mut LogOddsGrid, pose: [f64; 3], scan: &Scan) {
+        let sensor = compose(pose, self.mount);
+        let origin = [sensor[0], sensor[1]];
+        let max_sq = self.settings.max_range_m * self.settings.max_range_m;
+        let cell = self.settings.resolution_m;
+        let beams: Vec<Beam> = scan
+            .endpoints()
+            .flatten()
+            .filter(|p| p[0] * p[0] + p[1] * p[1] <= max_sq)
+            .map(|p| {
+                let w = apply(sensor, p);
+                let (d, r) = {
+                    let (dx, dy) = (w[0] - origin[0], w[1] - origin[1]);
+                    let r = dx.hypot(dy);
+                    ([dx / r, dy / r], r)
+                };
+                let back_by = |back: f64| {
+                    let back = back.min(r);
+                    [w[0] - back * d[0], w[1] - back * d[1]]
+                };
+                match self.points.nearest(w[0], w[1]) {
+                    // On a wall: drawn on its line; cleared up to where the
+                    // beam comes within a cell of it.
+                    Some((_, a, _)) if a.normal != [0.0, 0.0] => {
+                        let (res, g) = a.residual(w);
+                        if res.abs() > self.settings.snap_m {
+                            return Beam { end: w, free_to: w };
+                        }
+                        let end = [w[0] - res * g[0], w[1] - res * g[1]];
+                        let incidence = (d[0] * g[0] + d[1] * g[1]).abs().max(1e-3);
+                        let back = (cell / incidence).min(r);
+                        Beam {
+                            end,
+                            free_to: [end[0] - back * d[0], end[1] - back * d[1]],
+                        }
+                    }
+                    // A corner or clutter seen often enough: drawn where
+                    // its returns average.
+                    Some((i, a, _))
+                        if self.drawn[i]
+                            && (a.at[0] - w[0]).hypot(a.at[1] - w[1]) <= self.settings.snap_m =>
+                    {
+                        Beam {
+                            end: a.at,
+                            free_to: back_by(2.0 * cell),
+                        }
+                    }
+                    // A stray return (noise beyond a wall's corner): the
+                    // beam clears what it crossed, short of it, and marks
+                    // nothing.
+                    Some(_) => Beam {
+                        end: [f64::NAN, f64::NAN],
+                        free_to: back_by(2.0 * cell),
+                    },
+                    None => Beam { end: w, free_to: w },
+                }
+            })
+            .collect();
+        grid.integrate_beams(origin, &beams);
+    }
+}
+
+/// A drive mapped: the robot's pose at each scan, the grid, and how the
+/// poses were found.
+#[derive(Debug, Clone)]
+pub struct Mapping {
+    pub poses: Vec<[f64; 3]>,
+    pub grid: LogOddsGrid,
+    /// Scans matched against the map.
+    pub matched: usize,
+    /// Scans left at the odometry's pose, counted by reason (the first
+    /// scan is not counted).
+    pub unmatched: Vec<(String, usize)>,
+    /// Each match's RMS residual (m), in scan order.
+    pub rms_m: Vec<f64>,
+}
+
+/// Maps a drive: `scans` with the robot's odometry pose at each, in time
+/// order. `prior` is a map already drawn of the same site, in the frame
+/// the odometry's first pose is in, which the drive extends. Calls
+/// `progress(done, total)` as it goes (two passes over the scans).
+pub fn map_drive(
+    scans: &[(Scan, [f64; 3])],
+    mount: [f64; 3],
+    settings: MappingSettings,
+    prior: Option<&LogOddsGrid>,
+    mut progress: impl FnMut(usize, usize),
+) -> Mapping {
+    let total = 2 * scans.len();
+    let mut mapper = match prior {
+        Some(g) => Mapper::with_map(mount, settings, &g.occupied_centres()),
+        None => Mapper::new(mount, settings),
+    };
+    let mut poses = Vec::with_capacity(scans.len());
+    let mut matched = 0;
+    let mut rms_m = Vec::new();
+    let mut unmatched: Vec<(String, usize)> = Vec::new();
+    for (k, (scan, odometry)) in scans.iter().enumerate() {
+        let located = mapper.locate(*odometry, scan);
+        match located.matched {
+            Ok(m) => {
+                matched += 1;
+                rms_m.push(m.rms_m);
+            }
+            Err(MatchFailure::First) => {}
+            Err(f) => {
+                let kind = match f {
+                    MatchFailure::Refused(r) => r.kind(),
+                    _ => "moved too far",
+                };
+                match unmatched.iter_mut().find(|(k, _)| k == kind) {
+                    Some((_, n)) => *n += 1,
+                    None => unmatched.push((kind.to_string(), 1)),
+                }
+            }
+        }
+        poses.push(located.pose);
+        if k % 64 == 0 {
+            progress(k, total);
+        }
+    }
+    let mut grid = prior
+        .cloned()
+        .unwrap_or_else(|| LogOddsGrid::new(settings.resolution_m, settings.log_odds));
+    let surfaces = Surfaces::new(scans, &poses, mount, settings);
+    for (k, ((scan, _), pose)) in scans.iter().zip(&poses).enumerate() {
+        surfaces.draw(&mut grid, *pose, scan);
+        if k % 64 == 0 {
+            progress(scans.len() + k, total);
+        }
+    }
+    progress(total, total);
+    Mapping {
+        poses,
+        grid,
+        matched,
+        unmatched,
+        rms_m,
+    }
+}
+
+fn wrap(a: f64) -> f64 {
+    twindrive_kinematics::wrap_angle(a)
+}
+
+/// `a ⊕ b` in SE(2).
+pub(crate) fn compose(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    let (s, c) = a[2].sin_cos();
+    [
+        a[0] + c * b[0] - s * b[1],
+        a[1] + s * b[0] + c * b[1],
+        wrap(a[2] + b[2]),
+    ]
+}
+
+/// `a⁻¹`.
+fn inverse(a: [f64; 3]) -> [f64; 3] {
+    let (s, c) = a[2].sin_cos();
+    [-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]]
+}
+
+/// `a⁻¹ ⊕ b`: `b` seen from `a`.
+fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    compose(inverse(a), b)
+}
+
+/// The point `p` of frame `a` in `a`'s parent frame.
+fn apply(a: [f64; 3], p: [f64; 2]) -> [f64; 2] {
+    let (s, c) = a[2].sin_cos();
+    [a[0] + c * p[0] - s * p[1], a[1] + s * p[0] + c * p[1]]
+}
