@@ -204,9 +204,27 @@ fn demo_runs_from_any_directory() {
         "decoupled/twin.png",
         "decoupled/timeline.png",
         "plan/plan_wheel_speeds.png",
+        "mapped_site/map_vs_truth.png",
+        "mapped_site/decoupled/twin.png",
     ] {
         assert!(links.contains(&f), "report.md leaves out {f}");
     }
+
+    // The twin from the robot's own sensors: the hidden site's drive
+    // self-calibrated, mapped into a site the twin runs on, and the plan
+    // made there completed on the true site without a collision.
+    let m = out_dir.join("mapped_site");
+    let cal: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(m.join("calibration/calib.json")).unwrap()).unwrap();
+    assert_eq!(cal["reference"], "scans");
+    for f in ["site/map.pgm", "site/map.yaml", "site/site.toml"] {
+        assert!(m.join(f).is_file(), "{f}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(m.join("decoupled/report.json")).unwrap()).unwrap();
+    assert_eq!(report["outcome"], "completed", "{report}");
+    assert_eq!(report["collisions"], 0, "{report}");
+    assert!(stdout.contains("of wall the lidar saw drawn"), "{stdout}");
 }
 
 /// Writes a broken variant of the wall-following scenario and checks that

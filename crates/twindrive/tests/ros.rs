@@ -1239,6 +1239,60 @@ fn a_bag_self_calibrates_from_its_scans_as_its_log_does() {
             );
         }
     }
+    // The site mapped from the rosbags-written bag is the log's, in the
+    // bag's frame (the robot's first pose): the same poses, moved by the
+    // log's start pose.
+    let site_log = tmp.path().join("site_log");
+    let o = twindrive(&[
+        "map",
+        s(&sim),
+        "--calibration",
+        s(&log_out),
+        "--out",
+        s(&site_log),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let site_bag = tmp.path().join("site_bag");
+    let mut args = vec!["map", "--bag", s(&rosbags), "--scan-topic", "/scan"];
+    args.extend(JOINTS);
+    args.extend(["--calibration", s(&log_out), "--out", s(&site_bag)]);
+    let o = twindrive(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let poses = |dir: &Path| -> Vec<[f64; 3]> {
+        std::fs::read_to_string(dir.join("poses.tum"))
+            .unwrap()
+            .lines()
+            .map(|l| {
+                let v: Vec<f64> = l.split(' ').map(|x| x.parse().unwrap()).collect();
+                [v[1], v[2], 2.0 * v[6].atan2(v[7])]
+            })
+            .collect()
+    };
+    let (from_log, from_bag) = (poses(&site_log), poses(&site_bag));
+    assert_eq!(from_log.len(), from_bag.len());
+    let start = from_log[0];
+    let (sn, cs) = start[2].sin_cos();
+    let worst = from_log
+        .iter()
+        .zip(&from_bag)
+        .map(|(l, b)| {
+            let moved = [
+                start[0] + cs * b[0] - sn * b[1],
+                start[1] + sn * b[0] + cs * b[1],
+            ];
+            (l[0] - moved[0]).hypot(l[1] - moved[1])
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 0.005, "the bag's map poses differ by {worst} m");
+    let report = |dir: &Path| -> Value {
+        serde_json::from_slice(&std::fs::read(dir.join("map_report.json")).unwrap()).unwrap()
+    };
+    let (a, b) = (report(&site_log), report(&site_bag));
+    let occupied = |v: &Value| v["occupied_cells"].as_f64().unwrap();
+    assert!(
+        (occupied(&a) / occupied(&b) - 1.0).abs() < 0.1,
+        "{a} against {b}"
+    );
     // A topic that is not a scan names the scans there are.
     let out = tmp.path().join("wrong/calib.json");
     let mut args = vec!["calibrate", "--bag", s(&bag), "--scan-topic", "/imu"];

@@ -16,6 +16,7 @@ use crate::executive::{Executive, Stop};
 use crate::localize::Mode;
 use crate::navigator::{Navigator, initial_estimate, with_learnt_params};
 use crate::store::RobotStore;
+use twindrive_link::wire::MAX_MESSAGE_BYTES;
 
 impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     pub(super) fn start(
@@ -169,7 +170,11 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 ranges_m: reading.ranges_m.iter().map(|&v| v as f32).collect(),
                 bump: reading.bump,
             });
-            if r.window.len() > WINDOW_TICKS / WINDOW_EVERY as usize {
+            // As many samples as fit the hand-back message: a lidar's
+            // hundreds of beams a sample would otherwise make it too long
+            // to send, and the hand-back would never arrive.
+            let beams = reading.ranges_m.len();
+            if r.window.len() > window_samples(beams) {
                 r.window.pop_front();
             }
         }
@@ -269,5 +274,56 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         }
         self.unwritten.push_back((plan.sha256.clone(), r.log));
         self.next_status_ns = now_ns;
+    }
+}
+
+/// Samples of `beams` readings the hand-back's window keeps: at most
+/// [`WINDOW_TICKS`] / [`WINDOW_EVERY`], and no more than fill three
+/// quarters of a message (4 bytes a beam, about 40 more a sample).
+fn window_samples(beams: usize) -> usize {
+    let per_sample = 4 * beams + 48;
+    (MAX_MESSAGE_BYTES * 3 / 4 / per_sample).clamp(2, WINDOW_TICKS / WINDOW_EVERY as usize)
+}
+
+#[cfg(test)]
+mod window_tests {
+    use super::*;
+    use twindrive_link::wire::{Body, Handback, Stamper, WindowSample, decode, encode};
+
+    #[test]
+    fn a_full_window_fits_a_hand_back_message_for_any_sensor() {
+        for beams in [1usize, 3, 181, 361, 720, 1081, 2000] {
+            let n = window_samples(beams);
+            assert!(n >= 2 && n <= WINDOW_TICKS / WINDOW_EVERY as usize);
+            let window = vec![
+                WindowSample {
+                    plan_t_s: 1.0,
+                    pose: [1.0, 2.0, 3.0],
+                    ranges_m: vec![1.5; beams],
+                    bump: false,
+                };
+                n + 1
+            ];
+            let h = Handback {
+                plan: [7; 32],
+                reason: "range_residual".into(),
+                plan_t_s: 1.0,
+                progress: 3,
+                pose: [0.0; 3],
+                pose_covariance: [0.0; 9],
+                params: [0.066, 0.066, 0.26],
+                params_covariance: [0.0; 9],
+                window,
+            };
+            // The window as the robot keeps it: `n` samples.
+            let mut h = h;
+            h.window.truncate(n);
+            let bytes = encode(&Stamper::new("rover").stamp(Body::Handback(Box::new(h)), 0));
+            assert!(
+                decode(&bytes).is_ok(),
+                "{beams} beams: {} bytes",
+                bytes.len()
+            );
+        }
     }
 }

@@ -153,6 +153,7 @@ pub struct MappedSite {
     pub intervals: usize,
     pub map: MapScore,
     pub map_cells: [usize; 3],
+    pub resolution_m: f64,
     pub scans_matched: usize,
     pub scans: usize,
     pub verified: bool,
@@ -192,12 +193,19 @@ fn seen_points(log: &MissionLog, site: &Scenario, lidar: usize) -> Vec<[f64; 2]>
 
 /// Runs the section into `out` (the `mapped_site/` directory).
 pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<MappedSite> {
+    let started = std::time::Instant::now();
+    let stage = |name: &str| {
+        tracing::info!(
+            elapsed_s = started.elapsed().as_secs_f64(),
+            "mapped site: {name}"
+        )
+    };
     // 1. The calibration drive on the hidden site: encoders, lidar, gyro.
     let drive_text = scenario_text(
         "hidden_site_calibration_drive",
         Pose::new(3.5, 2.75, 0.3),
         120.0,
-        0.005,
+        0.01,
         2024,
         DRIVE,
     );
@@ -210,6 +218,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     let (summary, log) = simulate_into(drive, &out.join("drive"))?;
     twindrive_workflow::simulate::print_summary(&summary, &out.join("drive"), stdout)?;
 
+    stage("drive simulated");
     // 2. Self-calibration: no tracker, the mount guessed as on the axle.
     let rec = ScanRecording::from_log(&log, Some("lidar"), [1.0, 1.0])?;
     let job = ScanJob {
@@ -237,6 +246,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         cal.lidar_mount.heading_rad,
     );
 
+    stage("self-calibrated");
     // 3. The site's map from the same drive, and the mission on it.
     let mut lidar = rec.lidar.clone();
     lidar.mount = mount;
@@ -246,7 +256,14 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         lidar,
         params,
         start: log.header.start,
-        settings: MappingSettings::default(),
+        // Cells of 2.5 cm: the twin's walls are the edges of the free
+        // cells, so half a cell of the true wall on average; the lidar's
+        // beams that meet a wall at a grazing angle read that many times
+        // over.
+        settings: MappingSettings {
+            resolution_m: 0.025,
+            ..MappingSettings::default()
+        },
         prior: None,
     };
     let mapped = site_map::map_site(&map_job, |_, _| {})?;
@@ -254,7 +271,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     let mission_text = scenario_text(
         "hidden_site_wall_following",
         mission_start,
-        120.0,
+        90.0,
         0.01,
         2012,
         MISSION,
@@ -273,8 +290,11 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     let report = mapped.report(&map_job);
     site_map::write_site(&site_dir, &mapped, &report, &site_text)?;
     let twin = Scenario::load(&site_dir.join("site.toml"))?;
-    let true_site = parse(&mission_text, "hidden_site_wall_following.toml")?;
+    // The robot is at the same site the twin mapped: one name.
+    let mut true_site = parse(&mission_text, "hidden_site_wall_following.toml")?;
+    true_site.name = twin.name.clone();
 
+    stage("mapped");
     // The map against the hidden walls.
     let grid = mapped.grid();
     let true_walls = truth_site.world.walls();
@@ -303,6 +323,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     }
     .write(&out.join("map_vs_truth"))?;
 
+    stage("map scored");
     // 4. The mission rehearsed on the mapped twin, planned, verified.
     let rehearsal_dir = out.join("rehearsal");
     let (_, rehearsal) = simulate_into(twin.clone(), &rehearsal_dir)?;
@@ -327,6 +348,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         return Err(PlanFailed(verification.report.verdict.clone()).into());
     }
 
+    stage("planned and verified");
     // 5. The plan executed by the robot agent on the true site.
     let plan_json = std::fs::read(&plan_path)
         .with_context(|| format!("reading back {}", plan_path.display()))?;
@@ -341,6 +363,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         &out.join("decoupled"),
     )?;
 
+    stage("mission executed");
     let nominal = [
         np.left_diameter_m,
         np.right_diameter_m,
@@ -377,6 +400,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
             report.occupied_cells,
             report.unknown_cells,
         ],
+        resolution_m: report.resolution_m,
         scans_matched: report.scans_matched,
         scans: report.scans,
         verified: verification.report.verdict.passed,
@@ -460,12 +484,13 @@ pub fn add_to(r: &mut Report, m: &MappedSite) {
             .collect(),
     );
     r.paragraph(format!(
-        "The map: {} of {} scans matched to the map drawn before them; {} free, {} occupied and {}          unknown cells of 5 cm. {:.1} % of the occupied cells lie within {:.0} cm of a true wall (the          farthest {:.1} cm), and {:.1} % of the {:.1} m of wall the lidar's beams reached is drawn.",
+        "The map: {} of {} scans matched to the map drawn before them; {} free, {} occupied and {}          unknown cells of {:.1} cm. {:.1} % of the occupied cells lie within {:.0} cm of a true wall (the          farthest {:.1} cm), and {:.1} % of the {:.1} m of wall the lidar's beams reached is drawn.",
         m.scans_matched,
         m.scans,
         m.map_cells[0],
         m.map_cells[1],
         m.map_cells[2],
+        100.0 * m.resolution_m,
         100.0 * m.map.on_a_wall,
         100.0 * m.map.tolerance_m,
         100.0 * m.map.worst_m,
@@ -478,9 +503,9 @@ pub fn add_to(r: &mut Report, m: &MappedSite) {
     );
     let d = &m.decoupled.report;
     r.paragraph(format!(
-        "The case-study mission (the wall follower on its side IR) is rehearsed on the mapped twin,          planned, and verified there ({}). The plan goes over the lunar link to the robot agent on the          true site: outcome {:?}, {} hand-back(s), {} collision period(s), {} bump(s).",
+        "The case-study mission (the wall follower on its side IR) is rehearsed on the mapped twin,          planned, and verified there ({}). The plan goes over the lunar link to the robot agent on the          true site: outcome {}, {} hand-back(s), {} collision period(s), {} bump(s).",
         if m.verified { "passed" } else { "failed" },
-        d.outcome,
+        d.outcome.map_or("none".to_string(), |o| format!("{o:?}")),
         d.handbacks.len(),
         d.collisions,
         d.bumps
