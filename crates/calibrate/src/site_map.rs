@@ -402,3 +402,42 @@ pub fn write_site(
         .context("the site.toml written does not load as a scenario on the map; nothing written")?;
     staging.commit()
 }
+
+/// Where the beams of range sensor `sensor` truly met the walls over a
+/// simulated drive: from the log's true poses and the site's true mount
+/// and walls, without noise; what a map of the drive could have drawn
+/// (for [`twindrive_estimation::mapping::score`]).
+pub fn seen_wall_points(
+    log: &twindrive_log::MissionLog,
+    site: &twindrive_sim::Scenario,
+    sensor: usize,
+) -> Vec<[f64; 2]> {
+    let info = &site.range_sensors[sensor].info;
+    let (a0, da) = info.angle_min_and_increment();
+    let mut seen = Vec::new();
+    for (i, step) in log.steps.iter().enumerate() {
+        let Some(ranges) = log.range_reading(i, sensor) else {
+            continue;
+        };
+        let t = step.ground_truth;
+        let m = info.mount;
+        let (s, c) = t.heading_rad.sin_cos();
+        let o = [t.x_m + c * m.x_m - s * m.y_m, t.y_m + s * m.x_m + c * m.y_m];
+        for (k, r) in ranges.iter().enumerate() {
+            if !(r.is_finite() && *r < info.max_range_m && *r > info.min_range_m) {
+                continue;
+            }
+            let a = t.heading_rad + m.heading_rad + a0 + k as f64 * da;
+            let dir = twindrive_sim::Vector::new(a.cos(), a.sin());
+            let d = site.world.cast_ray(
+                twindrive_sim::Vector::new(o[0], o[1]),
+                dir,
+                info.max_range_m,
+            );
+            if d < info.max_range_m {
+                seen.push([o[0] + d * dir.x, o[1] + d * dir.y]);
+            }
+        }
+    }
+    seen
+}

@@ -279,42 +279,9 @@ fn a_lidar_that_sees_nothing_gives_a_clear_error() {
     assert!(text.contains("from lidar"), "{text}");
 }
 
-/// Where the lidar's beams truly met the walls: true poses and mount, no
-/// noise.
-fn seen(log: &twindrive_log::MissionLog, site: &twindrive_sim::Scenario) -> Vec<[f64; 2]> {
-    let info = &site.range_sensors[0].info;
-    let (a0, da) = info.angle_min_and_increment();
-    let mut out = Vec::new();
-    for (i, step) in log.steps.iter().enumerate() {
-        let Some(ranges) = log.range_reading(i, 0) else {
-            continue;
-        };
-        let t = step.ground_truth;
-        let m = info.mount;
-        let (s, c) = t.heading_rad.sin_cos();
-        let o = [t.x_m + c * m.x_m - s * m.y_m, t.y_m + s * m.x_m + c * m.y_m];
-        for (k, r) in ranges.iter().enumerate() {
-            if !(r.is_finite() && *r < info.max_range_m && *r > info.min_range_m) {
-                continue;
-            }
-            let a = t.heading_rad + m.heading_rad + a0 + k as f64 * da;
-            let dir = twindrive_sim::Vector::new(a.cos(), a.sin());
-            let d = site.world.cast_ray(
-                twindrive_sim::Vector::new(o[0], o[1]),
-                dir,
-                info.max_range_m,
-            );
-            if d < info.max_range_m {
-                out.push([o[0] + d * dir.x, o[1] + d * dir.y]);
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn the_site_is_mapped_from_the_self_calibrated_drive_on_held_out_sites() {
-    use twindrive_calibrate::site_map::{MapJob, map_site};
+    use twindrive_calibrate::site_map::{MapJob, map_site, seen_wall_points};
     use twindrive_estimation::mapping::{MappingSettings, score};
     let sites: u64 = std::env::var("TWINDRIVE_HELD_OUT")
         .ok()
@@ -350,7 +317,12 @@ fn the_site_is_mapped_from_the_self_calibrated_drive_on_held_out_sites() {
             |_, _| {},
         )
         .unwrap_or_else(|e| panic!("seed {seed}: {e:#}"));
-        let s = score(&map.grid(), &truth.world.walls(), &seen(&log, &truth), 0.05);
+        let s = score(
+            &map.grid(),
+            &truth.world.walls(),
+            &seen_wall_points(&log, &truth, 0),
+            0.05,
+        );
         eprintln!(
             "seed {seed}: {} occupied cells, {:.1} % within 5 cm of a wall (worst {:.1} cm), \
              {:.1} % of {:.1} m seen drawn; {}/{} scans matched",

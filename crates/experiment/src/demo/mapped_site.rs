@@ -16,11 +16,10 @@ use twindrive_calibrate::{ScanJob, self_calibrate, write_scan_outputs};
 use twindrive_estimation::mapping::{MapScore, MappingSettings, score};
 use twindrive_estimation::selfcal::LaserOdometrySettings;
 use twindrive_kinematics::{DiffDriveParams, Pose, wrap_angle};
-use twindrive_log::MissionLog;
 use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_plot::{Markers, Series, WorldFigure, palette};
-use twindrive_sim::{Scenario, Vector};
+use twindrive_sim::Scenario;
 use twindrive_workflow::figures::walls;
 use twindrive_workflow::plan;
 use twindrive_workflow::simulate::simulate_into;
@@ -160,37 +159,6 @@ pub struct MappedSite {
     pub decoupled: Decoupled,
 }
 
-/// Where the lidar's beams truly met the walls over the drive: from the
-/// true poses and mount, without noise.
-fn seen_points(log: &MissionLog, site: &Scenario, lidar: usize) -> Vec<[f64; 2]> {
-    let info = &site.range_sensors[lidar].info;
-    let (a0, da) = info.angle_min_and_increment();
-    let mut seen = Vec::new();
-    for (i, step) in log.steps.iter().enumerate() {
-        let Some(ranges) = log.range_reading(i, lidar) else {
-            continue;
-        };
-        let t = step.ground_truth;
-        let (s, c) = t.heading_rad.sin_cos();
-        let m = info.mount;
-        let (sx, sy) = (t.x_m + c * m.x_m - s * m.y_m, t.y_m + s * m.x_m + c * m.y_m);
-        for (k, r) in ranges.iter().enumerate() {
-            if !(r.is_finite() && *r < info.max_range_m && *r > info.min_range_m) {
-                continue;
-            }
-            let a = t.heading_rad + m.heading_rad + a0 + k as f64 * da;
-            let dir = Vector::new(a.cos(), a.sin());
-            let d = site
-                .world
-                .cast_ray(Vector::new(sx, sy), dir, info.max_range_m);
-            if d < info.max_range_m {
-                seen.push([sx + d * dir.x, sy + d * dir.y]);
-            }
-        }
-    }
-    seen
-}
-
 /// Runs the section into `out` (the `mapped_site/` directory).
 pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<MappedSite> {
     let started = std::time::Instant::now();
@@ -298,7 +266,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     // The map against the hidden walls.
     let grid = mapped.grid();
     let true_walls = truth_site.world.walls();
-    let seen = seen_points(&log, &truth_site, lidar_index);
+    let seen = site_map::seen_wall_points(&log, &truth_site, lidar_index);
     let map_score = score(&grid, &true_walls, &seen, 0.05);
     let occupied: Vec<(f64, f64)> = grid
         .occupied_centres()
