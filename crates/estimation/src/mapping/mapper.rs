@@ -5,11 +5,12 @@
 //! drew on the way out, so it does not draw them a second time.
 //!
 //! Then the occupancy grid: each scan's beams from the pose found, each
-//! return drawn where the surface it fell on lies. The map's points
-//! average every view of a wall, so a return is moved onto the local line
-//! of its nearest map point (when it lies within `snap_m` of it): the walls
-//! are drawn a cell thick where the raw returns, 1-3 cm of noise either
-//! side, would mark the cells behind the wall occupied too.
+//! return drawn where the surface it fell on lies. [`Surfaces`] averages
+//! every return of the drive at its final pose per voxel, so a return is
+//! moved onto the local line of its nearest surface point (when it lies
+//! within `snap_m` of it): the walls are drawn a cell thick where the raw
+//! returns, 1-3 cm of noise either side, would mark the cells behind the
+//! wall occupied too.
 
 use crate::localize::{MatchSettings, PointMap, Refusal, Scan, ScanMatch, register};
 
