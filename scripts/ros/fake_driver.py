@@ -248,7 +248,15 @@ def main():
             time.sleep(max(0.0, next_tick - time.monotonic()))
 
         # What a `ros2 node list` / `ros2 topic info` would see.
-        tokens = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=10.0) if r.ok]
+        # On a loaded machine a query can come back empty: ask again (up
+        # to 30 s) until the agent's node is among the replies.
+        tokens = []
+        deadline = time.monotonic() + 30.0
+        while True:
+            tokens = [str(r.ok.key_expr) for r in session.liveliness().get("@ros2_lv/0/**", timeout=5.0) if r.ok]
+            if any("/NN/%/%/twindrive_agent" in t for t in tokens) or time.monotonic() > deadline:
+                break
+            time.sleep(0.5)
         sim.stdin.close()
         sim.wait(timeout=10)
         with lock:
