@@ -473,7 +473,7 @@ fn inverse(a: [f64; 3]) -> [f64; 3] {
 }
 
 /// `a⁻¹ ⊕ b`: `b` seen from `a`.
-fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     compose(inverse(a), b)
 }
 

@@ -11,6 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal as Gauss};
 use twindrive_sim::{Vector, World};
 
+use super::mapper::between;
 use super::*;
 use crate::localize::Scan;
 use crate::localize::testkit::{compose, rng};
@@ -185,17 +186,6 @@ fn case(seed: u64, laps: f64) -> Case {
         seen,
         mount,
     }
-}
-
-/// `a⁻¹ ⊕ b`.
-fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a[2].sin_cos();
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    [
-        c * dx + s * dy,
-        -s * dx + c * dy,
-        twindrive_kinematics::wrap_angle(b[2] - a[2]),
-    ]
 }
 
 fn draw(case: &Case, poses: &[[f64; 3]]) -> LogOddsGrid {
