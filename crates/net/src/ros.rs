@@ -100,6 +100,7 @@ impl RosBackend {
             tokio::spawn(async move {
                 let mut last_warning = f64::NEG_INFINITY;
                 let mut warned_hash = false;
+                let mut heard = false;
                 while let Ok(sample) = sub.recv_async().await {
                     let now_s = clock.elapsed().as_secs_f64();
                     let hash = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
@@ -117,6 +118,12 @@ impl RosBackend {
                         .lock()
                         .expect("not poisoned")
                         .on_message(i, &bytes, now_s);
+                    if result.is_ok() && !heard {
+                        heard = true;
+                        // One line when each driver is first heard: an
+                        // operator (and a test) knows the robot is up.
+                        tracing::info!(topic = %topic, "first message from the robot");
+                    }
                     if let Err(e) = result
                         && now_s - last_warning > WARN_EVERY_S
                     {

@@ -645,6 +645,8 @@ impl RosRobot {
                     "--run-for",
                     "150",
                 ])
+                // Says when it first hears each of the robot's topics.
+                .env("RUST_LOG", "warn,twindrive_net::ros=info")
                 .stdout(Stdio::null())
                 .stderr(std::fs::File::create(d.join("robot.log")).unwrap())
                 .spawn()
@@ -660,17 +662,22 @@ impl RosRobot {
     }
 
     /// Runs a master to the end: its exit code and report. The mission
-    /// starts once the driver publishes joint states, as an operator starts
-    /// one once the robot is up (a robot whose joints never reported stops
-    /// on a sensor fault at the plan's first step, which a slow start of
-    /// the driver on a loaded machine would otherwise cause).
+    /// starts once the agent has heard the driver's joint states, as an
+    /// operator starts one once the robot is up (a robot whose joints never
+    /// reported stops on a sensor fault at the plan's first step, which a
+    /// slow start on a loaded machine would otherwise cause).
     fn master(&self) -> (Option<i32>, Value) {
         let started = std::time::Instant::now();
-        while !self.log("driver.log").contains("publishing joint states") {
+        let heard = |log: &str| {
+            log.lines()
+                .any(|l| l.contains("first message from the robot") && l.contains("joint_states"))
+        };
+        while !heard(&self.log("robot.log")) {
             assert!(
                 started.elapsed().as_secs() < 60,
-                "the fake driver published no joint states in 60 s: {}",
-                self.log("driver.log")
+                "the agent heard no joint states in 60 s\ndriver: {}\nrobot: {}",
+                self.log("driver.log"),
+                self.log("robot.log")
             );
             std::thread::sleep(std::time::Duration::from_millis(100));
         }
