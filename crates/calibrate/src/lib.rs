@@ -19,7 +19,9 @@
 //!   the lidar's mount (and a gyro) from encoders and scans
 //!   ([`self_calibrate`]), its inputs from logs ([`scan_inputs`]);
 //! - [`site_map`]: the site's map from the same inputs and the calibration
-//!   (`twindrive map`): map_server files and `site.toml` for the twin.
+//!   (`twindrive map`): map_server files and `site.toml` for the twin;
+//! - [`site_update`]: the twin's map extended by a mission's robot logs
+//!   (`twindrive master --site-maps`).
 
 pub mod bag_info;
 pub mod drive;
@@ -32,6 +34,7 @@ pub mod run;
 pub mod scan_inputs;
 pub mod self_cal;
 pub mod site_map;
+pub mod site_update;
 
 pub use drive::{calibrate_like, calibration_job};
 pub use job::{Job, Method, Offset};

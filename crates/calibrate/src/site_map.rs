@@ -323,20 +323,7 @@ pub fn site_toml(
                     }
                 }
             }
-            // A manual mission's commands file goes beside site.toml.
-            let mut copy = None;
-            if let Some(c) = doc.get_mut("controller").and_then(|v| v.as_table_mut())
-                && let Some(rel) = c.get("commands").and_then(|v| v.as_str()).map(String::from)
-            {
-                let from = path.parent().unwrap_or(Path::new(".")).join(&rel);
-                let file = from
-                    .file_name()
-                    .with_context(|| what("controller.commands"))?
-                    .to_string_lossy()
-                    .into_owned();
-                c.insert("commands".into(), file.into());
-                copy = Some(from);
-            }
+            let copy = commands_beside(&mut doc, path, "--mission")?;
             let head = format!(
                 "# The mission of {} on the site drawn by `twindrive map` from the robot's\n\
                  # own scans (map.yaml, map.pgm), with the calibrated wheels and lidar mount.\n",
@@ -345,6 +332,58 @@ pub fn site_toml(
             Ok((head + &toml::to_string(&doc)?, copy))
         }
     }
+}
+
+/// A manual mission's commands file goes beside the site.toml made from
+/// the scenario at `path`: its `controller.commands` is renamed to the
+/// file's name, and the file to copy is returned. `flag` names the
+/// scenario in errors.
+pub(crate) fn commands_beside(
+    doc: &mut toml::Table,
+    path: &Path,
+    flag: &str,
+) -> anyhow::Result<Option<std::path::PathBuf>> {
+    let Some(c) = doc.get_mut("controller").and_then(|v| v.as_table_mut()) else {
+        return Ok(None);
+    };
+    let Some(rel) = c.get("commands").and_then(|v| v.as_str()).map(String::from) else {
+        return Ok(None);
+    };
+    let from = path.parent().unwrap_or(Path::new(".")).join(&rel);
+    let file = from
+        .file_name()
+        .with_context(|| format!("{flag} {}: field `controller.commands`", path.display()))?
+        .to_string_lossy()
+        .into_owned();
+    c.insert("commands".into(), file.into());
+    Ok(Some(from))
+}
+
+/// `grid` as map_server files: `map.pgm`'s bytes and `map.yaml`'s text.
+pub(crate) fn map_files(grid: &LogOddsGrid) -> (Vec<u8>, String) {
+    let occupancy: Vec<Option<f64>> = (0..grid.height())
+        .flat_map(|r| (0..grid.width()).map(move |c| (c, r)))
+        .map(|(c, r)| grid.probability(c, r))
+        .collect();
+    let image = twindrive_sim::map::MapImage {
+        width: grid.width(),
+        height: grid.height(),
+        resolution_m: grid.resolution_m(),
+        origin_m: grid.origin_m(),
+        occupancy: &occupancy,
+    };
+    twindrive_sim::map::encode_map(&image, "map.pgm")
+}
+
+/// Copies `from` into `staging` under its own file name.
+pub(crate) fn stage_copy(staging: &Staging, from: &Path) -> anyhow::Result<()> {
+    let name = from
+        .file_name()
+        .context("the mission's commands file")?
+        .to_string_lossy()
+        .into_owned();
+    let bytes = std::fs::read(from).with_context(|| format!("reading {}", from.display()))?;
+    staging.write_with(&name, |w| Ok(w.write_all(&bytes)?))
 }
 
 /// Writes `map.pgm`, `map.yaml`, `site.toml` (and a file it names),
@@ -357,31 +396,13 @@ pub fn write_site(
     report: &MapReport,
     site: &(String, Option<std::path::PathBuf>),
 ) -> anyhow::Result<()> {
-    let grid = map.grid();
-    let occupancy: Vec<Option<f64>> = (0..grid.height())
-        .flat_map(|r| (0..grid.width()).map(move |c| (c, r)))
-        .map(|(c, r)| grid.probability(c, r))
-        .collect();
-    let image = twindrive_sim::map::MapImage {
-        width: grid.width(),
-        height: grid.height(),
-        resolution_m: grid.resolution_m(),
-        origin_m: grid.origin_m(),
-        occupancy: &occupancy,
-    };
-    let (pgm, yaml) = twindrive_sim::map::encode_map(&image, "map.pgm");
+    let (pgm, yaml) = map_files(&map.grid());
     let staging = Staging::new(out, "map")?;
     staging.write_with("map.pgm", |w| Ok(w.write_all(&pgm)?))?;
     staging.write_with("map.yaml", |w| Ok(w.write_all(yaml.as_bytes())?))?;
     staging.write_with("site.toml", |w| Ok(w.write_all(site.0.as_bytes())?))?;
     if let Some(from) = &site.1 {
-        let name = from
-            .file_name()
-            .context("the mission's commands file")?
-            .to_string_lossy()
-            .into_owned();
-        let bytes = std::fs::read(from).with_context(|| format!("reading {}", from.display()))?;
-        staging.write_with(&name, |w| Ok(w.write_all(&bytes)?))?;
+        stage_copy(&staging, from)?;
     }
     staging.write_with("poses.tum", |w| {
         twindrive_log::write_tum(

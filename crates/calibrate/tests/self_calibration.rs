@@ -350,3 +350,186 @@ fn the_site_is_mapped_from_the_self_calibrated_drive_on_held_out_sites() {
         );
     }
 }
+
+/// Standing still: a first look at the site.
+const HOLD: &str = r#"[controller]
+kind = "scripted"
+segments = [ { duration_s = 3.0, left_rad_s = 0.0, right_rad_s = 0.0 } ]
+"#;
+
+/// The twin keeps learning its site (`master --site-maps`): a map drawn
+/// from a first look (the robot standing still while a partition hid the
+/// room's far side) is extended by a mission's log (the whole drive, the
+/// partition gone). The new walls lie on true walls, the walls known before
+/// stay, the partition is cleared, and a log whose start is not where it
+/// says is not drawn. `TWINDRIVE_HELD_OUT=N`
+/// runs N sites (one by default).
+#[test]
+fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
+    use twindrive_calibrate::site_map::{
+        MapJob, SiteScenario, map_site, seen_wall_points, site_toml, write_site,
+    };
+    use twindrive_calibrate::site_update::{UpdateSettings, update_site};
+    use twindrive_estimation::mapping::{CellState, MappingSettings, distance_to_segment, score};
+    let sites: u64 = std::env::var("TWINDRIVE_HELD_OUT")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    for seed in FIRST_SEED + 600..FIRST_SEED + 600 + sites {
+        let site = site(seed, DRIVE, true);
+        let truth = scenario(&site);
+        let params =
+            twindrive_kinematics::DiffDriveParams::new(site.truth[0], site.truth[1], site.truth[2]);
+        let mount = Pose::new(site.truth[3], site.truth[4], site.truth[5]);
+        // The first look, when a partition (since taken away) hid the
+        // room's far side, mapped (with the true wheels and mount: the
+        // calibration is not what is tested here).
+        let walls = truth.world.walls();
+        let height_m = walls.iter().map(|w| w[1].max(w[3])).fold(0.0, f64::max);
+        let partition_x = truth.robot.start.x_m + 1.2;
+        let look_toml = site
+            .toml
+            .replace(DRIVE, HOLD)
+            .replacen(
+                "[world]\n",
+                &format!(
+                    "[world]\nsegments = [ [[{partition_x}, 0.0], [{partition_x}, {height_m}]] ]\n"
+                ),
+                1,
+            )
+            .replacen("duration_s = 120.0", "duration_s = 3.0", 1);
+        let look = twindrive_sim::Simulator::new(
+            twindrive_sim::Scenario::from_toml(&look_toml, std::path::Path::new("look.toml"))
+                .unwrap(),
+        )
+        .run(|_, _| {});
+        let rec = ScanRecording::from_log(&look, None, [1.0, 1.0]).unwrap();
+        let mut lidar = rec.lidar;
+        lidar.mount = mount;
+        let job = MapJob {
+            wheels: rec.wheels,
+            scans: rec.scans,
+            lidar,
+            params,
+            start: look.header.start,
+            settings: MappingSettings::default(),
+            prior: None,
+        };
+        let first = map_site(&job, |_, _| {}).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let mission_path = tmp.path().join("mission.toml");
+        std::fs::write(&mission_path, &site.toml).unwrap();
+        let twin_site = site_toml(
+            "look",
+            &first,
+            &job,
+            &SiteScenario::Mission {
+                text: site.toml.clone(),
+                path: mission_path,
+            },
+        )
+        .unwrap();
+        let dir = tmp.path().join("site");
+        write_site(&dir, &first, &first.report(&job), &twin_site).unwrap();
+        let twin = twindrive_sim::Scenario::load(&dir.join("site.toml")).unwrap();
+
+        // The mission, on the true site.
+        let mission = twindrive_sim::Simulator::new(truth.clone()).run(|_, _| {});
+        let settings = UpdateSettings::default();
+        let update = update_site(
+            &twin,
+            &[("mission".into(), &mission)],
+            &params,
+            &settings,
+            |_, _| {},
+        )
+        .unwrap();
+        let log = &update.logs[0];
+        assert!(log.drawn, "seed {seed}: {log:?}");
+        assert!(
+            log.scans_matched * 10 >= log.scans * 9,
+            "seed {seed}: {log:?}"
+        );
+        let seen = seen_wall_points(&mission, &truth, 0);
+        let before = score(&update.before, &walls, &seen, 0.05);
+        let after = score(&update.after, &walls, &seen, 0.05);
+        let share = |cells: &[[f64; 2]], state: CellState| {
+            cells
+                .iter()
+                .filter(|p| update.after.state_at(**p) == state)
+                .count() as f64
+                / cells.len().max(1) as f64
+        };
+        // What the first look drew: on the partition, and on true walls.
+        let on_a_wall = |p: &[f64; 2]| walls.iter().any(|w| distance_to_segment(*p, w) <= 0.05);
+        let before_cells = update.before.occupied_centres();
+        let partition: Vec<[f64; 2]> = before_cells
+            .iter()
+            .copied()
+            .filter(|p| (p[0] - partition_x).abs() < 0.05 && !on_a_wall(p))
+            .collect();
+        let old_walls: Vec<[f64; 2]> = before_cells.into_iter().filter(on_a_wall).collect();
+        // A wall known before is still drawn where it was (within a cell
+        // and a half: a wall drawn two cells thick may come out one).
+        let now = update.after.occupied_centres();
+        let kept = old_walls
+            .iter()
+            .filter(|p| {
+                now.iter()
+                    .any(|q| (p[0] - q[0]).hypot(p[1] - q[1]) <= 0.075)
+            })
+            .count() as f64
+            / old_walls.len() as f64;
+        let cleared = share(&partition, CellState::Free);
+        eprintln!(
+            "seed {seed}: {}/{} scans matched; seen walls drawn {:.1} % -> {:.1} %, \
+             occupied cells within 5 cm of a wall {:.1} % -> {:.1} %, {:.1} % of the old \
+             walls kept, {:.1} % of the partition cleared; {:?}",
+            log.scans_matched,
+            log.scans,
+            100.0 * before.seen_drawn,
+            100.0 * after.seen_drawn,
+            100.0 * before.on_a_wall,
+            100.0 * after.on_a_wall,
+            100.0 * kept,
+            100.0 * cleared,
+            update.changes
+        );
+        assert!(before.seen_drawn < 0.7, "seed {seed}: {before:?}");
+        assert!(after.seen_drawn >= 0.9, "seed {seed}: {after:?}");
+        // The update places its scans against the twin's map, whose cells
+        // say where a wall is only to within a cell: an update's walls
+        // follow them, up to 2 cm off the truth. 13 of 14 sites gave
+        // 97.5-100 %, one 88 % (its walls drawn a cell thicker).
+        assert!(after.on_a_wall >= 0.85, "seed {seed}: {after:?}");
+        assert!(kept >= 0.95, "seed {seed}: {kept}");
+        assert!(
+            partition.len() > 20 && cleared >= 0.9,
+            "seed {seed}: {cleared}"
+        );
+        assert!(update.changes.unknown_to_occupied > 0 && update.changes.unknown_to_free > 0);
+
+        // The same log, saying it started 0.8 m and 0.5 rad from where it
+        // did: it does not agree with the map and is not drawn.
+        let mut astray = mission.clone();
+        let s = astray.header.start;
+        astray.header.start = Pose::new(s.x_m + 0.8, s.y_m - 0.6, wrap_angle(s.heading_rad + 0.5));
+        let refused = update_site(
+            &twin,
+            &[("astray".into(), &astray)],
+            &params,
+            &settings,
+            |_, _| {},
+        )
+        .unwrap();
+        let log = &refused.logs[0];
+        assert!(!log.drawn, "seed {seed}: {log:?}");
+        assert!(
+            log.refused.as_deref().unwrap().contains("does not agree"),
+            "{log:?}"
+        );
+        assert!(!refused.drawn());
+        let (a, b) = (refused.cells_after(), update.cells_before());
+        assert_eq!((a.free, a.occupied), (b.free, b.occupied));
+    }
+}

@@ -10,7 +10,9 @@
 //! - [`keys`]: fresh ed25519 keys from the operating system's randomness;
 //! - [`archive`]: the master's output folder ([`MasterArchive`]), one
 //!   layout for the master process, the console and in-process missions;
-//! - [`robot_log`]: what the master makes of a robot log it received.
+//! - [`robot_log`]: what the master makes of a robot log it received;
+//! - [`site_maps`]: the twin's map of each site, kept across missions
+//!   ([`SiteMaps`]).
 
 pub mod archive;
 pub mod chunks;
@@ -18,9 +20,11 @@ pub mod counter;
 pub mod keys;
 pub mod robot_dir;
 pub mod robot_log;
+pub mod site_maps;
 
 pub use archive::{ArchivedLog, MasterArchive};
 pub use chunks::DirStore;
 pub use counter::CounterFile;
 pub use keys::generate_key;
 pub use robot_dir::RobotDir;
+pub use site_maps::{SiteMaps, SiteVersion};

@@ -381,6 +381,9 @@ pub struct Mapping {
     pub grid: LogOddsGrid,
     /// Scans matched against the map.
     pub matched: usize,
+    /// Whether each scan matched the map (the first of a drive with no
+    /// prior map has nothing to match and does not).
+    pub matched_each: Vec<bool>,
     /// Scans left at the odometry's pose, counted by reason (the first
     /// scan is not counted).
     pub unmatched: Vec<(String, usize)>,
@@ -391,7 +394,16 @@ pub struct Mapping {
 /// Maps a drive: `scans` with the robot's odometry pose at each, in time
 /// order. `prior` is a map already drawn of the same site, in the frame
 /// the odometry's first pose is in, which the drive extends. Calls
-/// `progress(done, total)` as it goes (two passes over the scans).
+/// `progress(done, total)` as it goes (two passes over the scans, three
+/// with a prior).
+///
+/// With a prior, the drive is located twice: against its own scans (as
+/// without a prior), and against the prior's occupied cells. A map of
+/// cell centres places each scan only to within a fraction of a cell (a
+/// wall's cells all sit in one row, wherever in it the wall is), so the
+/// poses are the drive's own, carried onto the prior by the rigid motion
+/// that best takes them to the poses located against it, over the scans
+/// that matched it. The matches reported are those against the prior.
 pub fn map_drive(
     scans: &[(Scan, [f64; 3])],
     mount: [f64; 3],
@@ -399,21 +411,74 @@ pub fn map_drive(
     prior: Option<&LogOddsGrid>,
     mut progress: impl FnMut(usize, usize),
 ) -> Mapping {
-    let total = 2 * scans.len();
-    let mut mapper = match prior {
-        Some(g) => Mapper::with_map(mount, settings, &g.occupied_centres()),
-        None => Mapper::new(mount, settings),
+    let passes = if prior.is_some() { 3 } else { 2 };
+    let total = passes * scans.len();
+    let own = locate_all(Mapper::new(mount, settings), scans, |k| progress(k, total));
+    let located = match prior {
+        None => own,
+        Some(g) => {
+            let against = locate_all(
+                Mapper::with_map(mount, settings, &g.occupied_centres()),
+                scans,
+                |k| progress(scans.len() + k, total),
+            );
+            let onto = rigid_fit(&own.poses, &against.poses, &against.matched_each);
+            DriveLocated {
+                poses: own.poses.iter().map(|p| compose(onto, *p)).collect(),
+                ..against
+            }
+        }
     };
-    let mut poses = Vec::with_capacity(scans.len());
-    let mut matched = 0;
-    let mut rms_m = Vec::new();
-    let mut unmatched: Vec<(String, usize)> = Vec::new();
+    let mut grid = prior
+        .cloned()
+        .unwrap_or_else(|| LogOddsGrid::new(settings.resolution_m, settings.log_odds));
+    let surfaces = Surfaces::new(scans, &located.poses, mount, settings);
+    let drawn_from = (passes - 1) * scans.len();
+    for (k, ((scan, _), pose)) in scans.iter().zip(&located.poses).enumerate() {
+        surfaces.draw(&mut grid, *pose, scan);
+        if k % 64 == 0 {
+            progress(drawn_from + k, total);
+        }
+    }
+    progress(total, total);
+    Mapping {
+        poses: located.poses,
+        grid,
+        matched: located.matched,
+        matched_each: located.matched_each,
+        unmatched: located.unmatched,
+        rms_m: located.rms_m,
+    }
+}
+
+/// A drive's scans located by one mapper.
+struct DriveLocated {
+    poses: Vec<[f64; 3]>,
+    matched: usize,
+    matched_each: Vec<bool>,
+    unmatched: Vec<(String, usize)>,
+    rms_m: Vec<f64>,
+}
+
+fn locate_all(
+    mut mapper: Mapper,
+    scans: &[(Scan, [f64; 3])],
+    mut progress: impl FnMut(usize),
+) -> DriveLocated {
+    let mut out = DriveLocated {
+        poses: Vec::with_capacity(scans.len()),
+        matched: 0,
+        matched_each: Vec::with_capacity(scans.len()),
+        unmatched: Vec::new(),
+        rms_m: Vec::new(),
+    };
     for (k, (scan, odometry)) in scans.iter().enumerate() {
         let located = mapper.locate(*odometry, scan);
+        out.matched_each.push(located.matched.is_ok());
         match located.matched {
             Ok(m) => {
-                matched += 1;
-                rms_m.push(m.rms_m);
+                out.matched += 1;
+                out.rms_m.push(m.rms_m);
             }
             Err(MatchFailure::First) => {}
             Err(f) => {
@@ -421,35 +486,48 @@ pub fn map_drive(
                     MatchFailure::Refused(r) => r.kind(),
                     _ => "moved too far",
                 };
-                match unmatched.iter_mut().find(|(k, _)| k == kind) {
+                match out.unmatched.iter_mut().find(|(k, _)| k == kind) {
                     Some((_, n)) => *n += 1,
-                    None => unmatched.push((kind.to_string(), 1)),
+                    None => out.unmatched.push((kind.to_string(), 1)),
                 }
             }
         }
-        poses.push(located.pose);
+        out.poses.push(located.pose);
         if k % 64 == 0 {
-            progress(k, total);
+            progress(k);
         }
     }
-    let mut grid = prior
-        .cloned()
-        .unwrap_or_else(|| LogOddsGrid::new(settings.resolution_m, settings.log_odds));
-    let surfaces = Surfaces::new(scans, &poses, mount, settings);
-    for (k, ((scan, _), pose)) in scans.iter().zip(&poses).enumerate() {
-        surfaces.draw(&mut grid, *pose, scan);
-        if k % 64 == 0 {
-            progress(scans.len() + k, total);
-        }
+    out
+}
+
+/// The rigid motion `t` for which `t ⊕ from[i]` best matches `to[i]` over
+/// the `use_[i]`: the mean turn, then the mean of what is left in
+/// position (least squares for the positions given the turn). The
+/// identity when none is used.
+fn rigid_fit(from: &[[f64; 3]], to: &[[f64; 3]], use_: &[bool]) -> [f64; 3] {
+    let pairs = || {
+        from.iter()
+            .zip(to)
+            .zip(use_)
+            .filter(|(_, u)| **u)
+            .map(|(p, _)| p)
+    };
+    let n = pairs().count();
+    if n == 0 {
+        return [0.0, 0.0, 0.0];
     }
-    progress(total, total);
-    Mapping {
-        poses,
-        grid,
-        matched,
-        unmatched,
-        rms_m,
+    let (s, c) = pairs().fold((0.0, 0.0), |(s, c), (a, b)| {
+        let d = wrap(b[2] - a[2]);
+        (s + d.sin(), c + d.cos())
+    });
+    let turn = s.atan2(c);
+    let (sn, cs) = turn.sin_cos();
+    let (mut x, mut y) = (0.0, 0.0);
+    for (a, b) in pairs() {
+        x += b[0] - (cs * a[0] - sn * a[1]);
+        y += b[1] - (sn * a[0] + cs * a[1]);
     }
+    [x / n as f64, y / n as f64, turn]
 }
 
 fn wrap(a: f64) -> f64 {

@@ -1,0 +1,385 @@
+//! The twin keeps learning its site: after a mission, the robot's logs
+//! (their encoders and lidar scans) extend the twin's map
+//! (`twindrive master --site-maps`).
+//!
+//! The twin's map (the map_server image its world was loaded from) is the
+//! prior: its occupied and free cells enter as confident as the grid can
+//! be, unknown stays unknown. Each log's scans are placed by the
+//! calibrated odometry from the log's start, located against the map by
+//! the one scan matcher ([`twindrive_estimation::mapping::map_drive`]),
+//! and drawn into it; the next log extends the result. A log whose scans
+//! mostly fail to match the map (another site, a start far from where it
+//! says, a broken lidar) is not drawn, and the update says why: a map is
+//! only ever changed by scans that agree with it.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use serde::Serialize;
+use twindrive_estimation::mapping::{CellState, LogOddsGrid, MappingSettings};
+use twindrive_files::Staging;
+use twindrive_kinematics::DiffDriveParams;
+use twindrive_log::MissionLog;
+use twindrive_sim::Scenario;
+use twindrive_sim::map::{Cell, OccupancyGrid};
+
+use crate::scan_inputs::{MIN_SCAN_BEAMS, ScanRecording};
+use crate::site_map::{MapJob, commands_beside, map_files, map_site, stage_copy};
+
+/// How robot logs update a map.
+#[derive(Debug, Clone, Copy)]
+pub struct UpdateSettings {
+    /// A log is drawn only when at least this fraction of its scans
+    /// matched the map,
+    pub min_matched_fraction: f64,
+    /// and as many of its first `start_scans` did: the log starts where it
+    /// says (the matcher's corrections, each small, could otherwise walk a
+    /// log that starts elsewhere onto the map while its first scans are
+    /// drawn in the wrong place).
+    pub start_scans: usize,
+    /// The mapper's settings; the cell size is the twin's map's.
+    pub mapping: MappingSettings,
+}
+
+impl Default for UpdateSettings {
+    fn default() -> Self {
+        Self {
+            min_matched_fraction: 0.5,
+            start_scans: 10,
+            mapping: MappingSettings {
+                // A log's scans join the matcher's map only where they
+                // matched it, never from the odometry alone: a log that
+                // does not agree with the map cannot draw a map of its own
+                // and then agree with that. (Scans that did not match are
+                // still drawn, at the odometry's pose, if the log is.)
+                bridge_m: f64::INFINITY,
+                ..MappingSettings::default()
+            },
+        }
+    }
+}
+
+/// What became of one robot log.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LogUpdate {
+    /// The log's name (where the master keeps it).
+    pub log: String,
+    pub scans: usize,
+    pub scans_matched: usize,
+    /// Whether its scans were drawn into the map.
+    pub drawn: bool,
+    /// Why not, when not.
+    pub refused: Option<String>,
+}
+
+/// Cells by state: free, occupied, unknown.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct CellCounts {
+    pub free: usize,
+    pub occupied: usize,
+    pub unknown: usize,
+}
+
+impl CellCounts {
+    fn of(grid: &LogOddsGrid) -> Self {
+        let [free, occupied, unknown] = grid.counts();
+        Self {
+            free,
+            occupied,
+            unknown,
+        }
+    }
+
+    pub fn known(&self) -> usize {
+        self.free + self.occupied
+    }
+}
+
+/// Cells whose state the update changed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct CellChanges {
+    pub unknown_to_free: usize,
+    pub unknown_to_occupied: usize,
+    pub free_to_occupied: usize,
+    pub occupied_to_free: usize,
+}
+
+/// A site's map after a mission's logs.
+#[derive(Debug, Clone)]
+pub struct SiteUpdate {
+    pub site: String,
+    /// The map before (the twin's) and after.
+    pub before: LogOddsGrid,
+    pub after: LogOddsGrid,
+    pub logs: Vec<LogUpdate>,
+    pub changes: CellChanges,
+}
+
+/// What `update.json` says.
+#[derive(Debug, Clone, Serialize)]
+pub struct UpdateReport<'a> {
+    pub site: &'a str,
+    pub version: u32,
+    /// The version the update started from (none: the site as given).
+    pub previous: Option<u32>,
+    pub resolution_m: f64,
+    pub logs: &'a [LogUpdate],
+    pub cells_before: CellCounts,
+    pub cells_after: CellCounts,
+    pub changes: CellChanges,
+}
+
+impl SiteUpdate {
+    /// Whether any log was drawn.
+    pub fn drawn(&self) -> bool {
+        self.logs.iter().any(|l| l.drawn)
+    }
+
+    pub fn cells_before(&self) -> CellCounts {
+        CellCounts::of(&self.before)
+    }
+
+    pub fn cells_after(&self) -> CellCounts {
+        CellCounts::of(&self.after)
+    }
+
+    /// `update.json`'s content.
+    pub fn report(&self, version: u32, previous: Option<u32>) -> UpdateReport<'_> {
+        UpdateReport {
+            site: &self.site,
+            version,
+            previous,
+            resolution_m: self.after.resolution_m(),
+            logs: &self.logs,
+            cells_before: self.cells_before(),
+            cells_after: self.cells_after(),
+            changes: self.changes,
+        }
+    }
+}
+
+/// A map_server map as a log-odds grid: occupied and free cells at the
+/// bounds of `settings.log_odds`, unknown cells unknown.
+pub fn prior_grid(map: &OccupancyGrid, settings: &MappingSettings) -> anyhow::Result<LogOddsGrid> {
+    if map.origin_yaw_rad.abs() > 1e-9 {
+        bail!(
+            "the map's origin is turned by {} rad: only maps aligned with the site's frame (yaw 0, as `twindrive map` writes them) can be extended",
+            map.origin_yaw_rad
+        );
+    }
+    let model = settings.log_odds;
+    let p = |l: f32| 1.0 / (1.0 + (-f64::from(l)).exp());
+    let (occupied, free) = (p(model.max), p(model.min));
+    Ok(LogOddsGrid::from_probabilities(
+        map.resolution_m,
+        model,
+        [map.origin_x_m, map.origin_y_m],
+        map.width,
+        map.height,
+        map.cells.iter().map(|c| match c {
+            Cell::Occupied => Some(occupied),
+            Cell::Free => Some(free),
+            Cell::Unknown => None,
+        }),
+    ))
+}
+
+/// Extends the map of `twin`'s site with the scans of `logs` (name and
+/// log, in the order they were driven), the robot's wheels as `params`
+/// say. The twin's lidar (its first range sensor with a lidar's beams)
+/// gives the mount. `progress(done, total)` over all logs' scans.
+pub fn update_site(
+    twin: &Scenario,
+    logs: &[(String, &MissionLog)],
+    params: &DiffDriveParams,
+    settings: &UpdateSettings,
+    mut progress: impl FnMut(usize, usize),
+) -> anyhow::Result<SiteUpdate> {
+    let Some(map) = twin.world.grid() else {
+        bail!(
+            "the twin's site `{}` has no map (its world is drawn by hand): only a site with a map_server map (`[world] map`, as `twindrive map` writes) is kept and extended",
+            twin.name
+        );
+    };
+    let Some(lidar) = twin
+        .range_sensors
+        .iter()
+        .map(|s| &s.info)
+        .find(|s| s.beams >= MIN_SCAN_BEAMS)
+    else {
+        bail!(
+            "the twin's robot in `{}` has no lidar (a range sensor of {MIN_SCAN_BEAMS} beams or more): there are no scans to map with",
+            twin.name
+        );
+    };
+    let mapping = MappingSettings {
+        resolution_m: map.resolution_m,
+        ..settings.mapping
+    };
+    let before = prior_grid(map, &mapping)?;
+    let mut grid = before.clone();
+    let recordings: Vec<anyhow::Result<ScanRecording>> = logs
+        .iter()
+        .map(|(_, log)| ScanRecording::from_log(log, Some(&lidar.name), [1.0, 1.0]))
+        .collect();
+    let total: usize = recordings
+        .iter()
+        .map(|r| r.as_ref().map_or(0, |r| r.scans.len()))
+        .sum();
+    let mut done = 0;
+    let mut outcomes = Vec::with_capacity(logs.len());
+    for ((name, log), rec) in logs.iter().zip(recordings) {
+        let rec = match rec {
+            Ok(r) => r,
+            Err(e) => {
+                outcomes.push(LogUpdate {
+                    log: name.clone(),
+                    scans: 0,
+                    scans_matched: 0,
+                    drawn: false,
+                    refused: Some(format!("{e:#}")),
+                });
+                continue;
+            }
+        };
+        let scans = rec.scans.len();
+        let mut job_lidar = rec.lidar;
+        job_lidar.mount = lidar.mount;
+        let job = MapJob {
+            wheels: rec.wheels,
+            scans: rec.scans,
+            lidar: job_lidar,
+            params: *params,
+            start: log.header.start,
+            settings: mapping,
+            prior: Some(grid.clone()),
+        };
+        let mapped = map_site(&job, |k, n| {
+            progress(done + k * scans / n.max(1), total);
+        });
+        done += scans;
+        let mapped = match mapped {
+            Ok(m) => m,
+            Err(e) => {
+                outcomes.push(LogUpdate {
+                    log: name.clone(),
+                    scans,
+                    scans_matched: 0,
+                    drawn: false,
+                    refused: Some(format!("{e:#}")),
+                });
+                continue;
+            }
+        };
+        let each = &mapped.mapping.matched_each;
+        let matched = mapped.mapping.matched;
+        let fraction = matched as f64 / each.len().max(1) as f64;
+        let first = &each[..each.len().min(settings.start_scans)];
+        let first_matched = first.iter().filter(|m| **m).count();
+        let min = settings.min_matched_fraction;
+        let refused = if fraction < min {
+            Some(format!(
+                "{matched} of {} scans matched the map ({:.0} %, {:.0} % needed)",
+                each.len(),
+                100.0 * fraction,
+                100.0 * min
+            ))
+        } else if (first_matched as f64) < min * first.len() as f64 {
+            Some(format!(
+                "{first_matched} of its first {} scans matched the map ({:.0} % needed): it did not start where it says",
+                first.len(),
+                100.0 * min
+            ))
+        } else {
+            None
+        }
+        .map(|why| {
+            format!(
+                "{why}; the log does not agree with this site's map (another site, a start far from where the log says, a broken lidar), so it is not drawn"
+            )
+        });
+        if refused.is_none() {
+            grid = mapped.mapping.grid;
+        }
+        outcomes.push(LogUpdate {
+            log: name.clone(),
+            scans: mapped.mapping.poses.len(),
+            scans_matched: matched,
+            drawn: refused.is_none(),
+            refused,
+        });
+    }
+    progress(total, total);
+    let after = grid.cropped(4);
+    let changes = changes(&before, &after);
+    Ok(SiteUpdate {
+        site: twin.name.clone(),
+        before,
+        after,
+        logs: outcomes,
+        changes,
+    })
+}
+
+/// How the cells of `after` differ from the same places in `before`.
+fn changes(before: &LogOddsGrid, after: &LogOddsGrid) -> CellChanges {
+    let mut c = CellChanges::default();
+    for row in 0..after.height() {
+        for col in 0..after.width() {
+            let now = after.state(col, row);
+            let was = before.state_at(after.centre(col, row));
+            match (was, now) {
+                (CellState::Unknown, CellState::Free) => c.unknown_to_free += 1,
+                (CellState::Unknown, CellState::Occupied) => c.unknown_to_occupied += 1,
+                (CellState::Free, CellState::Occupied) => c.free_to_occupied += 1,
+                (CellState::Occupied, CellState::Free) => c.occupied_to_free += 1,
+                _ => {}
+            }
+        }
+    }
+    c
+}
+
+/// Writes the updated site into `dest` (a new version's directory),
+/// whole or not at all: `map.pgm`, `map.yaml`, `site.toml` (the twin's
+/// scenario at `twin_path` on the new map, and the commands file it names,
+/// if any) and `update.json`. Nothing is written unless `site.toml` loads.
+pub fn write_site_version(
+    dest: &Path,
+    twin_path: &Path,
+    update: &SiteUpdate,
+    report: &UpdateReport<'_>,
+) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(twin_path)
+        .with_context(|| format!("reading the twin's site {}", twin_path.display()))?;
+    let mut doc: toml::Table = toml::from_str(&text)
+        .with_context(|| format!("{}: not a TOML scenario", twin_path.display()))?;
+    let world = doc
+        .entry("world")
+        .or_insert_with(|| toml::Table::new().into())
+        .as_table_mut()
+        .with_context(|| format!("{}: `world` is not a table", twin_path.display()))?;
+    world.insert("map".into(), "map.yaml".into());
+    let copy = commands_beside(&mut doc, twin_path, "the twin's site")?;
+    let head = format!(
+        "# Version {} of site `{}`, kept by `twindrive master --site-maps`: the twin's\n\
+         # site with its map extended by the robot's logs (update.json says which).\n",
+        report.version, update.site
+    );
+    let site = head + &toml::to_string(&doc)?;
+    let (pgm, yaml) = map_files(&update.after);
+    let staging = Staging::new(dest, "site-maps")?;
+    staging.write_with("map.pgm", |w| Ok(w.write_all(&pgm)?))?;
+    staging.write_with("map.yaml", |w| Ok(w.write_all(yaml.as_bytes())?))?;
+    staging.write_with("site.toml", |w| Ok(w.write_all(site.as_bytes())?))?;
+    if let Some(from) = &copy {
+        stage_copy(&staging, from)?;
+    }
+    staging.write_with("update.json", |w| {
+        serde_json::to_writer_pretty(w, report).map_err(Into::into)
+    })?;
+    Scenario::load(&staging.path("site.toml"))
+        .context("the updated site.toml does not load as a scenario on its map; nothing written")?;
+    staging.commit()
+}
