@@ -20,7 +20,7 @@ use serde::Serialize;
 use twindrive_estimation::mapping::{CellState, LogOddsGrid, MappingSettings};
 use twindrive_files::Staging;
 use twindrive_kinematics::DiffDriveParams;
-use twindrive_log::MissionLog;
+use twindrive_log::{MissionLog, RangeSensorInfo};
 use twindrive_sim::Scenario;
 use twindrive_sim::map::{Cell, OccupancyGrid};
 
@@ -185,17 +185,18 @@ pub fn prior_grid(map: &OccupancyGrid, settings: &MappingSettings) -> anyhow::Re
     ))
 }
 
-/// Extends the map of `twin`'s site with the scans of `logs` (name and
-/// log, in the order they were driven), the robot's wheels as `params`
-/// say. The twin's lidar (its first range sensor with a lidar's beams)
-/// gives the mount. `progress(done, total)` over all logs' scans.
-pub fn update_site(
-    twin: &Scenario,
-    logs: &[(String, &MissionLog)],
-    params: &DiffDriveParams,
-    settings: &UpdateSettings,
-    mut progress: impl FnMut(usize, usize),
-) -> anyhow::Result<SiteUpdate> {
+/// A robot's log of a mission, to draw into the map.
+#[derive(Debug, Clone, Copy)]
+pub struct RobotLog<'a> {
+    /// Its name (where the master keeps it).
+    pub name: &'a str,
+    pub log: &'a MissionLog,
+    /// The robot's calibrated wheels.
+    pub params: DiffDriveParams,
+}
+
+/// The twin's map and lidar, or why its site cannot be kept and extended.
+pub fn check_twin(twin: &Scenario) -> anyhow::Result<(&OccupancyGrid, &RangeSensorInfo)> {
     let Some(map) = twin.world.grid() else {
         bail!(
             "the twin's site `{}` has no map (its world is drawn by hand): only a site with a map_server map (`[world] map`, as `twindrive map` writes) is kept and extended",
@@ -213,6 +214,20 @@ pub fn update_site(
             twin.name
         );
     };
+    Ok((map, lidar))
+}
+
+/// Extends the map of `twin`'s site with the scans of `logs`, in the
+/// order they were driven. The twin's lidar (its first range sensor with
+/// a lidar's beams) gives the mount. `progress(done, total)` over all
+/// logs' scans.
+pub fn update_site(
+    twin: &Scenario,
+    logs: &[RobotLog<'_>],
+    settings: &UpdateSettings,
+    mut progress: impl FnMut(usize, usize),
+) -> anyhow::Result<SiteUpdate> {
+    let (map, lidar) = check_twin(twin)?;
     let mapping = MappingSettings {
         resolution_m: map.resolution_m,
         ..settings.mapping
@@ -221,7 +236,7 @@ pub fn update_site(
     let mut grid = before.clone();
     let recordings: Vec<anyhow::Result<ScanRecording>> = logs
         .iter()
-        .map(|(_, log)| ScanRecording::from_log(log, Some(&lidar.name), [1.0, 1.0]))
+        .map(|l| ScanRecording::from_log(l.log, Some(&lidar.name), [1.0, 1.0]))
         .collect();
     let total: usize = recordings
         .iter()
@@ -229,7 +244,8 @@ pub fn update_site(
         .sum();
     let mut done = 0;
     let mut outcomes = Vec::with_capacity(logs.len());
-    for ((name, log), rec) in logs.iter().zip(recordings) {
+    for (l, rec) in logs.iter().zip(recordings) {
+        let name = l.name.to_string();
         let rec = match rec {
             Ok(r) => r,
             Err(e) => {
@@ -250,8 +266,8 @@ pub fn update_site(
             wheels: rec.wheels,
             scans: rec.scans,
             lidar: job_lidar,
-            params: *params,
-            start: log.header.start,
+            params: l.params,
+            start: l.log.header.start,
             settings: mapping,
             prior: Some(grid.clone()),
         };

@@ -369,7 +369,7 @@ fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
     use twindrive_calibrate::site_map::{
         MapJob, SiteScenario, map_site, seen_wall_points, site_toml, write_site,
     };
-    use twindrive_calibrate::site_update::{UpdateSettings, update_site};
+    use twindrive_calibrate::site_update::{RobotLog, UpdateSettings, update_site};
     use twindrive_estimation::mapping::{CellState, MappingSettings, distance_to_segment, score};
     let sites: u64 = std::env::var("TWINDRIVE_HELD_OUT")
         .ok()
@@ -438,8 +438,11 @@ fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
         let settings = UpdateSettings::default();
         let update = update_site(
             &twin,
-            &[("mission".into(), &mission)],
-            &params,
+            &[RobotLog {
+                name: "mission",
+                log: &mission,
+                params,
+            }],
             &settings,
             |_, _| {},
         )
@@ -516,8 +519,11 @@ fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
         astray.header.start = Pose::new(s.x_m + 0.8, s.y_m - 0.6, wrap_angle(s.heading_rad + 0.5));
         let refused = update_site(
             &twin,
-            &[("astray".into(), &astray)],
-            &params,
+            &[RobotLog {
+                name: "astray",
+                log: &astray,
+                params,
+            }],
             &settings,
             |_, _| {},
         )

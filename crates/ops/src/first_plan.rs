@@ -26,10 +26,13 @@ pub struct FirstPlan {
     pub resume: bool,
 }
 
+/// `scenario` is the twin's site (`--scenario`, or the version of it kept
+/// in `--site-maps`), whose hash the envelope carries.
 pub fn first_plan(
     args: &MasterSettings,
     robot: &str,
     archive: &MasterArchive,
+    scenario: Option<&std::path::Path>,
 ) -> anyhow::Result<FirstPlan> {
     // An upload this master began and did not finish is resumed when it
     // carries the same plan (a self-signed plan signs to new bytes each run).
@@ -52,7 +55,7 @@ pub fn first_plan(
             (unfinished.clone().expect("checked"), true)
         } else {
             let plan = parse_plan(&plan_json, path)?;
-            let world = world_bytes(&plan.header.robot.scenario, args.scenario.as_deref())?;
+            let world = world_bytes(&plan.header.robot.scenario, scenario)?;
             let key = args.key.as_ref().context("--plan needs --key to sign it")?;
             let now = since_epoch()?;
             let envelope = Envelope::new(

@@ -11,6 +11,8 @@
 //! - [`first_plan`]: the signed plan a master starts with (or resumes);
 //! - [`supervise`]: one robot's operator driven over the session;
 //! - [`settings`]: a master's checked configuration ([`MasterSettings`]);
+//! - [`site_maps`]: the twin's map of its site kept across missions
+//!   (`--site-maps`);
 //! - [`router`]: a zenoh router.
 
 pub mod first_plan;
@@ -18,6 +20,7 @@ pub mod master;
 pub mod robot;
 pub mod router;
 pub mod settings;
+pub mod site_maps;
 pub mod supervise;
 
 use anyhow::Context;

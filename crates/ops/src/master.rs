@@ -17,6 +17,7 @@ use twindrive_store::MasterArchive;
 
 use crate::first_plan::first_plan;
 use crate::settings::MasterSettings;
+use crate::site_maps::{KeptSite, ReturnedLogs};
 use crate::supervise::{Supervised, WriteError, supervise};
 use crate::{runtime, unix_now_s};
 
@@ -29,6 +30,21 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
     let verbosity = args.verbosity;
     let quiet = verbosity == Verbosity::Quiet;
     let unix_at_zero = unix_now_s()?;
+    // The twin's site: --scenario, or its latest version kept in --site-maps.
+    let kept = match (&args.site_maps, &args.scenario) {
+        (Some(dir), Some(scenario)) => Some(KeptSite::resolve(dir, scenario)?),
+        (Some(_), None) => bail!("--site-maps needs --scenario: the twin's site on a map"),
+        _ => None,
+    };
+    if let Some(k) = &kept
+        && !quiet
+    {
+        eprintln!("master: {}", k.describe());
+    }
+    let twin_site = kept
+        .as_ref()
+        .map(|k| k.path.clone())
+        .or_else(|| args.scenario.clone());
     let mut members = Vec::new();
     for robot in &args.robots {
         let out = if fleet {
@@ -37,11 +53,11 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
             args.out.clone()
         };
         let archive = MasterArchive::new(out);
-        let first = first_plan(args, robot, &archive)?;
-        // The twin: the scenario the plan was rehearsed in.
+        let first = first_plan(args, robot, &archive, twin_site.as_deref())?;
+        // The twin: the scenario the plan was rehearsed in (its latest map).
         let twin_scenario = match twindrive_workflow::verification::twin_of(
             &first.plan,
-            args.scenario.as_deref(),
+            twin_site.as_deref(),
         ) {
             Ok(twin) => Some(twin),
             Err(e) if args.allow_failed_verification && args.on_handback != OnHandback::Replan => {
@@ -230,6 +246,27 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
     }
     if let Some(e) = first_error {
         return Err(e);
+    }
+    // The twin keeps learning its site: the robot logs that came back
+    // extend its map into the next version.
+    if let Some(k) = &kept {
+        // Each robot's wheels as its twin knows them last (a hand-back may
+        // have changed them), else as its plan says.
+        let returned: Vec<ReturnedLogs<'_>> = members
+            .iter()
+            .filter_map(|m| {
+                let params =
+                    m.op.twin()
+                        .map(|t| t.calibrated)
+                        .or_else(|| m.op.current_plan().map(|p| p.header.calibrated))?;
+                Some(ReturnedLogs {
+                    dirs: &m.op.report.robot_logs,
+                    params,
+                })
+            })
+            .collect();
+        k.update(&returned, stdout, quiet)
+            .context("updating the site's map (the mission's reports are written)")?;
     }
     match worst {
         Outcome::Failed => bail!(

@@ -27,6 +27,8 @@ pub struct MasterSettings {
     pub on_handback: OnHandback,
     /// The twin's scenario (default: the built-in one the plan names).
     pub scenario: Option<PathBuf>,
+    /// Where the twin's map of each site is kept across missions.
+    pub site_maps: Option<PathBuf>,
     pub timeout: f64,
     pub telemetry_budget: f64,
     pub log_wait: f64,

@@ -521,6 +521,13 @@ pub struct MasterArgs {
     /// The twin's scenario (default: the built-in one the plan names).
     #[arg(long, value_name = "S.toml")]
     pub scenario: Option<PathBuf>,
+    /// Keep the twin's map of its site here across missions: the twin runs
+    /// on the latest version kept (DIR/<site>/NNNN/site.toml), and after
+    /// the mission the robot's logs (their lidar scans) extend the map into
+    /// the next version. The site is --scenario's, on a map_server map (as
+    /// `twindrive map` writes it).
+    #[arg(long, value_name = "DIR", requires = "scenario")]
+    pub site_maps: Option<PathBuf>,
     /// Give up (outcome `failed`) after this many seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 3_600.0, value_parser = usage::seconds)]
     pub timeout: f64,

@@ -181,3 +181,199 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(!out.exists());
 }
+
+/// The mission of the process test below: the self-calibration drive's
+/// room and robot, spinning, then one arc.
+fn short_drive() -> String {
+    let text =
+        std::fs::read_to_string(repo().join("scenarios/self_calibration_drive.toml")).unwrap();
+    let controller = text.find("[controller]").unwrap();
+    text[..controller].replacen("duration_s = 120.0", "duration_s = 18.0", 1)
+        + "[controller]\nkind = \"scripted\"\nsegments = [\n  \
+           { duration_s = 8.0, left_rad_s = -1.5, right_rad_s = 1.5 },\n  \
+           { duration_s = 10.0, left_rad_s = 8.0, right_rad_s = 5.5 },\n]\n"
+}
+
+/// `twindrive master --site-maps`: the twin's map is drawn from a first
+/// look while a partition hid half the room; a mission planned on it runs
+/// on the robot (`twindrive robot`, the room without the partition), and
+/// its log extends the map into version 1 (the far side known, the
+/// partition cleared); the next mission's twin runs on version 1 and
+/// makes version 2.
+#[test]
+fn the_master_keeps_the_twins_map_of_the_site_across_missions() {
+    use common::{Proc, finish, port};
+    use std::process::{Command, Stdio};
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let mission = short_drive();
+    std::fs::write(d.join("mission.toml"), &mission).unwrap();
+    // The first look: standing still (the boxes hide what is behind them).
+    let look = mission.replacen("duration_s = 18.0", "duration_s = 3.0", 1);
+    std::fs::write(d.join("look.toml"), look).unwrap();
+    simulate(&d.join("look.toml"), &d.join("look"), "3");
+    let cal = calibration(d);
+    let site = d.join("site");
+    let o = run(&[
+        "map",
+        &s(&d.join("look")),
+        "--calibration",
+        &s(&cal),
+        "--mission",
+        &s(&d.join("mission.toml")),
+        "--resolution-m",
+        "0.025",
+        "--out",
+        &s(&site),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // The mission rehearsed on the twin and planned; keys.
+    simulate(&site.join("site.toml"), &d.join("rehearsal"), "18");
+    let plan = d.join("plan/plan.json");
+    let o = run(&[
+        "plan",
+        &s(&d.join("rehearsal")),
+        "--calibration",
+        &s(&cal),
+        "--scenario",
+        &s(&site.join("site.toml")),
+        "--out",
+        &s(&plan),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let o = run(&["keygen", "--out", &s(&d.join("keys"))]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // The robot's site: the room, under the name the twin knows it by (a
+    // robot refuses a plan for another site), its lidar without dropouts
+    // (the robot's range check counts a dropped return as a discrepancy).
+    let name = "self_calibration_drive_on_site";
+    std::fs::write(
+        d.join("true.toml"),
+        mission
+            .replacen(
+                "name = \"self_calibration_drive\"",
+                &format!("name = \"{name}\""),
+                1,
+            )
+            .replacen("dropout_probability = 0.01", "dropout_probability = 0.0", 1),
+    )
+    .unwrap();
+
+    // A robot at the mission's start, its own state, on its own port.
+    let robot = |state: &str| {
+        let robot_port = port();
+        let p = Proc(
+            Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                .args([
+                    "robot",
+                    "--id",
+                    "rover",
+                    "--site",
+                    &s(&d.join("true.toml")),
+                    "--trust",
+                    &s(&d.join("keys/master.pub")),
+                    "--state-dir",
+                    &s(&d.join(state)),
+                    "--listen",
+                    &format!("tcp/127.0.0.1:{robot_port}"),
+                    "--time-scale",
+                    "4",
+                    "--telemetry-budget",
+                    "1000000",
+                    "--run-for",
+                    "240",
+                ])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap(),
+        );
+        (p, robot_port)
+    };
+    let maps = d.join("maps");
+    let master = |out: &str, robot_port: u16| {
+        let stdout = d.join(format!("{out}.stdout"));
+        let p = Proc(
+            Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                .args([
+                    "master",
+                    "--plan",
+                    &s(&plan),
+                    "--key",
+                    &s(&d.join("keys/master.key")),
+                    "--robot",
+                    "rover",
+                    "--connect",
+                    &format!("tcp/127.0.0.1:{robot_port}"),
+                    "--out",
+                    &s(&d.join(out)),
+                    "--scenario",
+                    &s(&site.join("site.toml")),
+                    "--site-maps",
+                    &s(&maps),
+                    "--telemetry-budget",
+                    "1000000",
+                    "--timeout",
+                    "120",
+                    "--log-wait",
+                    "60",
+                ])
+                .stdout(std::fs::File::create(&stdout).unwrap())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let (code, err) = finish(p, 180.0);
+        let said = std::fs::read_to_string(&stdout).unwrap();
+        assert_eq!(code, Some(0), "{said}\n{err}");
+        (said, err)
+    };
+    let update = |version: &str| -> serde_json::Value {
+        let dir = maps.join(name).join(version);
+        for f in ["site.toml", "map.yaml", "map.pgm"] {
+            assert!(dir.join(f).is_file(), "{}", dir.join(f).display());
+        }
+        serde_json::from_slice(&std::fs::read(dir.join("update.json")).unwrap()).unwrap()
+    };
+
+    let (first_robot, robot_port) = robot("robot1");
+    let (said, err) = master("first", robot_port);
+    drop(first_robot);
+    assert!(err.contains("no map of site"), "{err}");
+    assert!(said.contains(&format!("site `{name}` version 1")), "{said}");
+    let first = update("0001");
+    assert_eq!(first["previous"], serde_json::Value::Null);
+    assert_eq!(first["logs"][0]["drawn"], true, "{first}");
+    let known = |u: &serde_json::Value, k: &str| {
+        u[k]["free"].as_u64().unwrap() + u[k]["occupied"].as_u64().unwrap()
+    };
+    // It matched the map, and what the boxes hid from the first look is
+    // known now.
+    let log = &first["logs"][0];
+    assert!(
+        log["scans_matched"].as_u64().unwrap() * 20 >= log["scans"].as_u64().unwrap() * 19,
+        "{first}"
+    );
+    assert!(
+        known(&first, "cells_after") > known(&first, "cells_before") + 200,
+        "{first}"
+    );
+    assert!(
+        first["changes"]["unknown_to_occupied"].as_u64().unwrap() > 50,
+        "{first}"
+    );
+
+    // The next mission, by a robot back at the start.
+    let (_second_robot, robot_port) = robot("robot2");
+    let (said, err) = master("second", robot_port);
+    assert!(err.contains("(version 1)"), "{err}");
+    assert!(said.contains(&format!("site `{name}` version 2")), "{said}");
+    let second = update("0002");
+    assert_eq!(second["previous"], 1);
+    // Version 1 was the twin: it knew the room already.
+    assert_eq!(known(&second, "cells_before"), known(&first, "cells_after"));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("second/report.json")).unwrap()).unwrap();
+    assert_eq!(report["outcome"], "completed", "{report}");
+}

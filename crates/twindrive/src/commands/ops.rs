@@ -95,6 +95,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             OnHandbackArg::Replan => OnHandback::Replan,
         },
         scenario: args.scenario.clone(),
+        site_maps: args.site_maps.clone(),
         timeout: args.timeout,
         telemetry_budget: args.telemetry_budget,
         log_wait: args.log_wait,
