@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite: formatting, lints, every benchmark in smoke mode,
 # every test in the workspace, the book built and its links checked. Needs
-# the Rust toolchain (with rustfmt and clippy), Node.js's npm (the console's
+# the Rust toolchain (with rustfmt and clippy; cargo-nextest runs the tests
+# where it is installed), Node.js's npm (the console's
 # pinned front-end libraries) and python3 with venv and pip; installs
 # Debian's chromium and chromium-driver for the console's browser tests when
 # they are missing, the pinned Python ROS 2 peers (rosbags,
@@ -62,5 +63,14 @@ stage "test peers (chromium, Python ROS 2 packages)" wait_for_deps
 # Every benchmark in smoke mode, twindrive's side (the Python peers stay out
 # of CI), on the dev build: a change that breaks a benchmark fails here.
 stage "benchmarks, smoke mode" env PEERS=0 bash bench/smoke.sh
-stage "cargo test" cargo test --workspace
+# Every test. cargo-nextest runs the tests of every binary side by side (the
+# machine's cores stay busy across binaries, where cargo test waits for each
+# binary's slowest test); doc tests are cargo test's alone. Plain cargo test
+# where nextest is missing.
+if cargo nextest --version >/dev/null 2>&1; then
+    stage "tests (cargo nextest)" cargo nextest run --workspace --no-fail-fast
+    stage "doc tests" cargo test --workspace --doc
+else
+    stage "cargo test" cargo test --workspace
+fi
 stage "the book: mdbook build, links" build_docs

@@ -180,6 +180,41 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
     ]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
     assert!(!out.exists());
+    // A master keeps maps only of a site on a map, given with --scenario.
+    let maps = tmp.path().join("maps");
+    let master = |extra: &[&str]| {
+        let mut args = vec![
+            "master",
+            "--plan",
+            "plan.json",
+            "--key",
+            "master.key",
+            "--robot",
+            "rover",
+            "--out",
+            out.to_str().unwrap(),
+            "--site-maps",
+            maps.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let o = master(&[]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("--scenario"),
+        "{}",
+        text(&o.stderr)
+    );
+    let hand_drawn = repo().join("scenarios/wall_following.toml");
+    let o = master(&["--scenario", hand_drawn.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("has no map"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(!maps.exists() && !out.exists());
 }
 
 /// The mission of the process test below: the self-calibration drive's
