@@ -182,13 +182,20 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
     assert!(!out.exists());
     // A master keeps maps only of a site on a map, given with --scenario.
     let maps = tmp.path().join("maps");
+    let keys = tmp.path().join("keys");
+    assert!(
+        run(&["keygen", "--out", keys.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let key = keys.join("master.key");
     let master = |extra: &[&str]| {
         let mut args = vec![
             "master",
             "--plan",
             "plan.json",
             "--key",
-            "master.key",
+            key.to_str().unwrap(),
             "--robot",
             "rover",
             "--out",
