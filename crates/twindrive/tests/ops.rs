@@ -531,6 +531,8 @@ fn robot_and_master_meet_through_a_zenoh_router() {
                 s(&client),
                 "--time-scale",
                 "10",
+                "--telemetry-budget",
+                m.telemetry_budget,
                 "--run-for",
                 "300",
             ])
@@ -571,6 +573,8 @@ fn robot_and_master_meet_through_a_zenoh_router() {
                 "240",
                 "--log-wait",
                 "60",
+                "--telemetry-budget",
+                m.telemetry_budget,
             ])
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
