@@ -178,6 +178,10 @@ fn a_fleet_of_three_robot_processes_completes_through_a_router_with_every_log_ba
             "3",
             "--time-scale",
             "4",
+            // Each robot's two logs (~1.8 MB each) home in seconds, not
+            // the minutes the default budget takes.
+            "--telemetry-budget",
+            "200000",
             "--timeout",
             "400",
             "--cost",
