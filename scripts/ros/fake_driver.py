@@ -209,7 +209,8 @@ def main():
                     velocity=np.array(s["wheel_rad_s"], dtype=np.float64),
                     effort=np.array([], dtype=np.float64)))
                 if not announced:
-                    # The tests start a mission once the robot's joints are live.
+                    # Said once, for the driver's log (the tests start a
+                    # mission once the agent says it heard the joints).
                     print("publishing joint states", file=sys.stderr, flush=True)
                     announced = True
             x, y, th = s["pose"]

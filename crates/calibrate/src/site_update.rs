@@ -73,6 +73,18 @@ pub struct LogUpdate {
     pub refused: Option<String>,
 }
 
+impl LogUpdate {
+    fn not_drawn(log: String, scans: usize, scans_matched: usize, why: String) -> Self {
+        Self {
+            log,
+            scans,
+            scans_matched,
+            drawn: false,
+            refused: Some(why),
+        }
+    }
+}
+
 /// Cells by state: free, occupied, unknown.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct CellCounts {
@@ -249,13 +261,7 @@ pub fn update_site(
         let rec = match rec {
             Ok(r) => r,
             Err(e) => {
-                outcomes.push(LogUpdate {
-                    log: name.clone(),
-                    scans: 0,
-                    scans_matched: 0,
-                    drawn: false,
-                    refused: Some(format!("{e:#}")),
-                });
+                outcomes.push(LogUpdate::not_drawn(name, 0, 0, format!("{e:#}")));
                 continue;
             }
         };
@@ -278,13 +284,7 @@ pub fn update_site(
         let mapped = match mapped {
             Ok(m) => m,
             Err(e) => {
-                outcomes.push(LogUpdate {
-                    log: name.clone(),
-                    scans,
-                    scans_matched: 0,
-                    drawn: false,
-                    refused: Some(format!("{e:#}")),
-                });
+                outcomes.push(LogUpdate::not_drawn(name, scans, 0, format!("{e:#}")));
                 continue;
             }
         };
@@ -315,15 +315,19 @@ pub fn update_site(
                 "{why}; the log does not agree with this site's map (another site, a start far from where the log says, a broken lidar), so it is not drawn"
             )
         });
-        if refused.is_none() {
-            grid = mapped.mapping.grid;
-        }
-        outcomes.push(LogUpdate {
-            log: name.clone(),
-            scans: mapped.mapping.poses.len(),
-            scans_matched: matched,
-            drawn: refused.is_none(),
-            refused,
+        let scans = mapped.mapping.poses.len();
+        outcomes.push(match refused {
+            Some(why) => LogUpdate::not_drawn(name, scans, matched, why),
+            None => {
+                grid = mapped.mapping.grid;
+                LogUpdate {
+                    log: name,
+                    scans,
+                    scans_matched: matched,
+                    drawn: true,
+                    refused: None,
+                }
+            }
         });
     }
     progress(total, total);

@@ -148,24 +148,15 @@ impl KeptSite {
             .with_context(|| format!("writing {}", next.dir.display()))?;
         let (before, after) = (report.cells_before, report.cells_after);
         let c = report.changes;
+        let drawn: Vec<_> = update.logs.iter().filter(|l| l.drawn).collect();
         writeln!(
             out,
             "site map: site `{}` version {} from {} robot log(s), {} of {} scans matched the map: {} cells known (was {}); {} newly free, {} newly occupied, {} free turned occupied, {} occupied turned free -> {}",
             self.site,
             next.number,
-            update.logs.iter().filter(|l| l.drawn).count(),
-            update
-                .logs
-                .iter()
-                .filter(|l| l.drawn)
-                .map(|l| l.scans_matched)
-                .sum::<usize>(),
-            update
-                .logs
-                .iter()
-                .filter(|l| l.drawn)
-                .map(|l| l.scans)
-                .sum::<usize>(),
+            drawn.len(),
+            drawn.iter().map(|l| l.scans_matched).sum::<usize>(),
+            drawn.iter().map(|l| l.scans).sum::<usize>(),
             after.known(),
             before.known(),
             c.unknown_to_free,
