@@ -277,7 +277,7 @@ pub fn run(
         // The robot reports what it sensed at the start of this step.
         let stream = !matches!(config.method, DirectMethod::MoveAndWait { .. });
         let report = if stream {
-            (now % period_ns == 0).then_some(0)
+            now.is_multiple_of(period_ns).then_some(0)
         } else {
             if let DirectMethod::MoveAndWait { move_s } = config.method
                 && last_move_done == 0
@@ -343,7 +343,7 @@ pub fn run(
         };
         match config.method {
             DirectMethod::HoldLast | DirectMethod::Watchdog { .. } => {
-                if now % period_ns == 0
+                if now.is_multiple_of(period_ns)
                     && let Some(seen) = &latest
                 {
                     let obs = Observation {

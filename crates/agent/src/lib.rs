@@ -30,6 +30,7 @@ pub mod ros;
 pub mod store;
 pub mod twin;
 
+use twindrive_link::secure::Refusal;
 use twindrive_link::upload::ChunkStore;
 use twindrive_link::vtime::Endpoint;
 use twindrive_link::wire::Message;
@@ -44,6 +45,9 @@ impl<B: backend::RobotBackend, S: store::RobotStore> Endpoint for robot::RobotAg
     fn poll_timeout(&self) -> Option<u64> {
         robot::RobotAgent::poll_timeout(self)
     }
+    fn refused(&mut self, refusal: &Refusal, now_ns: u64) {
+        robot::RobotAgent::refused(self, refusal, now_ns)
+    }
 }
 
 impl<S: ChunkStore> Endpoint for operator::Operator<S> {
@@ -55,5 +59,8 @@ impl<S: ChunkStore> Endpoint for operator::Operator<S> {
     }
     fn poll_timeout(&self) -> Option<u64> {
         operator::Operator::poll_timeout(self)
+    }
+    fn refused(&mut self, refusal: &Refusal, now_ns: u64) {
+        operator::Operator::refused(self, refusal, now_ns)
     }
 }

@@ -148,6 +148,11 @@ pub struct Report {
     /// Directories of the robot's logs as received (filled by the owner).
     pub robot_logs: Vec<String>,
     pub status_messages: u64,
+    /// Payloads on the robot's key expression this master refused before
+    /// reading them (not authentic, replays): nothing of them was used.
+    pub refused_messages: u64,
+    /// The robot's own count of payloads it refused, from its latest status.
+    pub robot_refused_messages: u32,
     /// The link's round trip (median of the pings answered, s).
     pub link_rtt_median_s: Option<f64>,
     pub pings_answered: usize,
@@ -213,6 +218,8 @@ impl<S: ChunkStore> Operator<S> {
                 bumps: 0,
                 robot_logs: Vec::new(),
                 status_messages: 0,
+                refused_messages: 0,
+                robot_refused_messages: 0,
                 link_rtt_median_s: None,
                 pings_answered: 0,
                 unix_time_at_zero_s: config.unix_time_at_zero_s,
@@ -393,6 +400,7 @@ impl<S: ChunkStore> Operator<S> {
                     }
                     self.report.collisions = s.collisions;
                     self.report.bumps = s.bumps;
+                    self.report.robot_refused_messages = s.refused;
                 }
             }
         }
@@ -653,6 +661,11 @@ impl<S: ChunkStore> Operator<S> {
         rtt.sort_by(f64::total_cmp);
         self.report.pings_answered = rtt.len();
         self.report.link_rtt_median_s = rtt.get(rtt.len() / 2).copied();
+    }
+
+    /// A payload refused before it was read: counted, nothing else.
+    pub fn refused(&mut self, _refusal: &twindrive_link::secure::Refusal, _now_ns: u64) {
+        self.report.refused_messages += 1;
     }
 
     /// Takes in a message from the robot.

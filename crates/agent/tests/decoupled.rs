@@ -446,7 +446,7 @@ fn chunks_corrupted_in_flight_are_asked_again_and_the_plan_arrives_whole() {
     let mut k = 0u64;
     h.link.tamper_up = Some(Box::new(move |bytes: &mut Vec<u8>| {
         k += 1;
-        if k % 7 == 0 && bytes.len() > 500 {
+        if k.is_multiple_of(7) && bytes.len() > 500 {
             let n = bytes.len();
             bytes[n - 10] ^= 0xff;
         }

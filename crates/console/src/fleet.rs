@@ -61,6 +61,9 @@ pub struct RobotSlot {
     /// Arrival times and encoded sizes of recent messages (for rates).
     rx_times: VecDeque<(u64, usize)>,
     pub messages_received: u64,
+    /// Payloads on the robot's key expression refused before they were
+    /// read (not authentic, replays).
+    pub refused_messages: u64,
     /// (console s, plan s, deviation m, range residual m).
     series: VecDeque<[f64; 4]>,
     series_rev: u64,
@@ -105,6 +108,9 @@ impl Endpoint for SharedSlot {
     fn poll_timeout(&self) -> Option<u64> {
         self.lock().poll_timeout()
     }
+    fn refused(&mut self, _refusal: &twindrive_link::secure::Refusal, _now_ns: u64) {
+        self.lock().refused_messages += 1;
+    }
 }
 
 impl RobotSlot {
@@ -121,6 +127,7 @@ impl RobotSlot {
             last_status_ns: None,
             rx_times: VecDeque::new(),
             messages_received: 0,
+            refused_messages: 0,
             series: VecDeque::new(),
             series_rev: 0,
             mission_rev: 0,
@@ -554,6 +561,7 @@ impl RobotSlot {
                 "pings_answered": answered,
                 "pings_lost": lost,
                 "messages": self.messages_received,
+                "refused": self.refused_messages,
                 "outage": outage,
             },
             "status": status,
@@ -733,6 +741,7 @@ fn status_view(s: &Status, age_s: Option<f64>) -> Value {
         "params_std": s.params_std,
         "bumps": s.bumps,
         "collisions": s.collisions,
+        "refused": s.refused,
         "logs_pending": s.logs_pending,
     })
 }
@@ -826,6 +835,7 @@ mod tests {
             logs_pending: 0,
             bumps: 0,
             collisions: 0,
+            refused: 0,
         }))
     }
 

@@ -57,6 +57,8 @@ pub struct ConsoleConfig {
     /// The robot's calibrated parameters (default: the twin's nominal ones).
     pub params: Option<twindrive_kinematics::DiffDriveParams>,
     pub robots: Vec<String>,
+    /// The console's end of each robot's link (sealing), in `robots`' order.
+    pub robot_links: Vec<twindrive_link::secure::Peers>,
     pub session: SessionOptions,
     /// The emulated link on every robot's traffic, at this end.
     pub link: Option<LinkProfile>,
@@ -165,6 +167,7 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
         None
     } else {
         let robots = robots.clone();
+        let robot_links = config.robot_links;
         let options = config.session.clone();
         let link = config.link.clone();
         let seed = config.seed;
@@ -183,8 +186,9 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
                 }
             };
             let mut drivers = Vec::new();
-            for (k, slot) in robots.iter().enumerate() {
+            for (k, (slot, peers)) in robots.iter().zip(robot_links).enumerate() {
                 let id = slot.lock().id.clone();
+                let mut link_end = twindrive_net::LinkEnd::master(&id, peers);
                 let session = session.clone();
                 let mut endpoint = slot.clone();
                 let stop = stop.clone();
@@ -197,9 +201,7 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
                     let result = twindrive_net::drive_counting(
                         &mut endpoint,
                         &session,
-                        &id,
-                        &twindrive_net::up_key(&id),
-                        &twindrive_net::down_key(&id),
+                        &mut link_end,
                         emulation,
                         Duration::from_secs(100 * 365 * 86_400),
                         zero,
@@ -241,13 +243,13 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
                         said = seq;
                         eprintln!("console: {level}: {text}");
                     }
-                    if n % 2 == 0
+                    if n.is_multiple_of(2)
                         && let Some(b) = &mut bridge
                     {
                         let unix_ns = ((unix_at_zero_s + now as f64 * 1e-9) * 1e9) as u64;
                         b.publish(&c, unix_ns);
                     }
-                    (n % 2 == 0).then(|| c.frame(now))
+                    n.is_multiple_of(2).then(|| c.frame(now))
                 };
                 if let Some(f) = frame {
                     frames_tx.send_replace(Arc::new(f));

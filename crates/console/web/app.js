@@ -207,6 +207,7 @@ function renderRobot(r) {
   $('link-state').innerHTML =
     `link: ${l.outage ? '<span class="stale">OUTAGE</span> · ' : ''}round trip ${l.rtt_s === null ? '–' : fmt(l.rtt_s, 2) + ' s'} · ` +
     `last message ${age(l.last_rx_age_s)} · ${fmt(l.rx_msgs_s, 1)} msg/s, ${fmt(l.rx_bytes_s / 1000, 2)} kB/s from the robot · ${l.messages} messages · ` +
+    (l.refused ? `<span class="stale">${l.refused} refused (not authentic or replayed)</span> · ` : '') +
     (l.pings_answered + l.pings_lost ? `round-trip loss ${fmt(100 * l.pings_lost / (l.pings_answered + l.pings_lost), 0)} % (${l.pings_lost} of ${l.pings_answered + l.pings_lost} pings)` : 'no ping answered yet');
   const s = r.status;
   if (s) {
@@ -220,7 +221,8 @@ function renderRobot(r) {
       `state <b>${esc(r.state)}</b> · status ${age(s.age_s)}${stale}<br>` +
       `${pose}${when}${pred}<br>` +
       `deviation ${fmt(s.deviation_m, 3)} m (tolerance ${r.tolerances.deviation_m}) · range residual ${fmt(s.range_residual_m, 3)} m (tolerance ${r.tolerances.range_residual_m})<br>` +
-      `wheels ${fmt(s.params[0], 4)}/${fmt(s.params[1], 4)} m, wheelbase ${fmt(s.params[2], 4)} m · bumps ${s.bumps} · logs pending ${s.logs_pending}`;
+      `wheels ${fmt(s.params[0], 4)}/${fmt(s.params[1], 4)} m, wheelbase ${fmt(s.params[2], 4)} m · bumps ${s.bumps} · logs pending ${s.logs_pending}` +
+      (s.refused ? ` · <span class="stale">robot refused ${s.refused} message(s)</span>` : '');
   } else {
     $('robot-status').innerHTML = `state <b>${esc(r.state)}</b> · no status from the robot yet`;
   }

@@ -296,7 +296,7 @@ impl AugmentedEkf {
         check_covariance(
             &self.est.covariance,
             t_s,
-            self.stats.accepted % FULL_CHECK_EVERY == 0,
+            self.stats.accepted.is_multiple_of(FULL_CHECK_EVERY),
         )?;
 
         self.stats.accepted += 1;

@@ -141,6 +141,17 @@ pub fn run_fleet(
     let _router = Proc(cmd.spawn().context("starting the router")?);
     std::thread::sleep(Duration::from_millis(300));
     let ids: Vec<String> = (1..=n).map(|k| format!("r{k:03}")).collect();
+    // Each run's robots start from empty state directories: new robot keys
+    // too (a key's link epochs live with its state), and a fresh link
+    // state at the master.
+    let robot_keys = dir.join("robot_keys");
+    let master_link = dir.join("master_link");
+    for d in [&robot_keys, &master_link] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+    for id in &ids {
+        twindrive_store::keys::write_named_key_pair(&robot_keys, id)?;
+    }
     let mut robots = Vec::new();
     for (k, id) in ids.iter().enumerate() {
         let site = dir.join(format!("site_{id}.toml"));
@@ -152,6 +163,8 @@ pub fn run_fleet(
             .arg(&site)
             .arg("--trust")
             .arg(keys.join("master.pub"))
+            .arg("--key")
+            .arg(robot_keys.join(format!("{id}.key")))
             .arg("--state-dir")
             .arg(&state)
             .args(["--connect", &router, "--zenoh-config"])
@@ -177,6 +190,8 @@ pub fn run_fleet(
     let mut cmd = Command::new(exe);
     cmd.arg("master").arg("--plan").arg(plan_json);
     cmd.arg("--key").arg(keys.join("master.key"));
+    cmd.arg("--trust-robot").arg(&robot_keys);
+    cmd.arg("--link-state").arg(&master_link);
     for id in &ids {
         cmd.args(["--robot", id]);
     }
@@ -391,6 +406,9 @@ struct Timed<'a> {
 }
 
 impl twindrive_link::vtime::Endpoint for Timed<'_> {
+    fn refused(&mut self, refusal: &twindrive_link::secure::Refusal, now_ns: u64) {
+        self.op.refused(refusal, now_ns);
+    }
     fn poll_transmit(&mut self, now_ns: u64) -> Option<twindrive_link::wire::Message> {
         let t = Instant::now();
         let m = self.op.poll_transmit(now_ns);

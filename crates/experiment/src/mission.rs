@@ -65,7 +65,13 @@ impl<B: RobotBackend> Mission<B> {
         );
         let signed = sign_plan(key, plan_json, envelope).context("signing the plan")?;
         let signed_bytes = signed.len();
-        let link = VirtualLink::symmetric(profile, seed);
+        // Every message sealed, as over zenoh: the robot's key from the seed.
+        let (master_end, robot_end) = twindrive_link::secure::memory_pair(
+            key,
+            &twindrive_link::secure::key_from_seed(seed, 1),
+            robot_id,
+        );
+        let link = VirtualLink::symmetric(profile, seed).sealed(master_end, robot_end);
         let master = Master::new(
             robot_id,
             MasterConfig::for_link(Some(profile), 8_000.0),

@@ -6,6 +6,8 @@
 //!   bandwidth, outages; named profiles), deterministic under a seed;
 //! - [`envelope`]: signed plans (ed25519) and the robot's rules for accepting one;
 //! - [`plan_codec`]: the compact, lossless form plans travel in;
+//! - [`secure`]: every message sealed (ChaCha20-Poly1305 from the two ends'
+//!   static keys), replays refused across restarts;
 //! - [`wire`]: the versioned messages and their bytes (any bytes decode to a
 //!   message or an error, never a panic);
 //! - [`upload`]: chunked, resumable upload with NAKs (sender and receiver
@@ -17,6 +19,7 @@ pub mod efficiency;
 pub mod emulator;
 pub mod envelope;
 pub mod plan_codec;
+pub mod secure;
 pub mod upload;
 pub mod vtime;
 pub mod wire;

@@ -6,6 +6,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 use crate::emulator::{LinkEmulator, LinkProfile};
+use crate::secure::{Peers, Refusal};
 use crate::upload::{ChunkStore, Receiver, Sender};
 use crate::wire::{self, Message};
 
@@ -14,6 +15,10 @@ pub trait Endpoint {
     fn poll_transmit(&mut self, now_ns: u64) -> Option<Message>;
     fn handle(&mut self, message: &Message, now_ns: u64);
     fn poll_timeout(&self) -> Option<u64>;
+    /// A payload arrived that was refused before it was read (not
+    /// authentic, a replay): nothing of it reached [`Self::handle`]. An
+    /// endpoint that reports counts it.
+    fn refused(&mut self, _refusal: &Refusal, _now_ns: u64) {}
 }
 
 impl Endpoint for Sender {
@@ -62,6 +67,10 @@ pub struct VirtualLink {
     pub tamper_up: Option<Tamper>,
     /// Bytes that did not decode, per direction (A → B, B → A).
     pub undecodable: [u64; 2],
+    /// Every message sealed by its sender's end and opened by its
+    /// receiver's (A's, B's), as over zenoh; `None`: plain messages (the
+    /// protocol's own tests).
+    pub sealed: Option<[Peers; 2]>,
 }
 
 impl VirtualLink {
@@ -83,11 +92,23 @@ impl VirtualLink {
             now_ns: 0,
             tamper_up: None,
             undecodable: [0; 2],
+            sealed: None,
         }
+    }
+
+    /// Seals every message: `a` is A's end of the link (the master's), `b`
+    /// B's.
+    pub fn sealed(mut self, a: Peers, b: Peers) -> Self {
+        self.sealed = Some([a, b]);
+        self
     }
 
     fn send(&mut self, to_b: bool, message: &Message) {
         let mut bytes = wire::encode(message);
+        if let Some(ends) = &mut self.sealed {
+            let end = &mut ends[usize::from(!to_b)];
+            bytes = end.seal(&bytes).expect("memory epochs never fail");
+        }
         let link = if to_b { &mut self.up } else { &mut self.down };
         if let Some(at) = link.send_bytes(self.now_ns, &mut bytes) {
             if to_b && let Some(tamper) = &mut self.tamper_up {
@@ -140,10 +161,17 @@ impl VirtualLink {
                 .is_some_and(|Reverse(e)| e.0 <= self.now_ns)
             {
                 let Reverse((_, _, to_b, bytes)) = self.in_flight.pop().expect("peeked");
-                match wire::decode(&bytes) {
-                    Ok(m) if to_b => b.handle(&m, self.now_ns),
-                    Ok(m) => a.handle(&m, self.now_ns),
-                    Err(_) => self.undecodable[usize::from(!to_b)] += 1,
+                let now = self.now_ns;
+                let opened = match &mut self.sealed {
+                    Some(ends) => ends[usize::from(to_b)].open(&bytes),
+                    None => Ok(bytes),
+                };
+                match opened.map(|plain| wire::decode(&plain)) {
+                    Ok(Ok(m)) if to_b => b.handle(&m, now),
+                    Ok(Ok(m)) => a.handle(&m, now),
+                    Ok(Err(_)) => self.undecodable[usize::from(!to_b)] += 1,
+                    Err(refusal) if to_b => b.refused(&refusal, now),
+                    Err(refusal) => a.refused(&refusal, now),
                 }
             }
         }

@@ -1,7 +1,9 @@
 //! Messages between master and robot, and their bytes.
 //!
 //! Every message carries the protocol version, the robot id, a sequence
-//! number (per sender, growing) and the sender's time stamp. The encoding is
+//! number (per sender, growing) and the sender's time stamp. On the link
+//! each is sealed ([`crate::secure`]): these bytes are what a receiver
+//! reads once the message has proven where it came from. The encoding is
 //! `postcard` (serde, compact varints); [`decode`] takes any bytes and
 //! answers with a message or an error, never a panic, and refuses anything
 //! longer than [`MAX_MESSAGE_BYTES`] before looking inside.
@@ -9,7 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Version of this message set; a message of another version is refused.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Nothing longer is decoded.
 pub const MAX_MESSAGE_BYTES: usize = 64 * 1024;
 /// Longest robot id.
@@ -145,6 +147,9 @@ pub struct Status {
     /// backend can tell), since the agent started.
     pub bumps: u32,
     pub collisions: u32,
+    /// Payloads refused before they were read (not authentic, replays)
+    /// since the agent started.
+    pub refused: u32,
 }
 
 /// Why and where the robot handed control back, with what it knows.
@@ -222,6 +227,12 @@ pub enum DecodeError {
 /// The bytes of a message.
 pub fn encode(message: &Message) -> Vec<u8> {
     postcard::to_allocvec(message).expect("messages always serialise")
+}
+
+/// A message's bytes on the link: encoded and sealed
+/// ([`crate::secure::OVERHEAD_BYTES`] more). What pacing and budgets count.
+pub fn link_bytes(message: &Message) -> usize {
+    encode(message).len() + crate::secure::OVERHEAD_BYTES
 }
 
 /// A message from any bytes.

@@ -157,7 +157,7 @@ fn corrupted_chunks_are_dropped_and_asked_for_again() {
     let mut n = 0u64;
     net.tamper_up = Some(Box::new(move |bytes: &mut Vec<u8>| {
         n += 1;
-        if n % 7 == 0 {
+        if n.is_multiple_of(7) {
             let last = bytes.len() - 1;
             bytes[last] ^= 0x5a;
         }

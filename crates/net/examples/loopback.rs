@@ -13,12 +13,19 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use rand::{RngExt, SeedableRng};
+use twindrive_link::secure::{Peers, key_from_seed, memory_pair};
 use twindrive_link::upload::{MemoryStore, Receiver, ReceiverConfig, Sender, SenderConfig};
 use twindrive_link::vtime::Endpoint;
 use twindrive_link::wire::{Body, Message, Stamper};
-use twindrive_net::{SessionOptions, down_key, drive, open_session, up_key};
+use twindrive_net::{LinkEnd, SessionOptions, drive, open_session};
 
 const ROBOT: &str = "bench";
+
+/// Both ends' sealing (every message is sealed, as between master and
+/// robot), from fixed keys: the master's and the robot's.
+fn ends() -> (Peers, Peers) {
+    memory_pair(&key_from_seed(1, 0), &key_from_seed(1, 1), ROBOT)
+}
 
 /// The robot's side: assembles uploads and answers pings.
 struct RobotSide {
@@ -121,12 +128,11 @@ fn robot(port: u16) -> anyhow::Result<()> {
             pongs: Vec::new(),
         };
         // Until the parent kills it (or a bounded while).
+        let mut link = LinkEnd::robot(ROBOT, ends().1);
         let _ = drive(
             &mut side,
             &session,
-            ROBOT,
-            &down_key(ROBOT),
-            &up_key(ROBOT),
+            &mut link,
             None,
             Duration::from_secs(300),
             |_| false,
@@ -182,13 +188,12 @@ fn main() -> anyhow::Result<()> {
                 ..SenderConfig::default()
             },
         );
+        let mut link = LinkEnd::master(ROBOT, ends().0);
         let start = Instant::now();
         drive(
             &mut sender,
             &session,
-            ROBOT,
-            &up_key(ROBOT),
-            &down_key(ROBOT),
+            &mut link,
             None,
             Duration::from_secs(240),
             |s| s.is_finished(),
@@ -211,9 +216,7 @@ fn main() -> anyhow::Result<()> {
         drive(
             &mut pinger,
             &session,
-            ROBOT,
-            &up_key(ROBOT),
-            &down_key(ROBOT),
+            &mut link,
             None,
             Duration::from_secs(120),
             |p| p.left == 0,

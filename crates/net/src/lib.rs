@@ -25,6 +25,7 @@ use std::time::{Duration, Instant};
 pub use zenoh::Session;
 
 use twindrive_link::LinkEmulator;
+use twindrive_link::secure::{Peers, Refusal};
 use twindrive_link::vtime::{Endpoint, InFlight};
 use twindrive_link::wire;
 
@@ -134,9 +135,71 @@ pub struct DriveStats {
     pub messages_received: u64,
     /// Bytes of the messages received for this robot.
     pub bytes_received: u64,
-    /// Payloads that were not messages, or not for this robot: logged and
-    /// dropped.
+    /// Authentic payloads that were not messages, or not for this robot:
+    /// logged and dropped.
     pub garbage: u64,
+    /// Payloads refused before they were read (not sealed, not authentic,
+    /// replays): logged (a line at most every [`REFUSAL_LOG_PERIOD`]) and
+    /// dropped.
+    pub refused: u64,
+}
+
+/// At most one log line per this while about refused payloads (with how
+/// many since the last).
+pub const REFUSAL_LOG_PERIOD: Duration = Duration::from_secs(10);
+
+/// One robot's link at this end: where it sends and listens, and the
+/// sealing every message goes through.
+pub struct LinkEnd {
+    pub robot_id: String,
+    pub tx_key: String,
+    pub rx_key: String,
+    pub peers: Peers,
+    last_refusal_log: Option<Instant>,
+    refused_unlogged: u64,
+}
+
+impl LinkEnd {
+    /// The master's end of robot `robot_id`'s link.
+    pub fn master(robot_id: &str, peers: Peers) -> Self {
+        Self::new(robot_id, up_key(robot_id), down_key(robot_id), peers)
+    }
+
+    /// The robot's end.
+    pub fn robot(robot_id: &str, peers: Peers) -> Self {
+        Self::new(robot_id, down_key(robot_id), up_key(robot_id), peers)
+    }
+
+    fn new(robot_id: &str, tx_key: String, rx_key: String, peers: Peers) -> Self {
+        Self {
+            robot_id: robot_id.into(),
+            tx_key,
+            rx_key,
+            peers,
+            last_refusal_log: None,
+            refused_unlogged: 0,
+        }
+    }
+
+    /// Logs a refusal: the first at once, then a line at most every
+    /// [`REFUSAL_LOG_PERIOD`] with the count since.
+    fn log_refusal(&mut self, refusal: &Refusal, bytes: usize) {
+        self.refused_unlogged += 1;
+        let due = self
+            .last_refusal_log
+            .is_none_or(|at| at.elapsed() >= REFUSAL_LOG_PERIOD);
+        if due {
+            tracing::warn!(
+                key = %self.rx_key,
+                bytes,
+                refused = self.refused_unlogged,
+                kind = refusal.kind(),
+                "refused a payload before reading it: {refusal}"
+            );
+            self.last_refusal_log = Some(Instant::now());
+            self.refused_unlogged = 0;
+        }
+    }
 }
 
 /// The emulated link both ways, applied at this end of the connection.
@@ -147,16 +210,15 @@ pub struct Emulation {
     pub incoming: LinkEmulator,
 }
 
-/// Runs `endpoint` over `session`: publishes on `tx_key`, listens on
-/// `rx_key`, until `done` says so or `deadline` passes (an error). Messages
-/// not for `robot_id` are dropped as garbage.
-#[allow(clippy::too_many_arguments)]
+/// Runs `endpoint` over `session` on `link` (sealing what it sends on
+/// `link.tx_key`, opening what arrives on `link.rx_key`), until `done`
+/// says so or `deadline` passes (an error). Payloads that do not open are
+/// refused before anything reads them; messages not for the link's robot
+/// are dropped as garbage.
 pub async fn drive<E: Endpoint>(
     endpoint: &mut E,
     session: &zenoh::Session,
-    robot_id: &str,
-    tx_key: &str,
-    rx_key: &str,
+    link: &mut LinkEnd,
     emulation: Option<Emulation>,
     deadline: Duration,
     done: impl FnMut(&mut E) -> bool,
@@ -164,7 +226,7 @@ pub async fn drive<E: Endpoint>(
     let mut stats = DriveStats::default();
     let zero = Instant::now();
     drive_counting(
-        endpoint, session, robot_id, tx_key, rx_key, emulation, deadline, zero, &mut stats, done,
+        endpoint, session, link, emulation, deadline, zero, &mut stats, done,
     )
     .await
     .map(|()| stats)
@@ -178,21 +240,20 @@ pub async fn drive<E: Endpoint>(
 pub async fn drive_counting<E: Endpoint>(
     endpoint: &mut E,
     session: &zenoh::Session,
-    robot_id: &str,
-    tx_key: &str,
-    rx_key: &str,
+    link: &mut LinkEnd,
     mut emulation: Option<Emulation>,
     deadline: Duration,
     zero: Instant,
     stats: &mut DriveStats,
     mut done: impl FnMut(&mut E) -> bool,
 ) -> anyhow::Result<()> {
+    let (tx_key, rx_key) = (link.tx_key.clone(), link.rx_key.clone());
     let publisher = session
-        .declare_publisher(tx_key.to_owned())
+        .declare_publisher(tx_key.clone())
         .await
         .map_err(|e| anyhow::anyhow!("declaring the publisher on {tx_key}: {e}"))?;
     let subscriber = session
-        .declare_subscriber(rx_key.to_owned())
+        .declare_subscriber(rx_key.clone())
         .await
         .map_err(|e| anyhow::anyhow!("declaring the subscriber on {rx_key}: {e}"))?;
     // Messages put before zenoh has a route to the other side are lost:
@@ -225,11 +286,14 @@ pub async fn drive_counting<E: Endpoint>(
                     .await
                     .map_err(|e| anyhow::anyhow!("publishing on {tx_key}: {e}"))?;
             } else {
-                deliver(endpoint, &bytes, robot_id, now, stats);
+                deliver(endpoint, link, &bytes, now, stats);
             }
         }
         while let Some(message) = endpoint.poll_transmit(now) {
-            let mut bytes = wire::encode(&message);
+            let mut bytes = link
+                .peers
+                .seal(&wire::encode(&message))
+                .map_err(|e| anyhow::anyhow!("sealing a message on {tx_key}: {e}"))?;
             stats.messages_sent += 1;
             match &mut emulation {
                 Some(e) => {
@@ -278,7 +342,7 @@ pub async fn drive_counting<E: Endpoint>(
                             delayed.push(Reverse((at, order, false, bytes)));
                         }
                     }
-                    None => deliver(endpoint, &bytes, robot_id, now, stats),
+                    None => deliver(endpoint, link, &bytes, now, stats),
                 }
             }
             _ = tokio::time::sleep(wake) => {}
@@ -286,15 +350,26 @@ pub async fn drive_counting<E: Endpoint>(
     }
 }
 
+/// Opens a payload and hands its message in; refuses (and counts) what
+/// does not open before anything reads it.
 fn deliver<E: Endpoint>(
     endpoint: &mut E,
+    link: &mut LinkEnd,
     bytes: &[u8],
-    robot_id: &str,
     now_ns: u64,
     stats: &mut DriveStats,
 ) {
-    match wire::decode(bytes) {
-        Ok(m) if m.robot_id == robot_id => {
+    let plain = match link.peers.open(bytes) {
+        Ok(plain) => plain,
+        Err(refusal) => {
+            stats.refused += 1;
+            link.log_refusal(&refusal, bytes.len());
+            endpoint.refused(&refusal, now_ns);
+            return;
+        }
+    };
+    match wire::decode(&plain) {
+        Ok(m) if m.robot_id == link.robot_id => {
             stats.messages_received += 1;
             stats.bytes_received += bytes.len() as u64;
             endpoint.handle(&m, now_ns);

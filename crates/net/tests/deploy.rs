@@ -8,7 +8,7 @@ use std::time::Duration;
 use twindrive_link::upload::{
     MemoryStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
 };
-use twindrive_net::{SessionOptions, down_key, drive, open_session, up_key};
+use twindrive_net::{SessionOptions, drive, open_session};
 
 fn deploy(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -58,15 +58,19 @@ async fn robot_and_master_configured_by_deploy_meet_through_its_router() {
             ..ReceiverConfig::default()
         },
     );
-    let (up, down) = (up_key("rover-1"), down_key("rover-1"));
+    let (master_peers, robot_peers) = twindrive_link::secure::memory_pair(
+        &twindrive_link::secure::key_from_seed(1, 0),
+        &twindrive_link::secure::key_from_seed(1, 1),
+        "rover-1",
+    );
+    let mut master_link = twindrive_net::LinkEnd::master("rover-1", master_peers);
+    let mut robot_link = twindrive_net::LinkEnd::robot("rover-1", robot_peers);
     let mut got = None;
     let (m, _) = tokio::join!(
         drive(
             &mut sender,
             &master,
-            "rover-1",
-            &up,
-            &down,
+            &mut master_link,
             None,
             Duration::from_secs(30),
             |s| s.is_finished(),
@@ -74,9 +78,7 @@ async fn robot_and_master_configured_by_deploy_meet_through_its_router() {
         drive(
             &mut receiver,
             &robot,
-            "rover-1",
-            &down,
-            &up,
+            &mut robot_link,
             None,
             Duration::from_secs(30),
             |r| {

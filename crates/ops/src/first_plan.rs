@@ -56,7 +56,7 @@ pub fn first_plan(
         } else {
             let plan = parse_plan(&plan_json, path)?;
             let world = world_bytes(&plan.header.robot.scenario, scenario)?;
-            let key = args.key.as_ref().context("--plan needs --key to sign it")?;
+            let key = &args.key;
             let now = since_epoch()?;
             let envelope = Envelope::new(
                 robot,

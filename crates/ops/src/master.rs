@@ -96,7 +96,7 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
         let mut op = Operator::new(
             master,
             twin_scenario.map(|s| Twin::new(s, calibrated)),
-            args.key.clone(),
+            Some(args.key.clone()),
             OperatorConfig {
                 on_handback: args.on_handback,
                 expires_in_s: args.expires_in,
@@ -127,11 +127,18 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
                 first.signed.len(),
             );
         }
+        let robot_key = args
+            .robot_keys
+            .get(robot)
+            .with_context(|| format!("no trusted key for robot {robot}"))?;
+        let peers =
+            twindrive_store::link_state::master_end(&args.link_state, robot, &args.key, robot_key)?;
         members.push(Supervised {
             robot: robot.clone(),
             archive,
             op,
             stats: Default::default(),
+            link: twindrive_net::LinkEnd::master(robot, peers),
         });
     }
     // The master's clock: zero now (every plan is ready), in Unix time and
@@ -220,6 +227,7 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
             "messages_received": m.stats.messages_received,
             "bytes_received": m.stats.bytes_received,
             "garbage": m.stats.garbage,
+            "refused": m.stats.refused,
         }));
     }
     {

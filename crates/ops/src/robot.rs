@@ -8,8 +8,8 @@ use anyhow::Context;
 use twindrive_agent::backend::SimBackend;
 use twindrive_agent::robot::{AgentConfig, RobotAgent};
 use twindrive_agent::ros::RosConfig;
-use twindrive_link::envelope::VerifyingKey;
-use twindrive_net::{SessionOptions, down_key, up_key};
+use twindrive_link::envelope::{SigningKey, VerifyingKey};
+use twindrive_net::{SessionOptions, up_key};
 use twindrive_sim::Scenario;
 use twindrive_store::RobotDir;
 
@@ -25,6 +25,8 @@ pub struct RobotConfig {
     /// The site's `[ros]` section: drive a ROS 2 robot, not the simulation.
     pub ros: Option<RosConfig>,
     pub trusted: Vec<VerifyingKey>,
+    /// The robot's own key: seals every message to the master.
+    pub key: SigningKey,
     pub state_dir: PathBuf,
     pub zenoh: SessionOptions,
     pub telemetry_budget: f64,
@@ -120,26 +122,28 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
     let mut agent = RobotDir::open(&args.state_dir)
         .and_then(|store| RobotAgent::new(config, backend, store))
         .with_context(|| format!("--state-dir {}", args.state_dir.display()))?;
+    let peers =
+        twindrive_store::link_state::robot_end(&args.state_dir, &args.id, &args.key, &args.trusted)
+            .with_context(|| format!("--state-dir {}", args.state_dir.display()))?;
+    let mut link = twindrive_net::LinkEnd::robot(&args.id, peers);
     let options = args.zenoh.clone();
     let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
     rt.block_on(async {
         // A robot that boots before its router or its network keeps trying.
         let session = twindrive_net::open_session_patiently(&options, deadline).await?;
         eprintln!(
-            "robot {}: listening on {} for plans signed by {} trusted key(s)",
+            "robot {}: listening on {} for plans signed by {} trusted key(s); every message sealed with key {}",
             args.id,
             up_key(&args.id),
-            args.trusted.len()
+            args.trusted.len(),
+            twindrive_store::link_state::fingerprint(&args.key.verifying_key()),
         );
-        let (tx, rx) = (down_key(&args.id), up_key(&args.id));
         let mut stats = twindrive_net::DriveStats::default();
         let mut voice = twindrive_progress::Voice::new();
         let drive = twindrive_net::drive_counting(
             &mut agent,
             &session,
-            &args.id,
-            &tx,
-            &rx,
+            &mut link,
             None,
             deadline,
             zero,

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use twindrive_agent::narrate::Verbosity;
 use twindrive_agent::operator::OnHandback;
 use twindrive_link::LinkProfile;
-use twindrive_link::envelope::SigningKey;
+use twindrive_link::envelope::{SigningKey, VerifyingKey};
 use twindrive_net::SessionOptions;
 
 /// A master process, checked.
@@ -13,7 +13,12 @@ pub struct MasterSettings {
     /// The plan to sign (`--plan`), or a plan signed already (`--signed`).
     pub plan: Option<PathBuf>,
     pub signed: Option<PathBuf>,
-    pub key: Option<SigningKey>,
+    /// The master's key: signs plans and seals every message.
+    pub key: SigningKey,
+    /// Each robot's public key (every robot of `robots` has one).
+    pub robot_keys: std::collections::BTreeMap<String, VerifyingKey>,
+    /// Where the master keeps each robot link's epochs.
+    pub link_state: PathBuf,
     /// The robots, distinct; more than one is a fleet (each its own folder
     /// under `out`).
     pub robots: Vec<String>,

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use twindrive_agent::narrate::{Narrator, Verbosity};
 use twindrive_agent::operator::Operator;
-use twindrive_net::{Emulation, down_key, up_key};
+use twindrive_net::Emulation;
 use twindrive_store::{DirStore, MasterArchive};
 
 /// One robot the master supervises.
@@ -16,6 +16,8 @@ pub struct Supervised {
     pub archive: MasterArchive,
     pub op: Operator<DirStore>,
     pub stats: twindrive_net::DriveStats,
+    /// Its link: key expressions and sealing.
+    pub link: twindrive_net::LinkEnd,
 }
 
 /// A file the master could not write (its mission may have gone well).
@@ -89,9 +91,7 @@ pub async fn supervise(
     let r = twindrive_net::drive_counting(
         &mut m.op,
         session,
-        &robot,
-        &up_key(&robot),
-        &down_key(&robot),
+        &mut m.link,
         emulation,
         deadline,
         zero,

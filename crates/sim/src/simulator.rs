@@ -494,7 +494,7 @@ impl Simulator {
         while self.step(&mut out) {
             log.steps.push(out.record);
             log.ranges.extend_from_slice(&out.ranges);
-            if self.step % 8192 == 0 {
+            if self.step.is_multiple_of(8192) {
                 progress(self.step, total);
             }
         }

@@ -18,7 +18,16 @@ pub fn generate_key() -> Result<SigningKey, getrandom::Error> {
 /// Writes a new key pair, `dir/master.key` (0600) and `dir/master.pub`,
 /// and returns their paths; never replaces a key, never leaves half a pair.
 pub fn write_key_pair(dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
-    let (private, public) = (dir.join("master.key"), dir.join("master.pub"));
+    write_named_key_pair(dir, "master")
+}
+
+/// [`write_key_pair`] as `dir/NAME.key` and `dir/NAME.pub` (a robot's:
+/// its id).
+pub fn write_named_key_pair(dir: &Path, name: &str) -> anyhow::Result<(PathBuf, PathBuf)> {
+    let (private, public) = (
+        dir.join(format!("{name}.key")),
+        dir.join(format!("{name}.pub")),
+    );
     for p in [&private, &public] {
         if p.exists() {
             bail!(

@@ -134,14 +134,20 @@ pub enum Command {
         /// Directory for office.pgm and office.yaml.
         dir: PathBuf,
     },
-    /// Make the master's ed25519 key pair: DIR/master.key (PKCS#8 PEM, mode
-    /// 0600) and DIR/master.pub (public key PEM, for robots' --trust).
+    /// Make an ed25519 key pair: the master's, DIR/master.key (PKCS#8 PEM,
+    /// mode 0600) and DIR/master.pub (public key PEM, for robots' --trust);
+    /// with --robot ID a robot's, DIR/ID.key (its `robot --key`) and
+    /// DIR/ID.pub (for the master's --trust-robot).
     ///
+    /// The master's key signs plans; both seal every message between them.
     /// Refuses to replace an existing key.
     Keygen {
-        /// Directory for master.key and master.pub (created if missing).
+        /// Directory for the key pair (created if missing).
         #[arg(long)]
         out: PathBuf,
+        /// Make robot ID's key pair instead of the master's.
+        #[arg(long, value_name = "ID", value_parser = usage::robot_id)]
+        robot: Option<String>,
     },
     /// Sign a plan for one robot (on any machine, offline if need be).
     ///
@@ -451,7 +457,13 @@ pub struct RobotArgs {
     /// robot accepts; repeatable.
     #[arg(long, value_name = "master.pub", required = true)]
     pub trust: Vec<PathBuf>,
-    /// The robot's durable state (journal, plans, uploads, logs).
+    /// This robot's private key (`twindrive keygen --robot ID`): every
+    /// message to and from a trusted master is sealed with it; its public
+    /// half goes to the master's --trust-robot.
+    #[arg(long, value_name = "ID.key")]
+    pub key: PathBuf,
+    /// The robot's durable state (journal, plans, uploads, logs, the
+    /// link's epochs).
     #[arg(long, value_name = "DIR")]
     pub state_dir: PathBuf,
     #[command(flatten)]
@@ -477,16 +489,22 @@ pub struct RobotArgs {
 #[derive(Debug, clap::Args)]
 pub struct MasterArgs {
     /// The plan JSON to sign and send (with --key).
-    #[arg(
-        long,
-        value_name = "PLAN.json",
-        conflicts_with = "signed",
-        requires = "key"
-    )]
+    #[arg(long, value_name = "PLAN.json", conflicts_with = "signed")]
     pub plan: Option<PathBuf>,
-    /// The master's private key: signs --plan and every continuation.
+    /// The master's private key: signs --plan and every continuation, and
+    /// seals every message to and from the robots.
     #[arg(long, value_name = "master.key")]
-    pub key: Option<PathBuf>,
+    pub key: PathBuf,
+    /// A robot's public key (`twindrive keygen --robot ID` wrote ID.pub:
+    /// the file's name is the robot's id), or a directory of them (every
+    /// ID.pub in it but master.pub); repeatable. Every --robot needs one;
+    /// messages from any other key are refused.
+    #[arg(long, value_name = "ID.pub|DIR", required = true)]
+    pub trust_robot: Vec<PathBuf>,
+    /// Where the master keeps each robot link's epochs (what makes a
+    /// replay refused across restarts); default: link-state/ beside --key.
+    #[arg(long, value_name = "DIR")]
+    pub link_state: Option<PathBuf>,
     /// A plan signed beforehand (`twindrive sign`).
     #[arg(long, value_name = "PLAN.signed", required_unless_present = "plan")]
     pub signed: Option<PathBuf>,
@@ -567,9 +585,17 @@ pub struct ConsoleArgs {
     #[arg(long, value_name = "ORIGIN")]
     pub allow_origin: Vec<String>,
     /// The master's private key (from `twindrive keygen`); without it the
-    /// console plans but does not sign or upload.
+    /// console plans but does not sign, upload or talk to robots.
     #[arg(long, value_name = "master.key")]
     pub key: Option<PathBuf>,
+    /// A robot's public key (ID.pub from `twindrive keygen --robot ID`) or
+    /// a directory of them; repeatable. Every --robot needs one.
+    #[arg(long, value_name = "ID.pub|DIR")]
+    pub trust_robot: Vec<PathBuf>,
+    /// Where the console keeps each robot link's epochs; default:
+    /// link-state/ beside --key.
+    #[arg(long, value_name = "DIR")]
+    pub link_state: Option<PathBuf>,
     /// The robot's calibrated parameters (`twindrive calibrate`'s JSON):
     /// plans are made with them and the twin rehearses with them. Without
     /// it the console does not plan.

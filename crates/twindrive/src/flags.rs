@@ -66,6 +66,94 @@ pub fn signing_key(
         .map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))
 }
 
+/// `--trust-robot` files and directories, read: each robot's id (the
+/// file's name, `ID.pub`) and public key. A directory gives every `*.pub`
+/// in it but `master.pub`.
+pub fn robot_keys(
+    paths: &[std::path::PathBuf],
+) -> anyhow::Result<std::collections::BTreeMap<String, twindrive_link::envelope::VerifyingKey>> {
+    use twindrive_link::envelope::read_public_key_pem;
+    let mut files = Vec::new();
+    for path in paths {
+        if path.is_dir() {
+            let mut in_dir: Vec<_> = std::fs::read_dir(path)
+                .with_context(|| format!("--trust-robot: reading {}", path.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.extension().is_some_and(|e| e == "pub")
+                        && p.file_name().is_some_and(|n| n != "master.pub")
+                })
+                .collect();
+            if in_dir.is_empty() {
+                return Err(usage(format!(
+                    "--trust-robot {}: no robot key (ID.pub) in the directory",
+                    path.display()
+                )));
+            }
+            in_dir.sort();
+            files.extend(in_dir);
+        } else {
+            files.push(path.clone());
+        }
+    }
+    let mut keys = std::collections::BTreeMap::new();
+    for file in files {
+        let id = file
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .filter(|_| file.extension().is_some_and(|e| e == "pub"))
+            .ok_or_else(|| {
+                usage(format!(
+                    "--trust-robot {}: a robot's key is named ID.pub (its robot's id)",
+                    file.display()
+                ))
+            })?;
+        crate::usage::robot_id(id).map_err(|e| {
+            usage(format!(
+                "--trust-robot {}: the name is not a robot id: {e}",
+                file.display()
+            ))
+        })?;
+        let text = std::fs::read_to_string(&file)
+            .with_context(|| format!("--trust-robot: reading {}", file.display()))?;
+        let key = read_public_key_pem(&text)
+            .map_err(|e| anyhow::anyhow!("--trust-robot {}: {e}", file.display()))?;
+        if keys.insert(id.to_string(), key).is_some() {
+            return Err(usage(format!(
+                "--trust-robot: two keys for robot {id} (the second: {})",
+                file.display()
+            )));
+        }
+    }
+    Ok(keys)
+}
+
+/// Every robot of `robots` has a key in `keys` (a usage error names the
+/// first that has none).
+pub fn check_robot_keys(
+    robots: &[String],
+    keys: &std::collections::BTreeMap<String, twindrive_link::envelope::VerifyingKey>,
+) -> anyhow::Result<()> {
+    match robots.iter().find(|r| !keys.contains_key(*r)) {
+        Some(r) => Err(usage(format!(
+            "--robot {r}: no trusted key for it (give --trust-robot with its {r}.pub, from `twindrive keygen --robot {r}`)"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// `--link-state`, or link-state/ beside the master's key.
+pub fn link_state_dir(link_state: Option<&Path>, key: &Path) -> std::path::PathBuf {
+    link_state.map_or_else(
+        || {
+            key.parent()
+                .unwrap_or_else(|| Path::new("."))
+                .join("link-state")
+        },
+        Path::to_path_buf,
+    )
+}
+
 /// `--stamps`, as the bag reader takes it.
 pub fn stamps(s: crate::cli::StampsArg) -> twindrive_ros::extract::Stamps {
     match s {

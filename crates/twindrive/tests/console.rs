@@ -87,6 +87,8 @@ fn robot(site: &Path, zenoh_port: u16, state: &Path) -> Proc {
             s(site),
             "--trust",
             s(&fixture().path("keys/master.pub")),
+            "--key",
+            s(&fixture().path("keys/rover.key")),
             "--state-dir",
             s(state),
             "--listen",
@@ -562,6 +564,10 @@ fn with_robot(site: &Path, link: &str) -> WithRobot {
         &[
             "--key",
             s(&f.path("keys/master.key")),
+            "--trust-robot",
+            s(&f.path("keys/rover.pub")),
+            "--link-state",
+            s(&tmp.path().join("console-link")),
             "--calibration",
             s(&f.path("calib.json")),
             "--robot",
@@ -894,6 +900,12 @@ async fn foxglove_clients_get_the_map_the_twin_and_the_robots() {
             &format!("127.0.0.1:{fox}"),
             "--robot",
             "rover",
+            "--key",
+            s(&fixture().path("keys/master.key")),
+            "--trust-robot",
+            s(&fixture().path("keys/rover.pub")),
+            "--link-state",
+            s(&tmp.path().join("link")),
         ],
     );
     let mut request = format!("ws://127.0.0.1:{fox}/")

@@ -183,12 +183,13 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
     // A master keeps maps only of a site on a map, given with --scenario.
     let maps = tmp.path().join("maps");
     let keys = tmp.path().join("keys");
-    assert!(
-        run(&["keygen", "--out", keys.to_str().unwrap()])
-            .status
-            .success()
-    );
+    for extra in [&[][..], &["--robot", "rover"]] {
+        let mut args = vec!["keygen", "--out", keys.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        assert!(run(&args).status.success());
+    }
     let key = keys.join("master.key");
+    let robot_key = keys.join("rover.pub");
     let master = |extra: &[&str]| {
         let mut args = vec![
             "master",
@@ -196,6 +197,8 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
             "plan.json",
             "--key",
             key.to_str().unwrap(),
+            "--trust-robot",
+            robot_key.to_str().unwrap(),
             "--robot",
             "rover",
             "--out",
@@ -286,6 +289,8 @@ fn the_master_keeps_the_twins_map_of_the_site_across_missions() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let o = run(&["keygen", "--out", &s(&d.join("keys"))]);
     assert!(o.status.success(), "{}", text(&o.stderr));
+    let o = run(&["keygen", "--out", &s(&d.join("keys")), "--robot", "rover"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
     // The robot's site: the room, under the name the twin knows it by (a
     // robot refuses a plan for another site), its lidar without dropouts
     // (the robot's range check counts a dropped return as a discrepancy).
@@ -315,6 +320,8 @@ fn the_master_keeps_the_twins_map_of_the_site_across_missions() {
                     &s(&d.join("true.toml")),
                     "--trust",
                     &s(&d.join("keys/master.pub")),
+                    "--key",
+                    &s(&d.join("keys/rover.key")),
                     "--state-dir",
                     &s(&d.join(state)),
                     "--listen",
@@ -344,6 +351,8 @@ fn the_master_keeps_the_twins_map_of_the_site_across_missions() {
                     &s(&plan),
                     "--key",
                     &s(&d.join("keys/master.key")),
+                    "--trust-robot",
+                    &s(&d.join("keys/rover.pub")),
                     "--robot",
                     "rover",
                     "--connect",

@@ -16,7 +16,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{SIM_NOISE, TRUTH, fixture, repo, text, twindrive};
+use common::{SIM_NOISE, TRUTH, fixture, python, repo, text, twindrive};
 use serde_json::Value;
 
 const NOMINAL: &str = "0.066,0.066,0.26";
@@ -30,23 +30,6 @@ const JOINTS: [&str; 4] = [
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// The venv's python with the pinned peers (installs them once).
-fn python() -> &'static Path {
-    static P: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-    P.get_or_init(|| {
-        let o = Command::new("bash")
-            .arg(repo().join("scripts/ros-deps.sh"))
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "scripts/ros-deps.sh failed (it needs python3 with venv and pip, and network access to PyPI once):\n{}",
-            text(&o.stderr)
-        );
-        PathBuf::from(text(&o.stdout).trim())
-    })
 }
 
 fn py(script: &str, args: &[&str]) -> String {
@@ -638,6 +621,8 @@ impl RosRobot {
                     s(&d.join("site.toml")),
                     "--trust",
                     s(&fixture().path("keys/master.pub")),
+                    "--key",
+                    s(&fixture().path("keys/tb1.key")),
                     "--state-dir",
                     s(&d.join("robot")),
                     "--listen",
@@ -690,6 +675,10 @@ impl RosRobot {
                     s(&fixture().path("plan/plan.json")),
                     "--key",
                     s(&fixture().path("keys/master.key")),
+                    "--trust-robot",
+                    s(&fixture().path("keys/tb1.pub")),
+                    "--link-state",
+                    s(&self.dir.path().join("master-link")),
                     "--robot",
                     "tb1",
                     "--connect",

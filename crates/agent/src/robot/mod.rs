@@ -153,6 +153,8 @@ pub struct RobotAgent<B: RobotBackend, S: RobotStore> {
     bumps: u32,
     collisions: u32,
     last_bump: bool,
+    /// Payloads refused before they were read (see [`Self::refused`]).
+    refused: u32,
     /// Journal writes that failed (reported in the process log).
     pub journal_errors: u64,
     /// The telemetry budget in force (the master may lower it).
@@ -209,6 +211,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             pose_covariance: [f64::INFINITY; 9],
             bumps: 0,
             collisions: 0,
+            refused: 0,
             last_bump: false,
             journal_errors: 0,
             budget_bytes_s: config.telemetry_budget_bytes_s,
@@ -466,7 +469,15 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             logs_pending: self.logs_pending() as u32,
             bumps: self.bumps,
             collisions: self.collisions,
+            refused: self.refused,
         }
+    }
+
+    /// A payload refused before it was read (forged, altered, replayed):
+    /// counted, reported in every status, and nothing else. It is not
+    /// heard: a supervised plan's dead-man keeps counting.
+    pub fn refused(&mut self, _refusal: &twindrive_link::secure::Refusal, _now_ns: u64) {
+        self.refused = self.refused.saturating_add(1);
     }
 
     /// The next message to send at `now_ns`; runs the control ticks due by
@@ -487,7 +498,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             let message = self
                 .stamper
                 .stamp(Body::Status(Box::new(self.status())), now_ns);
-            let bytes = twindrive_link::wire::encode(&message).len() as f64;
+            let bytes = twindrive_link::wire::link_bytes(&message) as f64;
             // A status at most every `status_period_s`, and within a third
             // of the budget.
             let period_s = self

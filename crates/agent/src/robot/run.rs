@@ -163,7 +163,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 (hex(&r.transfer), localizer.fixes, localizer.failures)
             });
         // Every few ticks, and every tick with a contact or a stop.
-        if r.tick % WINDOW_EVERY == 0 || reading.bump || r.exec.stopped().is_some() {
+        if r.tick.is_multiple_of(WINDOW_EVERY) || reading.bump || r.exec.stopped().is_some() {
             r.window.push_back(WindowSample {
                 plan_t_s: reading.t_s - t0,
                 pose,

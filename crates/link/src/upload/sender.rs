@@ -315,7 +315,7 @@ impl Sender {
                 },
                 now_ns,
             );
-            self.pace(now_ns, crate::wire::encode(&message).len());
+            self.pace(now_ns, crate::wire::link_bytes(&message));
             return Some(message);
         }
         // The first pass is over: the tail block's repair shards, once.
@@ -334,7 +334,7 @@ impl Sender {
                 },
                 now_ns,
             );
-            self.pace(now_ns, crate::wire::encode(&message).len());
+            self.pace(now_ns, crate::wire::link_bytes(&message));
             return Some(message);
         }
         // Everything sent: say so, and again each round trip until done.
@@ -364,7 +364,7 @@ impl Sender {
                 },
                 now_ns,
             );
-            self.pace(now_ns, crate::wire::encode(&message).len());
+            self.pace(now_ns, crate::wire::link_bytes(&message));
             return Some(message);
         }
         None

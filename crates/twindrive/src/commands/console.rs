@@ -38,6 +38,25 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
     };
     let link = crate::flags::link_profile(args.link.as_deref())?;
     let key = crate::flags::signing_key(args.key.as_deref())?;
+    let mut robot_links = Vec::new();
+    if !args.robot.is_empty() {
+        let (Some(key), Some(key_path)) = (&key, &args.key) else {
+            return Err(usage(
+                "--robot: talking to a robot needs the master's --key (it seals every message)",
+            ));
+        };
+        let robot_keys = crate::flags::robot_keys(&args.trust_robot)?;
+        crate::flags::check_robot_keys(&args.robot, &robot_keys)?;
+        let dir = crate::flags::link_state_dir(args.link_state.as_deref(), key_path);
+        for id in &args.robot {
+            robot_links.push(twindrive_store::link_state::master_end(
+                &dir,
+                id,
+                key,
+                &robot_keys[id],
+            )?);
+        }
+    }
     let rehearsal = args
         .rehearsal
         .as_deref()
@@ -66,6 +85,7 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
             .map(crate::flags::read_calibration)
             .transpose()?,
         robots: args.robot.clone(),
+        robot_links,
         session: SessionOptions {
             listen: args.zenoh_listen.clone(),
             connect: args.connect.clone(),

@@ -11,12 +11,22 @@ use twindrive_link::envelope::{
 
 use crate::cli::SignArgs;
 
-/// `twindrive keygen`: a new key pair in `dir`.
-pub fn keygen(dir: &Path) -> anyhow::Result<()> {
-    let (private, public) = twindrive_store::keys::write_key_pair(dir)?;
+/// `twindrive keygen`: a new key pair in `dir`, the master's or robot
+/// `robot`'s.
+pub fn keygen(dir: &Path, robot: Option<&str>) -> anyhow::Result<()> {
+    let (private, public, whom) = match robot {
+        None => {
+            let (private, public) = twindrive_store::keys::write_key_pair(dir)?;
+            (private, public, "robots: --trust")
+        }
+        Some(id) => {
+            let (private, public) = twindrive_store::keys::write_named_key_pair(dir, id)?;
+            (private, public, "the master: --trust-robot")
+        }
+    };
     writeln!(
         std::io::stdout().lock(),
-        "wrote {} (keep it secret) and {} (give it to robots: --trust)",
+        "wrote {} (keep it secret) and {} (give it to {whom})",
         private.display(),
         public.display()
     )?;

@@ -37,7 +37,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Prune(a) => prune::run(&a),
         Command::Demo { out } => demo::run(&out),
         Command::DrawMap { dir } => draw_map::run(&dir),
-        Command::Keygen { out } => keys::keygen(&out),
+        Command::Keygen { out, robot } => keys::keygen(&out, robot.as_deref()),
         Command::Sign(a) => keys::sign(&a),
         Command::Robot(a) => ops::robot(&a),
         Command::Master(a) => ops::master(&a),

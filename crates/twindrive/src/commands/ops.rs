@@ -36,6 +36,7 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
                 .map_err(|e| anyhow::anyhow!("--trust {}: {e}", path.display()))?,
         );
     }
+    let key = crate::flags::signing_key(Some(&args.key))?.expect("a path was given");
     let site = Scenario::load(&args.site).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
     let ros = twindrive_ops::robot::read_ros_section(&args.site)?;
     if ros.is_some() && args.time_scale != 1.0 {
@@ -50,6 +51,7 @@ pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
         site,
         ros,
         trusted,
+        key,
         state_dir: args.state_dir.clone(),
         zenoh: session_options(&args.zenoh),
         telemetry_budget: args.telemetry_budget,
@@ -73,16 +75,15 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
             "--signed holds a plan signed for one robot; a fleet needs --plan and --key (each robot gets its own signature)",
         ));
     }
-    let key = crate::flags::signing_key(args.key.as_deref())?;
-    if args.on_handback == OnHandbackArg::Replan && key.is_none() {
-        return Err(usage(
-            "--on-handback replan signs continuations: it needs --key",
-        ));
-    }
+    let robot_keys = crate::flags::robot_keys(&args.trust_robot)?;
+    crate::flags::check_robot_keys(&args.robot, &robot_keys)?;
+    let key = crate::flags::signing_key(Some(&args.key))?.expect("a path was given");
     let settings = MasterSettings {
         plan: args.plan.clone(),
         signed: args.signed.clone(),
         key,
+        robot_keys,
+        link_state: crate::flags::link_state_dir(args.link_state.as_deref(), &args.key),
         robots: args.robot.clone(),
         out: args.out.clone(),
         zenoh: session_options(&args.zenoh),

@@ -91,9 +91,10 @@ fn s(p: &Path) -> &str {
 }
 
 /// Made once per test binary: a 30 s case-study run (`wf/`), its
-/// calibration (`calib.json`), a plan from them (`plan/plan.json`), two key
-/// pairs (`keys/`, `other/`) and a site with a box the twin lacks
-/// (`site_box.toml`).
+/// calibration (`calib.json`), a plan from them (`plan/plan.json`), two
+/// sets of keys (`keys/`, `other/`: a master's, `master.key`, and robots
+/// `rover`, `r1`, `r2` and `tb1`'s, `ID.key`) and a site with a box the twin
+/// lacks (`site_box.toml`).
 pub struct Fixture {
     dir: tempfile::TempDir,
 }
@@ -129,6 +130,10 @@ pub fn fixture() -> &'static Fixture {
         for k in ["keys", "other"] {
             let out = twindrive(&["keygen", "--out", s(&d.join(k))]);
             assert!(out.status.success(), "{}", text(&out.stderr));
+            for robot in ["rover", "r1", "r2", "tb1"] {
+                let out = twindrive(&["keygen", "--out", s(&d.join(k)), "--robot", robot]);
+                assert!(out.status.success(), "{}", text(&out.stderr));
+            }
         }
         let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
         std::fs::write(
@@ -144,4 +149,22 @@ impl Fixture {
     pub fn path(&self, p: &str) -> PathBuf {
         self.dir.path().join(p)
     }
+}
+
+/// The venv's python with the pinned peers, `eclipse-zenoh` among them
+/// (installs them once).
+pub fn python() -> &'static Path {
+    static P: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    P.get_or_init(|| {
+        let o = Command::new("bash")
+            .arg(repo().join("scripts/ros-deps.sh"))
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "scripts/ros-deps.sh failed (it needs python3 with venv and pip, and network access to PyPI once):\n{}",
+            text(&o.stderr)
+        );
+        PathBuf::from(text(&o.stdout).trim())
+    })
 }
