@@ -9,8 +9,10 @@ earlier) on a key expression, and captures what others publish.
       every payload published on KEY for S seconds, appended to FILE
 
 FILE holds payloads as a 4-byte big-endian length and the bytes. A zenoh
-client of ENDPOINT (a robot's or a master's listening port, or a router).
-Says one line when it starts and one when it ends, on stderr.
+client of ENDPOINT (a robot's or a master's listening port, or a router);
+over TLS (`tls/HOST:PORT`) with --ca (the CA it checks the router by) and,
+to show one, --cert and --private-key (a client certificate). Says one line when
+it starts and one when it ends, on stderr; exits 3 if it cannot connect.
 """
 
 import argparse
@@ -31,12 +33,22 @@ def read_payloads(path):
     return out
 
 
-def session(endpoint):
+def session(a):
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
+    conf.insert_json5("connect/endpoints", f'["{a.endpoint}"]')
     conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
+    if a.ca:
+        conf.insert_json5("transport/link/tls/root_ca_certificate", f'"{a.ca}"')
+    if a.cert:
+        conf.insert_json5("transport/link/tls/connect_certificate", f'"{a.cert}"')
+        conf.insert_json5("transport/link/tls/connect_private_key", f'"{a.private_key}"')
+        conf.insert_json5("transport/link/tls/enable_mtls", "true")
+    try:
+        return zenoh.open(conf)
+    except Exception as e:  # zenoh's own error type
+        print(f"forger: cannot connect to {a.endpoint}: {e}", file=sys.stderr, flush=True)
+        sys.exit(3)
 
 
 def main():
@@ -47,8 +59,11 @@ def main():
     p.add_argument("file")
     p.add_argument("--every", type=float, default=0.25)
     p.add_argument("--for", dest="duration", type=float, default=None)
+    p.add_argument("--ca")
+    p.add_argument("--cert")
+    p.add_argument("--private-key", dest="private_key")
     a = p.parse_args()
-    s = session(a.endpoint)
+    s = session(a)
     if a.mode == "publish":
         payloads = read_payloads(a.file)
         pub = s.declare_publisher(a.key)

@@ -1,10 +1,12 @@
 //! The protocol's state machines without a network: a whole upload through
 //! an ideal virtual link (chunks per second through sender and receiver
-//! together), and one chunk message encoded and decoded.
+//! together), and one chunk message encoded and decoded, and also sealed
+//! and opened as on the link.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use twindrive_link::emulator::{LinkEmulator, LinkProfile};
+use twindrive_link::secure::{key_from_seed, memory_pair};
 use twindrive_link::upload::{MemoryStore, Receiver, ReceiverConfig, Sender, SenderConfig};
 use twindrive_link::vtime::VirtualLink;
 use twindrive_link::wire::{self, Body, Stamper};
@@ -64,6 +66,16 @@ fn wire_codec(c: &mut Criterion) {
         b.iter(|| {
             let bytes = wire::encode(black_box(&message));
             black_box(wire::decode(&bytes).unwrap())
+        })
+    });
+    // As on the link: encoded, sealed by the master, opened by the robot
+    // (which refuses a replay: each sealing is new).
+    let (mut master, mut robot) =
+        memory_pair(&key_from_seed(1, 0), &key_from_seed(1, 1), "rover-1");
+    g.bench_function("encode, seal, open + decode a 1 KiB chunk", |b| {
+        b.iter(|| {
+            let sealed = master.seal(&wire::encode(black_box(&message))).unwrap();
+            black_box(wire::decode(&robot.open(&sealed).unwrap()).unwrap())
         })
     });
     g.finish();

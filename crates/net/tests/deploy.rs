@@ -97,3 +97,15 @@ async fn robot_and_master_configured_by_deploy_meet_through_its_router() {
         s.close().await.unwrap();
     }
 }
+
+/// `deploy/tls/` (what `twindrive certs` writes) loads as zenoh
+/// configurations with this build's transports (TLS among them).
+#[test]
+fn the_tls_examples_load() {
+    for name in ["router.json5", "master.json5", "r1.json5"] {
+        let path = deploy(&format!("tls/{name}"));
+        if let Err(e) = zenoh::Config::from_file(&path) {
+            panic!("{}: {e}", path.display());
+        }
+    }
+}

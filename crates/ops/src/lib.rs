@@ -13,8 +13,11 @@
 //! - [`settings`]: a master's checked configuration ([`MasterSettings`]);
 //! - [`site_maps`]: the twin's map of its site kept across missions
 //!   (`--site-maps`);
-//! - [`router`]: a zenoh router.
+//! - [`router`]: a zenoh router;
+//! - [`certs`]: a fleet's CA, certificates and TLS configurations with the
+//!   router's access control.
 
+pub mod certs;
 pub mod first_plan;
 pub mod master;
 pub mod robot;

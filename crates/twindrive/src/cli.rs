@@ -149,6 +149,34 @@ pub enum Command {
         #[arg(long, value_name = "ID", value_parser = usage::robot_id)]
         robot: Option<String>,
     },
+    /// Make a small certificate authority, certificates and zenoh
+    /// configurations for a fleet over TLS with mutual authentication.
+    ///
+    /// Writes into DIR: ca.pem and ca.key (the CA: keep ca.key offline),
+    /// router.pem/.key and router.json5 (TLS only, client certificates
+    /// required, access control: each robot publishes only on
+    /// twindrive/ID/down and subscribes only to twindrive/ID/up),
+    /// master.pem/.key and master.json5, and for each robot ID.pem/.key and
+    /// ID.json5 (clients of the router). Give a process its file with
+    /// --zenoh-config. Private keys are mode 0600; DIR must be new or empty.
+    Certs {
+        /// Directory for the files (new or empty).
+        #[arg(long)]
+        out: PathBuf,
+        /// A robot of the fleet; repeatable.
+        #[arg(long = "robot", value_name = "ID", required = true, value_parser = usage::robot_id)]
+        robots: Vec<String>,
+        /// A name or address the router is reached at (its certificate is
+        /// valid for each; clients connect to the first); repeatable.
+        #[arg(long, value_name = "HOST", default_values_t = ["localhost".to_string(), "127.0.0.1".to_string()])]
+        router_host: Vec<String>,
+        /// The router's TLS port.
+        #[arg(long, default_value_t = 7447)]
+        port: u16,
+        /// Certificates are valid for this many days.
+        #[arg(long, default_value_t = 825, value_parser = clap::value_parser!(u32).range(1..=3650))]
+        days: u32,
+    },
     /// Sign a plan for one robot (on any machine, offline if need be).
     ///
     /// Writes a signed plan: an envelope (the plan's SHA-256s, robot id, a
@@ -436,8 +464,9 @@ pub struct ZenohArgs {
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: Vec<String>,
     /// A standard zenoh JSON5 configuration (client mode through a router,
-    /// timeouts; this build speaks TCP and UDP); --listen and --connect are
-    /// added to it.
+    /// TLS with mutual authentication as `twindrive certs` writes it,
+    /// timeouts; this build speaks TCP, UDP, TLS and QUIC); --listen and
+    /// --connect are added to it.
     #[arg(long, value_name = "FILE")]
     pub zenoh_config: Option<PathBuf>,
 }

@@ -132,3 +132,78 @@ fn keygen_then_sign_gives_a_plan_the_robot_accepts() {
         assert!(!tmp.path().join("bad.signed").exists());
     }
 }
+
+#[test]
+fn robot_keys_and_fleet_certificates_are_never_replaced() {
+    let tmp = tempfile::tempdir().unwrap();
+    let keys = tmp.path().join("keys");
+    let out = twindrive(&["keygen", "--out", s(&keys), "--robot", "rover-1"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let public = std::fs::read_to_string(keys.join("rover-1.pub")).unwrap();
+    assert!(read_public_key_pem(&public).is_ok());
+    let before = std::fs::read(keys.join("rover-1.key")).unwrap();
+    let out = twindrive(&["keygen", "--out", s(&keys), "--robot", "rover-1"]);
+    assert!(!out.status.success());
+    assert_eq!(std::fs::read(keys.join("rover-1.key")).unwrap(), before);
+    // A robot id that is not one: a usage error.
+    let out = twindrive(&["keygen", "--out", s(&keys), "--robot", "a/b"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+
+    let certs = tmp.path().join("certs");
+    let certs_for = |robots: &[&str]| {
+        let mut args = vec!["certs", "--out", s(&certs)];
+        for r in robots {
+            args.extend(["--robot", r]);
+        }
+        twindrive(&args)
+    };
+    let out = certs_for(&["r1"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        for key in ["ca.key", "router.key", "master.key", "r1.key"] {
+            let mode = std::fs::metadata(certs.join(key))
+                .unwrap()
+                .permissions()
+                .mode();
+            assert_eq!(mode & 0o777, 0o600, "{key}");
+        }
+    }
+    let key = std::fs::read(certs.join("r1.key")).unwrap();
+    let out = certs_for(&["r1", "r2"]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("never replaces"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert_eq!(std::fs::read(certs.join("r1.key")).unwrap(), key);
+    // A robot named like a fleet file: refused, nothing written.
+    let other = tmp.path().join("other");
+    let out = twindrive(&["certs", "--out", s(&other), "--robot", "router"]);
+    assert!(!out.status.success());
+    assert!(!other.exists());
+
+    // deploy/tls/ holds what `certs --robot r1` writes, the paths relative
+    // (certs/..., from where the processes run): the example is the
+    // command's own output. TWINDRIVE_BLESS=1 rewrites it.
+    let deploy = common::repo().join("deploy/tls");
+    let absolute = std::path::absolute(&certs).unwrap();
+    for name in ["router.json5", "master.json5", "r1.json5"] {
+        let made = std::fs::read_to_string(certs.join(name))
+            .unwrap()
+            .replace(&format!("{}/", absolute.display()), "certs/");
+        let path = deploy.join(name);
+        if std::env::var_os("TWINDRIVE_BLESS").is_some() {
+            std::fs::create_dir_all(&deploy).unwrap();
+            std::fs::write(&path, &made).unwrap();
+        }
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap_or_default(),
+            made,
+            "{} is not what `twindrive certs` writes",
+            path.display()
+        );
+    }
+}

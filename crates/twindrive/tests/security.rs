@@ -249,22 +249,27 @@ fn read_payloads(path: &Path) -> Vec<Vec<u8>> {
 /// with a sealed header whose tag is made up. `role` is whom the forger
 /// pretends to be.
 fn forged(role: Role, bodies: &[Body], copies: usize) -> Vec<Vec<u8>> {
+    forged_for("rover", role, bodies, copies)
+}
+
+/// [`forged`], for robot `id` (a fixture robot).
+fn forged_for(id: &str, role: Role, bodies: &[Body], copies: usize) -> Vec<Vec<u8>> {
     let f = fixture();
     let read =
         |p: &str| read_private_key_pem(&std::fs::read_to_string(f.path(p)).unwrap()).unwrap();
     let (own, peer) = match role {
-        Role::Master => (read("other/master.key"), read("keys/rover.key")),
-        Role::Robot => (read("other/rover.key"), read("keys/master.key")),
+        Role::Master => (read("other/master.key"), read(&format!("keys/{id}.key"))),
+        Role::Robot => (read(&format!("other/{id}.key")), read("keys/master.key")),
     };
     let mut attacker = Channel::new(
         role,
         &own,
         &peer.verifying_key(),
-        "rover",
+        id,
         Box::new(MemoryEpochs::default()),
     )
     .unwrap();
-    let mut stamper = Stamper::new("rover");
+    let mut stamper = Stamper::new(id);
     let unix_ns = || {
         std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -585,4 +590,181 @@ fn with_the_wrong_keys_nothing_moves_and_both_sides_say_why() {
         assert!(!journal.contains("upload_progress"), "{journal}");
         assert!(!journal.contains("execution_started"), "{journal}");
     }
+}
+
+#[test]
+fn a_fleet_over_tls_with_mutual_authentication_completes_and_each_robot_keeps_to_its_keys() {
+    let f = fixture();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let tls_port = port().to_string();
+    let certs = d.join("certs");
+    let o = twindrive(&[
+        "certs",
+        "--out",
+        s(&certs),
+        "--robot",
+        "r1",
+        "--robot",
+        "r2",
+        "--port",
+        &tls_port,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let cert = |name: &str| s(&certs.join(name)).to_string();
+    let _router = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args([
+                "router",
+                "--zenoh-config",
+                &cert("router.json5"),
+                "--listen",
+                &format!("tls/127.0.0.1:{tls_port}"),
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    std::thread::sleep(Duration::from_millis(1000));
+    let endpoint = format!("tls/localhost:{tls_port}");
+    let forger = |args: &[&str]| {
+        Command::new(python())
+            .arg(repo().join("scripts/forger.py"))
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // A client that trusts the router but shows no certificate: refused.
+    let (code, err) = finish(
+        Proc(forger(&[
+            "capture",
+            &endpoint,
+            "twindrive/r1/up",
+            s(&d.join("nothing.bin")),
+            "--for",
+            "1",
+            "--ca",
+            &cert("ca.pem"),
+        ])),
+        60.0,
+    );
+    assert_eq!(
+        code,
+        Some(3),
+        "a client without a certificate got in: {err}"
+    );
+
+    let robots: Vec<Proc> = ["r1", "r2"]
+        .iter()
+        .map(|id| {
+            Proc(
+                Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                    .args([
+                        "robot",
+                        "--id",
+                        id,
+                        "--site",
+                        s(&repo().join("scenarios/wall_following.toml")),
+                        "--trust",
+                        s(&f.path("keys/master.pub")),
+                        "--key",
+                        s(&f.path(&format!("keys/{id}.key"))),
+                        "--state-dir",
+                        s(&d.join(id)),
+                        "--zenoh-config",
+                        &cert(&format!("{id}.json5")),
+                        "--time-scale",
+                        "10",
+                        "--telemetry-budget",
+                        "200000",
+                        "--run-for",
+                        "240",
+                    ])
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .unwrap(),
+            )
+        })
+        .collect();
+    // Robot r1's certificate, misused: forged statuses on r2's key (the
+    // router's access control drops them) and on its own (they reach the
+    // master, which refuses them: not sealed by r1's key).
+    let status = |id: &str| forged_for(id, Role::Robot, &[Body::Ping { nonce: 9 }], 30);
+    let mut attacks = Vec::new();
+    for (id, name) in [("r2", "as-r2.bin"), ("r1", "as-r1.bin")] {
+        let file = d.join(name);
+        write_payloads(&file, &status(id));
+        attacks.push(Proc(forger(&[
+            "publish",
+            &endpoint,
+            &format!("twindrive/{id}/down"),
+            s(&file),
+            "--for",
+            "20",
+            "--ca",
+            &cert("ca.pem"),
+            "--cert",
+            &cert("r1.pem"),
+            "--private-key",
+            &cert("r1.key"),
+        ])));
+    }
+    let master = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args([
+                "master",
+                "--plan",
+                s(&f.path("plan/plan.json")),
+                "--key",
+                s(&f.path("keys/master.key")),
+                "--trust-robot",
+                s(&f.path("keys/r1.pub")),
+                "--trust-robot",
+                s(&f.path("keys/r2.pub")),
+                "--link-state",
+                s(&d.join("master-link")),
+                "--robot",
+                "r1",
+                "--robot",
+                "r2",
+                "--out",
+                s(&d.join("m")),
+                "--zenoh-config",
+                &cert("master.json5"),
+                "--timeout",
+                "200",
+                "--log-wait",
+                "5",
+                "--telemetry-budget",
+                "200000",
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let (code, err) = finish(master, 240.0);
+    assert_eq!(code, Some(0), "{err}");
+    let report = |id: &str| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(d.join("m").join(id).join("report.json")).unwrap())
+            .unwrap()
+    };
+    for id in ["r1", "r2"] {
+        assert_eq!(report(id)["outcome"], "completed", "{}", report(id));
+    }
+    assert!(
+        report("r1")["refused_messages"].as_u64().unwrap() > 0,
+        "r1's own key expression: the forgeries arrive, and are refused"
+    );
+    assert_eq!(
+        report("r2")["refused_messages"],
+        0,
+        "r2's key expression: the router let r1's certificate publish on it"
+    );
+    drop(attacks);
+    drop(robots);
 }

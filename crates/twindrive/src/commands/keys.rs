@@ -1,5 +1,5 @@
-//! `twindrive keygen` and `twindrive sign`: the master's key pair and signed
-//! plans.
+//! `twindrive keygen`, `twindrive certs` and `twindrive sign`: key pairs,
+//! a fleet's TLS certificates, and signed plans.
 
 use std::io::Write;
 use std::path::Path;
@@ -29,6 +29,20 @@ pub fn keygen(dir: &Path, robot: Option<&str>) -> anyhow::Result<()> {
         "wrote {} (keep it secret) and {} (give it to {whom})",
         private.display(),
         public.display()
+    )?;
+    Ok(())
+}
+
+/// `twindrive certs`: a fleet's CA, certificates and TLS configurations.
+pub fn certs(request: twindrive_ops::certs::CertsRequest) -> anyhow::Result<()> {
+    crate::flags::check_distinct_robots(&request.robots)?;
+    let written = twindrive_ops::certs::write(&request)?;
+    writeln!(
+        std::io::stdout().lock(),
+        "wrote {} files into {}: {} (keep ca.key and every .key secret; give each process its .json5 with --zenoh-config)",
+        written.len(),
+        request.out.display(),
+        written.join(", ")
     )?;
     Ok(())
 }
