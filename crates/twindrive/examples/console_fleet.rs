@@ -114,6 +114,18 @@ async fn main() -> anyhow::Result<()> {
     }
     let site = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/wall_following.toml");
     let ids: Vec<String> = (1..=robots).map(|k| format!("r{k:03}")).collect();
+    // Each robot's key pair: its messages are sealed with it.
+    let robot_keys = d.join("robot_keys");
+    for id in &ids {
+        anyhow::ensure!(
+            Command::new(&twindrive)
+                .args(["keygen", "--out", &s(&robot_keys), "--robot", id])
+                .stdout(Stdio::null())
+                .status()?
+                .success(),
+            "keygen --robot {id}"
+        );
+    }
     let mut procs = Vec::new();
     for id in &ids {
         procs.push(spawn(
@@ -126,6 +138,8 @@ async fn main() -> anyhow::Result<()> {
                 &s(&site),
                 "--trust",
                 &s(&keys.join("master.pub")),
+                "--key",
+                &s(&robot_keys.join(format!("{id}.key"))),
                 "--state-dir",
                 &s(&d.join(id)),
                 "--connect",
@@ -141,6 +155,8 @@ async fn main() -> anyhow::Result<()> {
     let mut cmd = Command::new(&twindrive);
     cmd.args(["console", "--listen", &format!("127.0.0.1:{http}")])
         .args(["--key", &s(&keys.join("master.key"))])
+        .args(["--trust-robot", &s(&robot_keys)])
+        .args(["--link-state", &s(&d.join("console_link"))])
         .args(["--calibration", &s(&calib)])
         .args(["--rehearsal", &rehearsal, "--out", &s(&d.join("console"))])
         .args(["--connect", &router, "--zenoh-config", &s(&client)]);

@@ -309,6 +309,10 @@ fn forged_pings_do_not_keep_a_supervised_robot_driving_after_its_master_died() {
     let mut master = site.master("m", &["--supervise", "3"]);
     site.wait_for("execution_started", 90.0);
     // The attacker keeps the robot company: pings, heartbeats, every 0.25 s.
+    // ... and every other message a master sends: a forged upload (offer,
+    // chunks, a repair shard, its end), answers about the robot's logs,
+    // a pong and a hand-back acknowledgement.
+    let fake = [5u8; 32];
     let forged_up = forged(
         Role::Master,
         &[
@@ -316,8 +320,41 @@ fn forged_pings_do_not_keep_a_supervised_robot_driving_after_its_master_died() {
             Body::Heartbeat {
                 telemetry_budget_bytes_s: 100,
             },
+            Body::Offer(Offer {
+                transfer: fake,
+                size: 2048,
+                chunk_size: 1024,
+                fec_from: 2,
+                fec_repairs: 0,
+            }),
+            Body::Chunk {
+                transfer: fake,
+                index: 0,
+                crc32: crc32(&[1; 1024]),
+                data: vec![1; 1024],
+            },
+            Body::Repair {
+                transfer: fake,
+                index: 2,
+                crc32: crc32(&[2; 1024]),
+                data: vec![2; 1024],
+            },
+            Body::EndOfFile { transfer: fake },
+            Body::Nak {
+                transfer: fake,
+                received: 0,
+                upto: 10,
+                missing: vec![(0, 9)],
+            },
+            Body::Finished { transfer: fake },
+            Body::Refused {
+                transfer: fake,
+                reason: "forged".into(),
+            },
+            Body::Pong { nonce: 1 },
+            Body::HandbackAck { plan: fake },
         ],
-        40,
+        10,
     );
     let _forger = site.forge("twindrive/rover/up", "pings.bin", &forged_up, Some(15.0));
     std::thread::sleep(Duration::from_millis(1500));
@@ -334,7 +371,15 @@ fn forged_pings_do_not_keep_a_supervised_robot_driving_after_its_master_died() {
         after_s <= 3.0 + 2.0,
         "stopped {after_s:.1} s after the master died (dead-man 3 s)"
     );
-    // The forged heartbeats did not touch the telemetry budget either.
+    // The forged heartbeats did not touch the telemetry budget either, and
+    // the forged upload never began.
+    let fake_hex: String = fake.iter().map(|b| format!("{b:02x}")).collect();
+    assert!(
+        site.journal()
+            .iter()
+            .all(|e| e["transfer"].as_str() != Some(fake_hex.as_str())),
+        "the forged upload reached the robot"
+    );
     assert!(
         site.events("telemetry_budget")
             .iter()
@@ -439,10 +484,32 @@ fn forged_and_replayed_messages_change_nothing_at_the_master_or_the_robot() {
                 fec_from: 4,
                 fec_repairs: 0,
             }),
+            Body::Chunk {
+                transfer: [7; 32],
+                index: 0,
+                crc32: crc32(&[3; 1024]),
+                data: vec![3; 1024],
+            },
+            Body::Repair {
+                transfer: [7; 32],
+                index: 4,
+                crc32: crc32(&[4; 1024]),
+                data: vec![4; 1024],
+            },
+            Body::EndOfFile { transfer: [7; 32] },
+            Body::Nak {
+                transfer,
+                received: 0,
+                upto: 100,
+                missing: vec![(0, 99)],
+            },
+            Body::Ping { nonce: 3 },
+            Body::Pong { nonce: 3 },
         ],
-        30,
+        10,
     );
     let capture_up = site.capture("twindrive/rover/up", "up.bin", 25.0);
+    let capture_down = site.capture("twindrive/rover/down", "down.bin", 25.0);
     std::thread::sleep(Duration::from_millis(1000));
     let _forger = site.forge("twindrive/rover/down", "down-forged.bin", &down, Some(20.0));
     let (code, err) = finish(site.master("m", &["--signed", s(&signed)]), 150.0);
@@ -491,6 +558,42 @@ fn forged_and_replayed_messages_change_nothing_at_the_master_or_the_robot() {
         &up,
         "accepted before this end restarted",
     );
+
+    // The master restarted (a new process, its link state kept): what the
+    // robot sent before, replayed to it, is refused; the twin learns
+    // nothing from the replayed hand-backs or statuses. (Its new plan is
+    // refused by the robot, which stands at the old plan's end: exit 4.)
+    let _ = finish(capture_down, 60.0);
+    let captured_down: Vec<Vec<u8>> = read_payloads(&site.path("down.bin"))
+        .into_iter()
+        .filter(|p| !down.contains(p))
+        .collect();
+    assert!(captured_down.len() > 5, "{} captured", captured_down.len());
+    let _replay = site.forge(
+        "twindrive/rover/down",
+        "replay-down.bin",
+        &captured_down,
+        Some(10.0),
+    );
+    let (code, err) = finish(site.master("m2", &[]), 150.0);
+    assert!(matches!(code, Some(0 | 4)), "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(site.path("m2/report.json")).unwrap()).unwrap();
+    assert!(report["refused_messages"].as_u64().unwrap() > 0, "{report}");
+    assert!(
+        report["handbacks"].as_array().unwrap().is_empty(),
+        "{report}"
+    );
+    assert!(
+        report["twin_updates"].as_array().unwrap().is_empty(),
+        "{report}"
+    );
+}
+
+fn crc32(data: &[u8]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    h.update(data);
+    h.finalize()
 }
 
 /// Replays `captured` to the robot: nothing of a plan happens, and the
