@@ -52,6 +52,13 @@ pub fn write(request: &CertsRequest) -> anyhow::Result<Vec<String>> {
     if request.router_hosts.is_empty() {
         bail!("the router's certificate needs a host name or address");
     }
+    if let Some(id) = request
+        .robots
+        .iter()
+        .find(|id| ["router", "master", "ca"].contains(&id.as_str()))
+    {
+        bail!("a robot cannot be called `{id}`: its files would clash with the {id}'s");
+    }
     // The configurations name the files by absolute path (zenoh reads them
     // relative to the process's directory otherwise).
     let absolute = std::path::absolute(out)
@@ -110,9 +117,6 @@ pub fn write(request: &CertsRequest) -> anyhow::Result<Vec<String>> {
     )?;
     leaf("master", MASTER_CN, Vec::new(), false)?;
     for id in &request.robots {
-        if id == "router" || id == "master" || id == "ca" {
-            bail!("a robot cannot be called `{id}`: its files would clash with the {id}'s");
-        }
         leaf(id, id, Vec::new(), false)?;
     }
 

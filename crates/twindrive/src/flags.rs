@@ -52,18 +52,23 @@ pub fn link_profile(arg: Option<&str>) -> anyhow::Result<Option<LinkProfile>> {
         .transpose()
 }
 
-/// `--key master.key`, read.
-pub fn signing_key(
-    path: Option<&Path>,
-) -> anyhow::Result<Option<twindrive_link::envelope::SigningKey>> {
-    let Some(path) = path else {
-        return Ok(None);
-    };
+/// `--key KEY`, read (the master's or a robot's private key).
+pub fn signing_key(path: &Path) -> anyhow::Result<twindrive_link::envelope::SigningKey> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("--key: reading {}", path.display()))?;
-    read_private_key_pem(&text)
-        .map(Some)
-        .map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))
+    read_private_key_pem(&text).map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))
+}
+
+/// A public key that `flag` names, read (`--trust master.pub`,
+/// `--trust-robot ID.pub`).
+pub fn public_key(
+    flag: &str,
+    path: &Path,
+) -> anyhow::Result<twindrive_link::envelope::VerifyingKey> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{flag}: reading {}", path.display()))?;
+    twindrive_link::envelope::read_public_key_pem(&text)
+        .map_err(|e| anyhow::anyhow!("{flag} {}: {e}", path.display()))
 }
 
 /// `--trust-robot` files and directories, read: each robot's id (the
@@ -72,7 +77,6 @@ pub fn signing_key(
 pub fn robot_keys(
     paths: &[std::path::PathBuf],
 ) -> anyhow::Result<std::collections::BTreeMap<String, twindrive_link::envelope::VerifyingKey>> {
-    use twindrive_link::envelope::read_public_key_pem;
     let mut files = Vec::new();
     for path in paths {
         if path.is_dir() {
@@ -114,10 +118,7 @@ pub fn robot_keys(
                 file.display()
             ))
         })?;
-        let text = std::fs::read_to_string(&file)
-            .with_context(|| format!("--trust-robot: reading {}", file.display()))?;
-        let key = read_public_key_pem(&text)
-            .map_err(|e| anyhow::anyhow!("--trust-robot {}: {e}", file.display()))?;
+        let key = public_key("--trust-robot", &file)?;
         if keys.insert(id.to_string(), key).is_some() {
             return Err(usage(format!(
                 "--trust-robot: two keys for robot {id} (the second: {})",

@@ -351,10 +351,6 @@ impl Peers {
         }
         Err(refusal)
     }
-
-    pub fn channels(&self) -> &[Channel] {
-        &self.channels
-    }
 }
 
 /// Both ends of robot `robot_id`'s link in one process (the demo, the

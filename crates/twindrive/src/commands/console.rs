@@ -37,7 +37,11 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
         }
     };
     let link = crate::flags::link_profile(args.link.as_deref())?;
-    let key = crate::flags::signing_key(args.key.as_deref())?;
+    let key = args
+        .key
+        .as_deref()
+        .map(crate::flags::signing_key)
+        .transpose()?;
     let mut robot_links = Vec::new();
     if !args.robot.is_empty() {
         let (Some(key), Some(key_path)) = (&key, &args.key) else {

@@ -4,10 +4,8 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use twindrive_agent::narrate::Verbosity;
 use twindrive_agent::operator::{OnHandback, Outcome};
-use twindrive_link::envelope::read_public_key_pem;
 use twindrive_net::SessionOptions;
 use twindrive_ops::MasterSettings;
 use twindrive_ops::robot::RobotConfig;
@@ -27,16 +25,12 @@ fn session_options(z: &ZenohArgs) -> SessionOptions {
 
 /// `twindrive robot`.
 pub fn robot(args: &RobotArgs) -> anyhow::Result<()> {
-    let mut trusted = Vec::new();
-    for path in &args.trust {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("--trust: reading {}", path.display()))?;
-        trusted.push(
-            read_public_key_pem(&text)
-                .map_err(|e| anyhow::anyhow!("--trust {}: {e}", path.display()))?,
-        );
-    }
-    let key = crate::flags::signing_key(Some(&args.key))?.expect("a path was given");
+    let trusted = args
+        .trust
+        .iter()
+        .map(|path| crate::flags::public_key("--trust", path))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let key = crate::flags::signing_key(&args.key)?;
     let site = Scenario::load(&args.site).map_err(|e| anyhow::anyhow!("--site: {e}"))?;
     let ros = twindrive_ops::robot::read_ros_section(&args.site)?;
     if ros.is_some() && args.time_scale != 1.0 {
@@ -77,7 +71,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     }
     let robot_keys = crate::flags::robot_keys(&args.trust_robot)?;
     crate::flags::check_robot_keys(&args.robot, &robot_keys)?;
-    let key = crate::flags::signing_key(Some(&args.key))?.expect("a path was given");
+    let key = crate::flags::signing_key(&args.key)?;
     let settings = MasterSettings {
         plan: args.plan.clone(),
         signed: args.signed.clone(),
