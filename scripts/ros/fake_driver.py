@@ -1,6 +1,9 @@
-"""A ROS 2 robot's drivers without ROS: twindrive's site simulator
-(`twindrive site-sim`) behind zenoh, speaking rmw_zenoh as a TurtleBot-class
-robot running `rmw_zenoh_cpp` would. Every byte on the wire is made by an
+"""A ROS 2 robot's drivers without ROS: a site's physics behind zenoh,
+speaking rmw_zenoh as a TurtleBot-class robot running `rmw_zenoh_cpp` would.
+The physics is twindrive's site simulator (`twindrive site-sim`, the
+default) or, with --physics mujoco, the MuJoCo physics engine
+(`mujoco_site.py`: motors with a gain and a torque limit, inertia, tyre and
+caster friction, ray-cast range sensors, a bumper from contacts). Every byte on the wire is made by an
 independent implementation: CDR and RIHS01 type hashes by `rosbags`, the
 session by `eclipse-zenoh`.
 
@@ -12,12 +15,17 @@ tokens for the node and each publisher and subscription):
   /hazard_detection  irobot_create_msgs/msg/HazardDetectionVector (BUMP, STALL)
 Subscribes /cmd_vel (geometry_msgs/msg/Twist) like a diff_drive_controller:
 wheel speeds from the twist through --wheel-radius/--wheel-separation, zero
-when no command came for --cmd-timeout.
+when no command came for --cmd-timeout (0: never, as a motor controller that
+holds the last command it heard).
 
 --stall-joints-after S stops /joint_states S seconds after the robot first
 moved (a driver that hangs). At the end (--run-for, or SIGTERM) it writes
 --stats: commands received, their attachments, the speeds commanded after
-the stall, and the liveliness tokens on the network.
+the stall, every command as received (`received`: [s since start, v, w]),
+the robot at every tick (`ticks`: [s, left, right rad/s driven, x, y]), the
+ticks with a contact (`contact_ticks`), with MuJoCo how far the robot rolls
+to a stop from its speed at the last moving command (`braking`), and the
+liveliness tokens on the network.
 
 usage: fake_driver.py --connect E --site SITE.toml --twindrive BIN --stats OUT.json [...]
 """
@@ -39,6 +47,7 @@ import zenoh
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from check_bag import IROBOT
+from mujoco_site import MujocoSite
 
 NODE = "fake_driver"
 
@@ -92,6 +101,44 @@ class Ros:
         return self.session.declare_subscriber(key, callback)
 
 
+class SiteSim:
+    """`twindrive site-sim` behind a pipe."""
+
+    def __init__(self, twindrive, site):
+        self.proc = subprocess.Popen([twindrive, "site-sim", "--site", site], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True)
+
+    def step(self, left, right, steps):
+        self.proc.stdin.write(f"{left!r} {right!r} {steps}\n")
+        self.proc.stdin.flush()
+        line = self.proc.stdout.readline()
+        return json.loads(line) if line else None
+
+    def close(self):
+        # The site simulator goes with the driver, however the driver ends.
+        if self.proc.poll() is None:
+            self.proc.stdin.close()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+        self.proc.wait()
+
+
+def braking(sim, stats):
+    """The robot's speed at the last moving command it heard, and how far
+    the physics lets it roll to a stop from there."""
+    moving = [r for r in stats["received"] if r[1] != 0.0 or r[2] != 0.0]
+    if not moving:
+        return None
+    t = moving[-1][0]
+    ticks = stats["ticks"]
+    speeds = [math.hypot(b[3] - a[3], b[4] - a[4]) / (b[0] - a[0])
+              for a, b in zip(ticks, ticks[1:]) if t - 0.2 <= b[0] <= t and b[0] > a[0]]
+    speed = max(speeds, default=0.0)
+    return {"at_s": t, "speed_m_s": speed, "distance_m": sim.braking_distance_m(speed)}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", required=True)
@@ -99,11 +146,14 @@ def main():
     ap.add_argument("--twindrive", required=True)
     ap.add_argument("--stats", required=True)
     ap.add_argument("--rate", type=float, default=50.0)
-    ap.add_argument("--cmd-timeout", type=float, default=0.5)
+    ap.add_argument("--cmd-timeout", type=float, default=0.5,
+                    help="zero the wheels after this long without a command (s); 0: never")
     ap.add_argument("--wheel-radius", type=float)
     ap.add_argument("--wheel-separation", type=float)
     ap.add_argument("--stall-joints-after", type=float)
     ap.add_argument("--run-for", type=float, default=600.0)
+    ap.add_argument("--physics", choices=["site-sim", "mujoco"], default="site-sim")
+    ap.add_argument("--seed", type=int, default=0, help="MuJoCo's sensor noise")
     a = ap.parse_args()
 
     with open(a.site, "rb") as f:
@@ -133,8 +183,10 @@ def main():
 
     lock = threading.Lock()
     stats = {"commands": 0, "bad_attachments": 0, "decode_errors": 0, "sequence_numbers": [],
-             "after_stall": [], "moving_commands": 0, "stalled_at_s": None}
+             "after_stall": [], "moving_commands": 0, "stalled_at_s": None,
+             "received": [], "ticks": [], "contact_ticks": 0, "physics": a.physics}
     cmd = {"v": 0.0, "w": 0.0, "at": -1e9}
+    started = time.monotonic()
 
     def on_cmd(sample):
         now = time.monotonic()
@@ -152,6 +204,7 @@ def main():
                 stats["sequence_numbers"].append(int.from_bytes(raw[:8], "little", signed=True))
             stats["commands"] += 1
             cmd.update(v=t.linear.x, w=t.angular.z, at=now)
+            stats["received"].append([now - started, t.linear.x, t.angular.z])
             if abs(t.linear.x) > 1e-9 or abs(t.angular.z) > 1e-9:
                 stats["moving_commands"] += 1
             if stats["stalled_at_s"] is not None:
@@ -166,8 +219,7 @@ def main():
         kind = "sensor_msgs/msg/Range" if s.get("beams", 1) == 1 else "sensor_msgs/msg/LaserScan"
         pub_ranges.append((s, kind, ros.publisher("/" + s["name"], kind)[0]))
 
-    sim = subprocess.Popen([a.twindrive, "site-sim", "--site", a.site], stdin=subprocess.PIPE,
-                           stdout=subprocess.PIPE, text=True)
+    sim = MujocoSite(site, a.seed) if a.physics == "mujoco" else SiteSim(a.twindrive, a.site)
     try:
         stop = threading.Event()
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -178,23 +230,19 @@ def main():
             return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
                 sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame)
 
-        started = time.monotonic()
         moved_at = None
         next_tick = started
         announced = False
         while not stop.is_set() and time.monotonic() - started < a.run_for:
             now = time.monotonic()
             with lock:
-                fresh = now - cmd["at"] <= a.cmd_timeout
+                fresh = a.cmd_timeout <= 0 or now - cmd["at"] <= a.cmd_timeout
                 v, w = (cmd["v"], cmd["w"]) if fresh else (0.0, 0.0)
             left = (v - 0.5 * w * separation) / radius
             right = (v + 0.5 * w * separation) / radius
-            sim.stdin.write(f"{left!r} {right!r} {steps}\n")
-            sim.stdin.flush()
-            line = sim.stdout.readline()
-            if not line:
+            s = sim.step(left, right, steps)
+            if s is None:
                 break
-            s = json.loads(line)
             if moved_at is None and (abs(left) > 1e-9 or abs(right) > 1e-9):
                 moved_at = now
             stalled = a.stall_joints_after is not None and moved_at is not None \
@@ -214,6 +262,9 @@ def main():
                     print("publishing joint states", file=sys.stderr, flush=True)
                     announced = True
             x, y, th = s["pose"]
+            with lock:
+                stats["ticks"].append([now - started, left, right, x, y])
+                stats["contact_ticks"] += int(s["bump"] or s["blocked"])
             P = T["geometry_msgs/msg/Pose"](
                 position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
                 orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(th / 2), w=math.cos(th / 2)))
@@ -261,9 +312,9 @@ def main():
             if any("/NN/%/%/twindrive_agent" in t for t in tokens) or time.monotonic() > deadline:
                 break
             time.sleep(0.5)
-        sim.stdin.close()
-        sim.wait(timeout=10)
         with lock:
+            if a.physics == "mujoco":
+                stats["braking"] = braking(sim, stats)
             stats["liveliness"] = sorted(tokens)
             stats["type_hashes"] = {t: store.hash_rihs01(t) for t in [
                 "geometry_msgs/msg/Twist", "sensor_msgs/msg/JointState", "nav_msgs/msg/Odometry",
@@ -275,10 +326,7 @@ def main():
                 json.dump(stats, f)
             os.replace(a.stats + ".tmp", a.stats)
     finally:
-        # The site simulator goes with the driver, however the driver ends.
-        if sim.poll() is None:
-            sim.kill()
-        sim.wait()
+        sim.close()
         session.close()
 
 

@@ -1,5 +1,10 @@
 //! The boundary between the agent and the robot it drives: wheel commands
 //! out; encoder counts, range readings, the bumper and any absolute pose in.
+//!
+//! A control period is one call of [`RobotBackend::step`]: the backend reads
+//! the robot's sensors, the agent decides from that reading, and the
+//! backend sends the decision **in the same period**. A stop decided on a
+//! reading is the command of that very period, never of the next.
 //! Two backends: a simulator running the robot's **site** (its own
 //! scenario, which the master never sees), and a ROS 2 robot
 //! (`crate::ros`, carried over zenoh by `twindrive_net::ros`); both
@@ -27,7 +32,9 @@ pub struct Reading {
     pub record: StepRecord,
     /// Every beam read this period (NaN where a sensor did not sample).
     pub fresh_ranges_m: Vec<f64>,
-    /// Contact stopped the robot this period, where the backend can tell.
+    /// Contact stopped the robot this period, where the backend can tell
+    /// (in the reading handed to `decide`, as far as the robot knows at the
+    /// period's start).
     pub blocked: bool,
     /// A sensor the robot steers by went silent: the backend has stopped
     /// the wheels, and the executive hands back.
@@ -38,9 +45,22 @@ pub struct Reading {
 pub trait RobotBackend {
     /// The control period (s).
     fn period_s(&self) -> f64;
-    /// Sends `wheels` (left, right, rad/s) for one period and returns what
-    /// the robot sensed; `None` when the backend can run no longer.
-    fn step(&mut self, wheels: [f64; 2]) -> Option<Reading>;
+    /// One control period: reads what the robot sensed, asks `decide` for
+    /// the wheel speeds (left, right, rad/s) on that reading, and sends them
+    /// at once. A fault the backend detects itself (`Reading::fault`) sends
+    /// zero whatever `decide` says. Returns the period's reading, its
+    /// `record.cmd_wheel_rad_s` the command sent; `None` when the backend
+    /// can run no longer.
+    fn step(&mut self, decide: &mut dyn FnMut(&Reading) -> [f64; 2]) -> Option<Reading>;
+    /// Commands the wheels to stand still for one period in which the agent
+    /// drives no plan (after a stop, between plans). Returns whether the
+    /// robot needs to go on hearing it every period: a robot's motor
+    /// drivers that hold their last command (or keep it until their own
+    /// timeout) must be told zero again and again; a simulated site, which
+    /// does not move between steps, needs nothing (the default).
+    fn hold(&mut self) -> bool {
+        false
+    }
     /// Total wheel rotation commanded and performed so far (rad), both
     /// wheels: a robot that never moved has zero.
     fn wheel_travel_rad(&self) -> f64;
@@ -59,6 +79,8 @@ pub struct SimBackend {
     out: StepOutput,
     travel_rad: f64,
     latest: Vec<f64>,
+    /// Whether contact stopped the robot in the last period.
+    blocked: bool,
 }
 
 impl SimBackend {
@@ -75,6 +97,7 @@ impl SimBackend {
             out,
             travel_rad: 0.0,
             latest: vec![f64::NAN; beams],
+            blocked: false,
         })
     }
 
@@ -94,29 +117,51 @@ impl RobotBackend for SimBackend {
         self.sim.scenario().dt_s()
     }
 
-    fn step(&mut self, wheels: [f64; 2]) -> Option<Reading> {
-        if !self.sim.step_with(&mut self.out, &mut |_: &Sensed| wheels) {
+    fn step(&mut self, decide: &mut dyn FnMut(&Reading) -> [f64; 2]) -> Option<Reading> {
+        // The simulator senses at the period's start, then asks for the
+        // period's command: the reading is made there, handed to `decide`,
+        // and its answer drives this same period.
+        let Self {
+            sim,
+            out,
+            latest,
+            blocked,
+            ..
+        } = self;
+        let mut reading = None;
+        let stepped = sim.step_with(out, &mut |s: &Sensed| {
+            for (latest, &now) in latest.iter_mut().zip(s.ranges_m) {
+                if !now.is_nan() {
+                    *latest = now;
+                }
+            }
+            let r = Reading {
+                t_s: s.t_ns as f64 * 1e-9,
+                encoder_ticks: s.encoder_ticks,
+                bump: s.bump,
+                ranges_m: latest.clone(),
+                pose: s.tracker,
+                // Completed once the period has run.
+                record: StepRecord::default(),
+                fresh_ranges_m: s.ranges_m.to_vec(),
+                blocked: *blocked,
+                fault: None,
+            };
+            let wheels = decide(&r);
+            reading = Some(r);
+            wheels
+        });
+        if !stepped {
             return None;
         }
-        let r = &self.out.record;
-        let dt = self.period_s();
-        self.travel_rad += (r.wheel_rad_s[0].abs() + r.wheel_rad_s[1].abs()) * dt;
-        for (latest, &now) in self.latest.iter_mut().zip(&self.out.ranges) {
-            if !now.is_nan() {
-                *latest = now;
-            }
-        }
-        Some(Reading {
-            t_s: r.t_s() + dt,
-            encoder_ticks: r.encoder_ticks,
-            bump: r.bump,
-            ranges_m: self.latest.clone(),
-            pose: r.tracker,
-            record: *r,
-            fresh_ranges_m: self.out.ranges.clone(),
-            blocked: self.out.blocked,
-            fault: None,
-        })
+        let mut reading = reading.expect("the simulator asks for every step's command");
+        let record = &self.out.record;
+        self.travel_rad += (record.wheel_rad_s[0].abs() + record.wheel_rad_s[1].abs())
+            * self.sim.scenario().dt_s();
+        self.blocked = self.out.blocked;
+        reading.record = *record;
+        reading.blocked = self.out.blocked;
+        Some(reading)
     }
 
     fn wheel_travel_rad(&self) -> f64 {

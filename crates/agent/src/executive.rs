@@ -228,8 +228,9 @@ impl Executive {
         self.last_median
     }
 
-    /// What the robot sensed over the last period and where it believes it
-    /// is now in; the wheel commands for the next period out.
+    /// What the robot sensed at the start of this period and where it
+    /// believes it is now in; the wheel commands for this period out (zero
+    /// from the period that decides a stop on).
     pub fn tick(&mut self, reading: &Reading, belief: &Belief) -> [f64; 2] {
         if self.stopped.is_some() {
             return [0.0, 0.0];

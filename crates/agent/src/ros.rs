@@ -159,7 +159,10 @@ pub struct BridgeStats {
     pub received: Vec<u64>,
     /// Messages that did not decode (logged and dropped).
     pub rejected: u64,
+    /// Wheel commands published, holds included.
     pub commands_sent: u64,
+    /// Zero commands published while no plan ran.
+    pub holds_sent: u64,
     /// Periods the wheels were stopped because `/joint_states` was stale.
     pub stale_periods: u64,
 }
@@ -424,10 +427,15 @@ impl RosBridge {
         now_s - self.joints_at_s.unwrap_or(self.origin_s)
     }
 
-    /// One control period at `now_s`: the reading for the agent and the
-    /// command to publish. Stale joint states command zero, whatever
-    /// `wheels` asked, and say why in the reading.
-    pub fn step(&mut self, wheels: [f64; 2], now_s: f64) -> (Reading, Vec<u8>) {
+    /// One control period at `now_s`: the reading of what the robot said
+    /// since the last, the agent's decision on it (`decide`), and the
+    /// command message to publish now. Stale joint states make the reading
+    /// a fault and command zero, whatever `decide` asked.
+    pub fn step(
+        &mut self,
+        now_s: f64,
+        decide: &mut dyn FnMut(&Reading) -> [f64; 2],
+    ) -> (Reading, Vec<u8>) {
         let silent = self.joints_silent_s(now_s);
         let timeout = self.config.joint_states.timeout_s;
         let fault = (silent > timeout).then(|| {
@@ -436,19 +444,11 @@ impl RosBridge {
                 self.subscriptions[0].topic
             )
         });
-        let wheels = if fault.is_some() {
-            self.stats.stale_periods += 1;
-            [0.0, 0.0]
-        } else {
-            wheels
-        };
-        let command = self.command_bytes(wheels, now_s);
-        self.stats.commands_sent += 1;
         let t_s = now_s - self.origin_s;
         let encoder_ticks = self.fresh_ticks.take();
         let pose = self.fresh_pose.take();
         let fresh = std::mem::replace(&mut self.fresh_ranges, vec![f64::NAN; self.ranges.len()]);
-        let reading = Reading {
+        let mut reading = Reading {
             t_s,
             encoder_ticks,
             bump: self.bump,
@@ -456,7 +456,7 @@ impl RosBridge {
             pose,
             record: StepRecord {
                 t_ns: 0,
-                cmd_wheel_rad_s: wheels,
+                cmd_wheel_rad_s: [0.0; 2],
                 wheel_rad_s: self.wheel_speeds,
                 encoder_ticks,
                 bump: self.bump,
@@ -468,7 +468,23 @@ impl RosBridge {
             blocked: self.stall,
             fault,
         };
-        (reading, command)
+        let asked = decide(&reading);
+        let wheels = if reading.fault.is_some() {
+            self.stats.stale_periods += 1;
+            [0.0, 0.0]
+        } else {
+            asked
+        };
+        reading.record.cmd_wheel_rad_s = wheels;
+        self.stats.commands_sent += 1;
+        (reading, self.command_bytes(wheels, now_s))
+    }
+
+    /// The command of a period in which the agent drives no plan: zero.
+    pub fn hold(&mut self, now_s: f64) -> Vec<u8> {
+        self.stats.commands_sent += 1;
+        self.stats.holds_sent += 1;
+        self.command_bytes([0.0, 0.0], now_s)
     }
 
     /// The command message for `wheels` (left, right, rad/s).
@@ -525,7 +541,7 @@ mod tests {
         let tpr = f64::from(site.log_header().ticks_per_rev);
         b.on_message(0, &joints([std::f64::consts::PI, 0.0]), 100.01)
             .unwrap();
-        let (r, cmd) = b.step([2.0, 2.0], 100.02);
+        let (r, cmd) = b.step(100.02, &mut |_| [2.0, 2.0]);
         assert_eq!(r.encoder_ticks, Some([(tpr / 2.0).round() as i64, 0]));
         assert!(r.fault.is_none());
         let (twist, _) =
@@ -534,10 +550,10 @@ mod tests {
         let radius = 0.25 * (n.left_diameter_m + n.right_diameter_m);
         assert!((twist.linear.x - 2.0 * radius).abs() < 1e-12 && twist.angular.z.abs() < 1e-12);
         // No new joint state: no new ticks this period.
-        let (r, _) = b.step([2.0, 2.0], 100.04);
+        let (r, _) = b.step(100.04, &mut |_| [2.0, 2.0]);
         assert_eq!(r.encoder_ticks, None);
         // Silent past the timeout: zero, whatever is asked, and a fault.
-        let (r, cmd) = b.step([2.0, -2.0], 100.6);
+        let (r, cmd) = b.step(100.6, &mut |_| [2.0, -2.0]);
         assert!(
             r.fault.as_deref().unwrap().contains("/joint_states"),
             "{:?}",
@@ -551,7 +567,7 @@ mod tests {
         assert!(b.on_message(0, &[0, 1, 0, 0, 9], 100.7).is_err());
         assert_eq!(b.stats().rejected, 1);
         b.on_message(0, &joints([0.0, 0.0]), 100.8).unwrap();
-        assert!(b.step([1.0, 1.0], 100.81).0.fault.is_none());
+        assert!(b.step(100.81, &mut |_| [1.0, 1.0]).0.fault.is_none());
     }
 
     #[test]
@@ -592,11 +608,11 @@ mod tests {
             }],
         });
         b.on_message(2, &hz, 0.01).unwrap();
-        let (r, _) = b.step([0.0, 0.0], 0.02);
+        let (r, _) = b.step(0.02, &mut |_| [0.0, 0.0]);
         assert!(r.bump);
         assert_eq!(r.ranges_m[0], 0.25_f32 as f64);
         assert_eq!(r.fresh_ranges_m[0], 0.25_f32 as f64);
-        let (r, _) = b.step([0.0, 0.0], 0.04);
+        let (r, _) = b.step(0.04, &mut |_| [0.0, 0.0]);
         assert!(r.fresh_ranges_m[0].is_nan() && r.ranges_m[0] > 0.0);
 
         let scan = msgs::encode(&LaserScan {

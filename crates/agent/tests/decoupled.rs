@@ -49,11 +49,47 @@ fn plan_json() -> Vec<u8> {
 struct Harness {
     link: VirtualLink,
     op: Operator<MemoryStore>,
-    agent: RobotAgent<SimBackend, MemoryRobotStore>,
+    agent: RobotAgent<Site, MemoryRobotStore>,
 }
 
-fn site_backend(extra: &str) -> SimBackend {
-    SimBackend::new(common::site(extra), common::plan().samples[0].pose(), 400.0).unwrap()
+/// The site's simulator as a robot whose motor drivers hold the last
+/// command they heard (as many do): it counts the zero commands the agent
+/// sends it while no plan runs.
+struct Site {
+    sim: SimBackend,
+    holds: u64,
+}
+
+impl RobotBackend for Site {
+    fn period_s(&self) -> f64 {
+        self.sim.period_s()
+    }
+    fn step(
+        &mut self,
+        decide: &mut dyn FnMut(&twindrive_agent::backend::Reading) -> [f64; 2],
+    ) -> Option<twindrive_agent::backend::Reading> {
+        self.sim.step(decide)
+    }
+    fn hold(&mut self) -> bool {
+        self.holds += 1;
+        true
+    }
+    fn wheel_travel_rad(&self) -> f64 {
+        self.sim.wheel_travel_rad()
+    }
+    fn log_header(&self) -> twindrive_log::LogHeader {
+        self.sim.log_header()
+    }
+    fn map(&self) -> Option<twindrive_log::WorldMap> {
+        self.sim.map()
+    }
+}
+
+fn site_backend(extra: &str) -> Site {
+    Site {
+        sim: SimBackend::new(common::site(extra), common::plan().samples[0].pose(), 400.0).unwrap(),
+        holds: 0,
+    }
 }
 
 /// A robot on `store` (a clone of one that an earlier agent used is that
@@ -62,7 +98,7 @@ fn agent(
     store: &MemoryRobotStore,
     trusted: &SigningKey,
     extra: &str,
-) -> RobotAgent<SimBackend, MemoryRobotStore> {
+) -> RobotAgent<Site, MemoryRobotStore> {
     let mut config = AgentConfig::new("rover", vec![trusted.verifying_key()]);
     config.unix_time_at_zero_s = UNIX0;
     RobotAgent::new(config, site_backend(extra), store.clone()).unwrap()
@@ -241,9 +277,18 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
             "seed {seed}: {:#?}",
             r.timeline
         );
-        for (_, mcap) in &h.op.new_logs {
+        for (k, (_, mcap)) in h.op.new_logs.iter().enumerate() {
             let log = twindrive_log::read_mcap_bytes(mcap, Path::new("received.mcap")).unwrap();
             assert!(log.steps.len() > 100);
+            // The period whose reading ended the plan (a hand-back or the
+            // plan's end) commanded zero itself; the plan was driving just
+            // before a hand-back.
+            let last = log.steps.last().unwrap();
+            assert_eq!(last.cmd_wheel_rad_s, [0.0, 0.0], "seed {seed}, log {k}");
+            if k < r.handbacks.len() {
+                let before = log.steps[log.steps.len() - 2].cmd_wheel_rad_s;
+                assert!(before != [0.0, 0.0], "seed {seed}, log {k}");
+            }
         }
         assert_eq!(events(&store, "execution_started").len(), r.uploads.len());
         assert_eq!(events(&store, "handback").len(), r.handbacks.len());
@@ -346,6 +391,19 @@ fn on_handback_stop_ends_the_mission_handed_back_with_the_twin_updated() {
     assert_eq!(r.handbacks.len(), 1);
     assert_eq!(r.twin_updates.len(), 1);
     assert!(!r.twin_updates[0].obstacles_added.is_empty());
+    // Stopped, the robot is told zero every control period for as long as
+    // no plan runs: drivers that hold their last command stay stopped.
+    let period_s = h.agent.backend().period_s();
+    let before = h.agent.backend().holds;
+    let from_ns = h.link.now_ns;
+    let (op, agent) = (&mut h.op, &mut h.agent);
+    h.link.run(op, agent, from_ns + 10 * S, |_, _| false);
+    let holds = h.agent.backend().holds - before;
+    let expected = 10.0 / period_s;
+    assert!(
+        (holds as f64 - expected).abs() <= 2.0,
+        "{holds} zero commands in 10 s, one a period is {expected}"
+    );
 }
 
 /// A plan the gate must refuse: it crosses the link whole, is rejected with
@@ -631,7 +689,10 @@ fn a_plan_for_another_site_is_refused() {
     let text = twindrive_sim::builtin::WALL_FOLLOWING
         .replace("name = \"wall_following\"", "name = \"quarry\"");
     let site = twindrive_sim::Scenario::from_toml(&text, Path::new("<quarry>.toml")).unwrap();
-    let backend = SimBackend::new(site, common::plan().samples[0].pose(), 100.0).unwrap();
+    let backend = Site {
+        sim: SimBackend::new(site, common::plan().samples[0].pose(), 100.0).unwrap(),
+        holds: 0,
+    };
     let mut config = AgentConfig::new("rover", vec![key.verifying_key()]);
     config.unix_time_at_zero_s = UNIX0;
     h.agent = RobotAgent::new(config, backend, store.clone()).unwrap();

@@ -42,22 +42,29 @@ fn run(
         plan.header.robot.ticks_per_rev,
         LocalizeSettings::default(),
     );
-    let mut wheels = [0.0, 0.0];
     let mut after = Vec::new();
     let mut collisions = 0;
     let mut next_heard = 0.0;
-    while let Some(reading) = backend.step(wheels) {
-        if backend.blocked() {
-            collisions += 1;
-        }
+    loop {
+        // The master's word arrives between periods.
+        let t_next = next_heard;
+        let Some(reading) = backend.step(&mut |reading| {
+            if heard_every_s.is_some() && reading.t_s >= t_next {
+                exec.heard_from_master(reading.t_s);
+            }
+            let belief = nav.update(reading);
+            exec.tick(reading, &belief)
+        }) else {
+            break;
+        };
         if let Some(every) = heard_every_s
             && reading.t_s >= next_heard
         {
-            exec.heard_from_master(reading.t_s);
             next_heard += every;
         }
-        let belief = nav.update(&reading);
-        wheels = exec.tick(&reading, &belief);
+        if backend.blocked() {
+            collisions += 1;
+        }
         if exec.stopped().is_some() {
             after.push(backend.true_pose());
             if after.len() > 100 {

@@ -100,16 +100,16 @@ fn drive_with(
         LocalizeSettings::odometry_only()
     };
     let mut nav = Navigator::new(plan, initial, plan.header.robot.ticks_per_rev, settings);
-    let mut wheels = [0.0, 0.0];
     let (mut path_error_m, mut collisions, mut k) = (0.0f64, 0, 0u64);
     let mut bumped = false;
-    while let Some(reading) = backend.step(wheels) {
+    while let Some(reading) = backend.step(&mut |reading| {
+        let belief = nav.update(reading);
+        exec.tick(reading, &belief)
+    }) {
         if backend.blocked() {
             collisions += 1;
         }
         bumped |= reading.bump;
-        let belief = nav.update(&reading);
-        wheels = exec.tick(&reading, &belief);
         k += 1;
         if k % 10 == 0 {
             let p = backend.true_pose();

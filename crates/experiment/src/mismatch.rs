@@ -128,8 +128,8 @@ impl RobotBackend for Recorder {
     fn period_s(&self) -> f64 {
         self.inner.period_s()
     }
-    fn step(&mut self, wheels: [f64; 2]) -> Option<Reading> {
-        let r = self.inner.step(wheels)?;
+    fn step(&mut self, decide: &mut dyn FnMut(&Reading) -> [f64; 2]) -> Option<Reading> {
+        let r = self.inner.step(decide)?;
         let p = r.record.ground_truth;
         self.path.push((r.t_s, p));
         let touching = r.record.bump || r.blocked;
@@ -142,6 +142,9 @@ impl RobotBackend for Recorder {
         }
         self.was_bumped = touching;
         Some(r)
+    }
+    fn hold(&mut self) -> bool {
+        self.inner.hold()
     }
     fn wheel_travel_rad(&self) -> f64 {
         self.inner.wheel_travel_rad()

@@ -133,7 +133,7 @@ impl LogHeader {
 pub use twindrive_kinematics::RangeSensorInfo;
 
 /// Everything recorded at one simulation step.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StepRecord {
     /// Simulation time; integer nanoseconds so that every format round-trips it exactly.
     pub t_ns: u64,

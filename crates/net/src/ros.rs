@@ -197,18 +197,27 @@ impl RobotBackend for RosBackend {
         self.period_s
     }
 
-    fn step(&mut self, wheels: [f64; 2]) -> Option<Reading> {
+    fn step(&mut self, decide: &mut dyn FnMut(&Reading) -> [f64; 2]) -> Option<Reading> {
         let now_s = self.clock.elapsed().as_secs_f64();
         let (reading, command) = self
             .bridge
             .lock()
             .expect("not poisoned")
-            .step(wheels, now_s);
+            .step(now_s, decide);
         // The publishing task only goes when the runtime does.
         self.commands.send(command).ok()?;
         let w = reading.record.wheel_rad_s;
         self.travel_rad += (w[0].abs() + w[1].abs()) * self.period_s;
         Some(reading)
+    }
+
+    /// Zero on the command topic every period while no plan runs: a motor
+    /// controller that holds its last command (or keeps it until its own
+    /// timeout) stays stopped.
+    fn hold(&mut self) -> bool {
+        let now_s = self.clock.elapsed().as_secs_f64();
+        let command = self.bridge.lock().expect("not poisoned").hold(now_s);
+        self.commands.send(command).is_ok()
     }
 
     fn wheel_travel_rad(&self) -> f64 {

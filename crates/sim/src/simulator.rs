@@ -91,6 +91,8 @@ pub struct Sensed<'a> {
     pub tracker: Option<Pose>,
     /// The latest first-beam reading of each range sensor.
     pub latest_range_m: &'a [f64],
+    /// Every beam read at this step (NaN where a sensor did not sample).
+    pub ranges_m: &'a [f64],
 }
 
 impl StepOutput {
@@ -444,6 +446,7 @@ impl Simulator {
                 encoder_ticks,
                 tracker,
                 latest_range_m: &self.latest_range_m,
+                ranges_m: &out.ranges,
             }),
             None => {
                 let obs = Observation {

@@ -97,7 +97,6 @@ struct Running {
     log: MissionLog,
     /// Backend time of the plan's first tick.
     t0_s: Option<f64>,
-    wheels: [f64; 2],
     max_deviation_m: f64,
     window: VecDeque<WindowSample>,
     tick: u64,
@@ -133,7 +132,11 @@ pub struct RobotAgent<B: RobotBackend, S: RobotStore> {
     running: Option<Running>,
     /// Backend time at the last tick.
     backend_t_s: f64,
+    /// The next control period: a tick while a plan runs, a hold (zero
+    /// commanded) while none does and the backend asks for it.
     next_tick_ns: u64,
+    /// The backend wants zero commanded every period while no plan runs.
+    holding: bool,
     next_status_ns: u64,
     handback: Option<(Handback, u64)>,
     backfills: VecDeque<Backfill>,
@@ -199,6 +202,9 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             running: None,
             backend_t_s: 0.0,
             next_tick_ns: 0,
+            // Zero at once on start, and every period after if the robot
+            // needs to hear it.
+            holding: true,
             next_status_ns: 0,
             handback: None,
             backfills: VecDeque::new(),
@@ -528,7 +534,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             }
         });
         [
-            self.running.as_ref().map(|_| self.next_tick_ns),
+            (self.running.is_some() || self.holding).then_some(self.next_tick_ns),
             Some(self.next_status_ns),
             handback,
             self.receiver.poll_timeout(),

@@ -104,7 +104,6 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             localized: false,
             log: MissionLog::new(header),
             t0_s: None,
-            wheels: [0.0, 0.0],
             max_deviation_m: 0.0,
             window: VecDeque::new(),
             tick: 0,
@@ -118,6 +117,10 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
 
     /// Runs every control tick due by `now_ns` (a process that fell behind
     /// catches up, a bounded number of ticks at a time).
+    ///
+    /// While no plan runs, the wheels are commanded zero once a period for
+    /// as long as the backend needs to hear it ([`RobotBackend::hold`]): a
+    /// stopped robot stays stopped on drivers that hold their last command.
     pub(super) fn run_ticks(&mut self, now_ns: u64) {
         let period = self.tick_period_ns();
         let mut budget = 1_000;
@@ -126,26 +129,37 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             self.next_tick_ns += period;
             self.tick(now_ns);
         }
+        if self.running.is_none() && self.holding && self.next_tick_ns <= now_ns {
+            self.holding = self.backend.hold();
+            // No catching up on zeros: one now, the next a period on.
+            self.next_tick_ns += period;
+            if self.next_tick_ns <= now_ns {
+                self.next_tick_ns = now_ns + period;
+            }
+        }
     }
 
     fn tick(&mut self, now_ns: u64) {
         let Some(r) = &mut self.running else {
             return;
         };
-        let Some(reading) = self.backend.step(r.wheels) else {
+        // Where the robot is (encoders, any absolute pose, and its range
+        // readings matched against the plan's map), and what the wheels do
+        // this period: decided on the period's reading and sent in the same
+        // period, so a stop is the very command of the tick that decides it.
+        let decided = self.backend.step(&mut |reading| {
+            let belief = r.nav.update(reading);
+            r.exec.tick(reading, &belief)
+        });
+        let Some(reading) = decided else {
             let reason = "the robot's backend stopped".to_string();
             self.end(Some(Stop::DeadMan { silent_s: 0.0 }), Some(reason), now_ns);
             return;
         };
         self.backend_t_s = reading.t_s;
-        let r = self.running.as_mut().expect("running");
         let t0 = *r.t0_s.get_or_insert(reading.t_s - self.backend.period_s());
-        // Where the robot is: encoders, any absolute pose, and its range
-        // readings matched against the plan's map.
-        let belief = r.nav.update(&reading);
         let pose = pose3(&r.nav.pose());
         let covariance = r.nav.pose_covariance();
-        r.wheels = r.exec.tick(&reading, &belief);
         r.tick += 1;
         // The robot's own log of this period.
         let mut record: StepRecord = reading.record;
@@ -218,6 +232,9 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         let Some(r) = self.running.take() else {
             return;
         };
+        // The stop's own tick commanded zero; from the next period on the
+        // agent holds it for as long as the robot needs to hear it.
+        self.holding = true;
         let plan = r.exec.plan().clone();
         let t = hex(&r.transfer);
         let plan_t_s = r.window.back().map_or(0.0, |w| w.plan_t_s);

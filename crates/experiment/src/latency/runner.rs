@@ -52,12 +52,15 @@ impl<B: RobotBackend> RobotBackend for Recorder<B> {
     fn period_s(&self) -> f64 {
         self.inner.period_s()
     }
-    fn step(&mut self, wheels: [f64; 2]) -> Option<Reading> {
-        let r = self.inner.step(wheels)?;
+    fn step(&mut self, decide: &mut dyn FnMut(&Reading) -> [f64; 2]) -> Option<Reading> {
+        let r = self.inner.step(decide)?;
         self.path.push((r.t_s, r.record.ground_truth));
         let dt_s = self.period_s();
         self.contacts.record(r.record.bump, r.blocked, dt_s);
         Some(r)
+    }
+    fn hold(&mut self) -> bool {
+        self.inner.hold()
     }
     fn wheel_travel_rad(&self) -> f64 {
         self.inner.wheel_travel_rad()

@@ -51,7 +51,7 @@ pub fn run(site: &Path) -> anyhow::Result<()> {
         let (mut bump, mut blocked) = (false, false);
         let mut last = None;
         for _ in 0..steps as u64 {
-            let Some(r) = backend.step(wheels) else {
+            let Some(r) = backend.step(&mut |_| wheels) else {
                 bail!("the site's simulation ended");
             };
             if let Some(t) = r.encoder_ticks {

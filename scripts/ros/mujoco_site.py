@@ -1,0 +1,264 @@
+"""A site in MuJoCo: the physics engine as the robot behind the fake ROS 2
+driver (`fake_driver.py --physics mujoco`), a fairer robot than twindrive's
+own simulator because nothing in it was written by twindrive.
+
+From a twindrive site file it builds:
+  - the site's walls (segments, polylines) and blocks (rectangles) as boxes;
+  - a differential-drive robot: a cylindrical chassis of the site's
+    footprint, two wheels of the site's *true* diameters on hinges the
+    site's true wheelbase apart, each driven by a velocity servo with a
+    finite gain and a torque limit (MuJoCo's `velocity` actuator), rotor
+    inertia, tyres with rubber-on-floor friction, and two casters that
+    drag a little;
+  - range sensors by ray casting (`mj_ray`) from each sensor's mount, with
+    the site's noise, dropouts, minimum and maximum range;
+  - a bumper from contacts: the chassis touching a wall within the bumper's
+    arc (detected `contact_margin_m` early, as the site file says).
+Encoders read the wheel hinges. Its `step(left, right, steps)` returns what
+`twindrive site-sim` prints for one line, so the driver can use either.
+"""
+
+import math
+
+import mujoco
+import numpy as np
+
+WALL_HEIGHT_M = 0.25
+WALL_THICKNESS_M = 0.004
+CHASSIS_MASS_KG = 2.5
+CHASSIS_HALF_HEIGHT_M = 0.03
+WHEEL_MASS_KG = 0.08
+WHEEL_HALF_WIDTH_M = 0.008
+# A small geared DC motor's rotor inertia seen at the wheel (kg m^2).
+ROTOR_INERTIA = 2e-5
+CASTER_RADIUS_M = 0.01
+TYRE_FRICTION = 1.0
+CASTER_FRICTION = 0.02
+# The casters stand this far off a level floor: the wheels carry the
+# robot, and a caster takes its share when the chassis pitches.
+CASTER_LIFT_M = 0.0005
+TIMESTEP_S = 0.001
+# Walls and blocks are in geom group 0 (what rays see), the robot in 1.
+WALLS, ROBOT = 0, 1
+
+
+def _wall_boxes(world):
+    """(centre x, y, half length, half width, yaw) of every wall and block."""
+    boxes = []
+    segments = [tuple(map(tuple, s)) for s in world.get("segments", [])]
+    for line in world.get("polylines", []):
+        pts = [tuple(p) for p in line["points"]]
+        if line.get("closed"):
+            pts.append(pts[0])
+        segments.extend(zip(pts, pts[1:]))
+    for (x0, y0), (x1, y1) in segments:
+        length = math.hypot(x1 - x0, y1 - y0)
+        if length == 0.0:
+            continue
+        boxes.append(((x0 + x1) / 2, (y0 + y1) / 2,
+                      length / 2 + WALL_THICKNESS_M / 2, WALL_THICKNESS_M / 2,
+                      math.atan2(y1 - y0, x1 - x0)))
+    for r in world.get("rectangles", []):
+        (x0, y0), (x1, y1) = r["min"], r["max"]
+        boxes.append(((x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) / 2, (y1 - y0) / 2, 0.0))
+    if "map" in world:
+        raise ValueError("a site drawn from an occupancy map cannot be built in MuJoCo here "
+                         "(walls, polylines and rectangles can)")
+    return boxes
+
+
+def model_xml(site, kv_nm_s, torque_limit_nm):
+    """The MJCF of `site` (a parsed twindrive site file)."""
+    robot = site["robot"]
+    truth = robot["true_params"]
+    r_left, r_right = truth["left_diameter_m"] / 2, truth["right_diameter_m"] / 2
+    axle_z = (r_left + r_right) / 2
+    half_base = truth["wheelbase_m"] / 2
+    footprint = robot["footprint_radius_m"]
+    margin = site.get("bump", {}).get("contact_margin_m", 0.0)
+    walls = []
+    for k, (x, y, hl, hw, yaw) in enumerate(_wall_boxes(site["world"])):
+        walls.append(
+            f'<geom name="wall{k}" type="box" group="{WALLS}" pos="{x} {y} {WALL_HEIGHT_M / 2}" '
+            f'size="{hl} {hw} {WALL_HEIGHT_M / 2}" euler="0 0 {yaw}" rgba=".6 .6 .6 1"/>')
+    casters = []
+    for name, cx in (("front", footprint - 0.03), ("back", -(footprint - 0.03))):
+        casters.append(
+            f'<geom name="caster_{name}" type="sphere" group="{ROBOT}" size="{CASTER_RADIUS_M}" '
+            f'pos="{cx} 0 {-(axle_z - CASTER_RADIUS_M) + CASTER_LIFT_M}" mass="0.01" '
+            f'friction="{CASTER_FRICTION} 0.001 0.0001"/>')
+    chassis_z = 0.012 + CHASSIS_HALF_HEIGHT_M - axle_z
+    wheels = []
+    for name, y, r in (("left", half_base, r_left), ("right", -half_base, r_right)):
+        wheels.append(f"""
+      <body name="{name}_wheel" pos="0 {y} {r - axle_z}">
+        <joint name="{name}" type="hinge" axis="0 1 0" armature="{ROTOR_INERTIA}" damping="1e-4"/>
+        <geom name="{name}_tyre" type="cylinder" group="{ROBOT}" size="{r} {WHEEL_HALF_WIDTH_M}"
+              euler="{math.pi / 2} 0 0" mass="{WHEEL_MASS_KG}" friction="{TYRE_FRICTION} 0.005 0.0001"/>
+      </body>""")
+    return f"""
+<mujoco model="{site.get('name', 'site')}">
+  <compiler angle="radian"/>
+  <option timestep="{TIMESTEP_S}" integrator="implicitfast"/>
+  <worldbody>
+    <!-- MuJoCo takes the larger friction of a pair: the floor's is the
+         casters', the tyres' their own. -->
+    <geom name="floor" type="plane" group="2" size="0 0 0.05" friction="{CASTER_FRICTION} 0.001 0.0001"/>
+    {''.join(walls)}
+    <body name="chassis" pos="0 0 {axle_z}">
+      <freejoint name="base"/>
+      <geom name="chassis" type="cylinder" group="{ROBOT}" size="{footprint} {CHASSIS_HALF_HEIGHT_M}"
+            pos="0 0 {chassis_z}" mass="{CHASSIS_MASS_KG}" margin="{margin}" gap="{margin}"/>
+      {''.join(casters)}
+      {''.join(wheels)}
+    </body>
+  </worldbody>
+  <contact>
+    <exclude body1="chassis" body2="left_wheel"/>
+    <exclude body1="chassis" body2="right_wheel"/>
+  </contact>
+  <actuator>
+    <velocity name="left" joint="left" kv="{kv_nm_s}" forcelimited="true" forcerange="{-torque_limit_nm} {torque_limit_nm}"/>
+    <velocity name="right" joint="right" kv="{kv_nm_s}" forcelimited="true" forcerange="{-torque_limit_nm} {torque_limit_nm}"/>
+  </actuator>
+</mujoco>
+"""
+
+
+class MujocoSite:
+    """The site and its robot in MuJoCo, stepped as `twindrive site-sim` is."""
+
+    def __init__(self, site, seed=0, kv_nm_s=0.08, torque_limit_nm=0.25):
+        self.site = site
+        self.dt = site["simulation"]["dt_s"]
+        self.kv_nm_s = kv_nm_s
+        self.torque_limit_nm = torque_limit_nm
+        self.model = mujoco.MjModel.from_xml_string(model_xml(site, kv_nm_s, torque_limit_nm))
+        self.data = mujoco.MjData(self.model)
+        self.rng = np.random.default_rng(seed)
+        self.substeps = max(1, round(self.dt / TIMESTEP_S))
+        m = self.model
+        self.chassis_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "chassis")
+        self.chassis_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "chassis")
+        self.joint_q = [m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]
+                        for n in ("left", "right")]
+        self.joint_v = [m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]
+                        for n in ("left", "right")]
+        self.wall_geoms = {g for g in range(m.ngeom) if m.geom_group[g] == WALLS}
+        self.sensors = site.get("range_sensors", [])
+        bump = site.get("bump", {})
+        self.bump_arc = bump.get("arc_rad", math.pi)
+        self.max_wheel = site["robot"]["max_wheel_speed_rad_s"]
+        start = site["robot"]["start"]
+        self.place(start["x_m"], start["y_m"], start["heading_rad"])
+        self.t = 0.0
+
+    def place(self, x, y, heading):
+        """Puts the robot at rest at (x, y, heading) and lets it settle."""
+        mujoco.mj_resetData(self.model, self.data)
+        q = self.data.qpos
+        q[0:3] = (x, y, self.model.body_pos[self.chassis_body][2] + 0.002)
+        q[3:7] = (math.cos(heading / 2), 0.0, 0.0, math.sin(heading / 2))
+        mujoco.mj_forward(self.model, self.data)
+        for _ in range(200):
+            mujoco.mj_step(self.model, self.data)
+        self.start_wheel = [self.data.qpos[a] for a in self.joint_q]
+
+    def pose(self):
+        x, y = self.data.xpos[self.chassis_body][:2]
+        w, qx, qy, qz = self.data.xquat[self.chassis_body]
+        return float(x), float(y), math.atan2(2 * (w * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+
+    def speed_m_s(self):
+        """The chassis's speed over the floor."""
+        return float(np.hypot(*self.data.qvel[0:2]))
+
+    def _contacts(self):
+        """(bumper pressed, touching a wall) from the chassis's contacts."""
+        x, y, th = self.pose()
+        bump = touching = False
+        for c in self.data.contact[: self.data.ncon]:
+            pair = {c.geom1, c.geom2}
+            if self.chassis_geom not in pair or not (pair & self.wall_geoms):
+                continue
+            bearing = math.atan2(c.pos[1] - y, c.pos[0] - x) - th
+            bearing = math.atan2(math.sin(bearing), math.cos(bearing))
+            if abs(bearing) <= self.bump_arc / 2:
+                bump = True
+            if c.dist <= 0.0:
+                touching = True
+        return bump, touching
+
+    def _ranges(self):
+        x, y, th = self.pose()
+        z = float(self.data.xpos[self.chassis_body][2])
+        groups = np.zeros(6, dtype=np.uint8)
+        groups[WALLS] = 1
+        geomid = np.zeros(1, dtype=np.int32)
+        out = []
+        for s in self.sensors:
+            m = s["mount"]
+            ox = x + m["x_m"] * math.cos(th) - m["y_m"] * math.sin(th)
+            oy = y + m["x_m"] * math.sin(th) + m["y_m"] * math.cos(th)
+            beams = s.get("beams", 1)
+            fov = s.get("fov_rad", 0.0)
+            step = fov / max(beams - 1, 1) if beams > 1 else 0.0
+            lo, hi = s.get("min_range_m", 0.0), s["max_range_m"]
+            for k in range(beams):
+                a = th + m["heading_rad"] + (-fov / 2 + k * step if beams > 1 else 0.0)
+                d = mujoco.mj_ray(self.model, self.data, np.array([ox, oy, z]),
+                                  np.array([math.cos(a), math.sin(a), 0.0]), groups, 1, -1, geomid)
+                r = hi if d < 0 or d >= hi else d
+                if r < hi:
+                    r = min(max(r + s.get("noise_std_m", 0.0) * self.rng.standard_normal(), lo), hi)
+                if self.rng.random() < s.get("dropout_probability", 0.0):
+                    r = hi
+                out.append(r)
+        return out
+
+    def step(self, left, right, steps):
+        """Drives the wheels at (left, right) rad/s (scaled down together to
+        the robot's limit) for `steps` site periods; what site-sim prints."""
+        peak = max(abs(left), abs(right))
+        if peak > self.max_wheel:
+            left, right = left * self.max_wheel / peak, right * self.max_wheel / peak
+        self.data.ctrl[:] = (left, right)
+        bump = blocked = False
+        for _ in range(steps):
+            for _ in range(self.substeps):
+                mujoco.mj_step(self.model, self.data)
+            b, touching = self._contacts()
+            bump |= b
+            blocked |= touching
+            self.t += self.dt
+        return {
+            "t_s": self.t,
+            "wheel_rad": [float(self.data.qpos[a] - s) for a, s in zip(self.joint_q, self.start_wheel)],
+            "wheel_rad_s": [float(self.data.qvel[a]) for a in self.joint_v],
+            "bump": bump,
+            "blocked": blocked,
+            "ranges_m": self._ranges(),
+            "pose": list(self.pose()),
+        }
+
+    def close(self):
+        """Nothing to release: the model lives in this process."""
+
+    def braking_distance_m(self, speed_m_s):
+        """How far this robot rolls on open floor from `speed_m_s` straight
+        ahead once its wheels are commanded zero (m): an experiment on the
+        same model, away from every wall."""
+        probe = MujocoSite({**self.site, "world": {}}, 0, self.kv_nm_s, self.torque_limit_nm)
+        r = sum(self.site["robot"]["true_params"][k] for k in ("left_diameter_m", "right_diameter_m")) / 4
+        w = speed_m_s / r
+        for _ in range(int(3.0 / probe.dt)):
+            probe.step(w, w, 1)
+            if abs(probe.speed_m_s() - speed_m_s) < 0.01 * max(speed_m_s, 0.01):
+                break
+        x0, y0, _ = probe.pose()
+        for _ in range(int(3.0 / probe.dt)):
+            probe.step(0.0, 0.0, 1)
+            if probe.speed_m_s() < 1e-4:
+                break
+        x1, y1, _ = probe.pose()
+        return math.hypot(x1 - x0, y1 - y0)
