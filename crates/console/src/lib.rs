@@ -173,12 +173,7 @@ async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
         let seed = config.seed;
         let stop = stop.clone();
         Some(tokio::spawn(async move {
-            let session = match twindrive_net::open_session_patiently(
-                &options,
-                Duration::from_secs(100 * 365 * 86_400),
-            )
-            .await
-            {
+            let session = match twindrive_net::open_session(&options).await {
                 Ok(s) => s,
                 Err(e) => {
                     tracing::error!("no zenoh session: {e:#}");

@@ -3,7 +3,7 @@
 //! [`open_session`] opens a zenoh session: peer mode with multicast
 //! scouting off by default (loopback, or `--listen` / `--connect` endpoints
 //! for two machines), or any standard zenoh JSON5 configuration (TLS, QUIC,
-//! client mode through a router). [`drive`] runs one of `twindrive-link`'s
+//! client mode through a router), within a bounded time (`session`). [`drive`] runs one of `twindrive-link`'s
 //! state machines over a session: it publishes what the machine wants sent
 //! on one key expression, feeds it what arrives on another, and wakes it
 //! when it asks; with a [`twindrive_link::LinkEmulator`] pair it puts the
@@ -17,10 +17,14 @@
 //! fragments a large message.
 
 pub mod ros;
+mod session;
+
+pub use session::{
+    OPEN_TIMEOUT, SessionError, SessionOptions, endpoints, open_session, plain_error,
+};
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
-use std::path::Path;
 use std::time::{Duration, Instant};
 pub use zenoh::Session;
 
@@ -37,91 +41,6 @@ pub fn up_key(robot_id: &str) -> String {
 /// Robot → master messages for robot `id`.
 pub fn down_key(robot_id: &str) -> String {
     format!("twindrive/{robot_id}/down")
-}
-
-/// How to open a session.
-#[derive(Debug, Clone, Default)]
-pub struct SessionOptions {
-    /// Endpoints to listen on (`tcp/127.0.0.1:7447`).
-    pub listen: Vec<String>,
-    /// Endpoints to connect to.
-    pub connect: Vec<String>,
-    /// A zenoh JSON5 configuration file; when given, it decides everything
-    /// (`listen` and `connect` are added to it).
-    pub config_file: Option<std::path::PathBuf>,
-    /// `peer` (default), `client` (through a router) or `router`.
-    pub mode: Option<String>,
-}
-
-/// Opens a zenoh session as `options` say: by default peer mode, multicast
-/// scouting off.
-pub async fn open_session(options: &SessionOptions) -> anyhow::Result<zenoh::Session> {
-    let mut config = match &options.config_file {
-        Some(path) => load_config(path)?,
-        None => {
-            let mut c = zenoh::Config::default();
-            set(&mut c, "mode", "\"peer\"")?;
-            set(&mut c, "scouting/multicast/enabled", "false")?;
-            c
-        }
-    };
-    if let Some(mode) = &options.mode {
-        set(&mut config, "mode", &format!("{mode:?}"))?;
-    }
-    if !options.listen.is_empty() {
-        set(&mut config, "listen/endpoints", &json_list(&options.listen))?;
-    }
-    if !options.connect.is_empty() {
-        set(
-            &mut config,
-            "connect/endpoints",
-            &json_list(&options.connect),
-        )?;
-    }
-    zenoh::open(config)
-        .await
-        .map_err(|e| anyhow::anyhow!("opening the zenoh session: {e}"))
-}
-
-/// [`open_session`], tried again every second while it fails (a client
-/// whose router is not up yet, a network still coming up), for at most
-/// `patience`. A robot that boots before its link must not give up.
-pub async fn open_session_patiently(
-    options: &SessionOptions,
-    patience: Duration,
-) -> anyhow::Result<zenoh::Session> {
-    let started = Instant::now();
-    loop {
-        match open_session(options).await {
-            Ok(s) => return Ok(s),
-            Err(e) if started.elapsed() < patience => {
-                tracing::warn!("{e:#}; trying again in 1 s");
-                tokio::time::sleep(Duration::from_secs(1)).await;
-            }
-            Err(e) => {
-                return Err(e.context(format!(
-                    "gave up after {:.0} s",
-                    started.elapsed().as_secs_f64()
-                )));
-            }
-        }
-    }
-}
-
-fn load_config(path: &Path) -> anyhow::Result<zenoh::Config> {
-    zenoh::Config::from_file(path)
-        .map_err(|e| anyhow::anyhow!("{}: not a zenoh configuration: {e}", path.display()))
-}
-
-fn set(config: &mut zenoh::Config, key: &str, value: &str) -> anyhow::Result<()> {
-    config
-        .insert_json5(key, value)
-        .map_err(|e| anyhow::anyhow!("zenoh configuration `{key}` = {value}: {e}"))
-}
-
-fn json_list(items: &[String]) -> String {
-    let quoted: Vec<String> = items.iter().map(|e| format!("{e:?}")).collect();
-    format!("[{}]", quoted.join(","))
 }
 
 /// How long [`drive`] waits for the other side's subscriber before it

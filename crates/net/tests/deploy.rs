@@ -36,7 +36,7 @@ async fn robot_and_master_configured_by_deploy_meet_through_its_router() {
             vec![endpoint.clone()]
         },
         config_file: Some(deploy(file)),
-        mode: None,
+        ..SessionOptions::default()
     };
     let router = open_session(&options("router.json5", true)).await.unwrap();
     let robot = open_session(&options("robot.json5", false)).await.unwrap();

@@ -6,7 +6,7 @@
 //! master's and each robot's. Written whole or not at all; never over keys
 //! that exist.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use rcgen::{
@@ -59,10 +59,6 @@ pub fn write(request: &CertsRequest) -> anyhow::Result<Vec<String>> {
     {
         bail!("a robot cannot be called `{id}`: its files would clash with the {id}'s");
     }
-    // The configurations name the files by absolute path (zenoh reads them
-    // relative to the process's directory otherwise).
-    let absolute = std::path::absolute(out)
-        .with_context(|| format!("the absolute path of {}", out.display()))?;
     let staging = twindrive_files::Staging::new(out, "certs")?;
     let (not_before, not_after) = validity(request.days);
 
@@ -124,20 +120,25 @@ pub fn write(request: &CertsRequest) -> anyhow::Result<Vec<String>> {
     write_file(
         &staging,
         "router.json5",
-        router_config(&absolute, request.port, &request.robots).as_bytes(),
+        router_config(
+            &listen_address(&request.router_hosts),
+            request.port,
+            &request.robots,
+        )
+        .as_bytes(),
         0o644,
     )?;
     write_file(
         &staging,
         "master.json5",
-        client_config(&absolute, "master", &connect).as_bytes(),
+        client_config("master", &connect).as_bytes(),
         0o644,
     )?;
     for id in &request.robots {
         write_file(
             &staging,
             &format!("{id}.json5"),
-            client_config(&absolute, id, &connect).as_bytes(),
+            client_config(id, &connect).as_bytes(),
             0o644,
         )?;
     }
@@ -180,16 +181,36 @@ fn validity(days: u32) -> (time::OffsetDateTime, time::OffsetDateTime) {
     )
 }
 
-fn path(dir: &Path, name: &str) -> String {
-    format!("{:?}", dir.join(name).display().to_string())
+/// A file of the fleet's directory as a configuration names it: by its
+/// name alone, relative to the configuration (twindrive reads it so), so
+/// the directory works wherever it is copied.
+fn path(name: &str) -> String {
+    format!("{name:?}")
+}
+
+/// Where the router listens: on loopback only when every name it is
+/// reached at is a loopback one (a fleet tried on one machine), else on
+/// every interface.
+fn listen_address(router_hosts: &[String]) -> String {
+    let loopback = |h: &String| {
+        h == "localhost"
+            || h.parse::<std::net::IpAddr>()
+                .is_ok_and(|ip| ip.is_loopback())
+    };
+    if router_hosts.iter().all(loopback) {
+        "127.0.0.1".into()
+    } else {
+        "0.0.0.0".into()
+    }
 }
 
 /// A client's configuration: through the router, over TLS, with its own
 /// certificate.
-fn client_config(dir: &Path, name: &str, connect: &str) -> String {
+fn client_config(name: &str, connect: &str) -> String {
     format!(
         r#"// `{name}`'s zenoh configuration: a client of the fleet's router over
-// TLS with mutual authentication (written by `twindrive certs`).
+// TLS with mutual authentication (written by `twindrive certs`). File
+// names are relative to this file's directory: keep them together.
 {{
   mode: "client",
   connect: {{ endpoints: ["{connect}"] }},
@@ -207,15 +228,15 @@ fn client_config(dir: &Path, name: &str, connect: &str) -> String {
   }},
 }}
 "#,
-        ca = path(dir, "ca.pem"),
-        cert = path(dir, &format!("{name}.pem")),
-        key = path(dir, &format!("{name}.key")),
+        ca = path("ca.pem"),
+        cert = path(&format!("{name}.pem")),
+        key = path(&format!("{name}.key")),
     )
 }
 
 /// The router's configuration: TLS only, clients must show a certificate
 /// of the fleet's CA, and each robot reaches only its own key expressions.
-fn router_config(dir: &Path, port: u16, robots: &[String]) -> String {
+fn router_config(address: &str, port: u16, robots: &[String]) -> String {
     let mut rules = vec![format!(
         r#"      {{ id: "master", messages: ["put", "declare_subscriber"], flows: ["ingress", "egress"], permission: "allow", key_exprs: ["twindrive/**"] }},"#
     )];
@@ -243,10 +264,12 @@ fn router_config(dir: &Path, port: u16, robots: &[String]) -> String {
 // --zenoh-config router.json5` (or `zenohd -c router.json5`). A client
 // without a certificate of this fleet's CA is refused; a robot may publish
 // only on twindrive/ID/down and subscribe only to twindrive/ID/up; the
-// master (common name {MASTER_CN}) reaches every robot's.
+// master (common name {MASTER_CN}) reaches every robot's. File names are
+// relative to this file's directory (`zenohd -c` reads them relative to
+// where it runs: start it in this directory).
 {{
   mode: "router",
-  listen: {{ endpoints: ["tls/0.0.0.0:{port}"] }},
+  listen: {{ endpoints: ["tls/{address}:{port}"] }},
   scouting: {{ multicast: {{ enabled: false }} }},
   transport: {{
     link: {{
@@ -273,9 +296,9 @@ fn router_config(dir: &Path, port: u16, robots: &[String]) -> String {
   }},
 }}
 "#,
-        ca = path(dir, "ca.pem"),
-        cert = path(dir, "router.pem"),
-        key = path(dir, "router.key"),
+        ca = path("ca.pem"),
+        cert = path("router.pem"),
+        key = path("router.key"),
         rules = rules.join("\n"),
         subjects = subjects.join("\n"),
         policies = policies.join("\n"),

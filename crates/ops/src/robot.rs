@@ -64,14 +64,14 @@ pub fn run(args: &RobotConfig) -> anyhow::Result<()> {
             let bridge = twindrive_agent::ros::RosBridge::new(ros, &site, 0.0)
                 .map_err(|e| anyhow::anyhow!("--site {}: {e}", args.site_path.display()))?;
             let options = SessionOptions {
-                listen: Vec::new(),
                 connect: bridge.config().connect.clone(),
-                config_file: None,
-                mode: None,
+                patience: args.zenoh.patience,
+                ..SessionOptions::default()
             };
-            let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
             let (backend, ros_session) = rt.block_on(async {
-                let session = twindrive_net::open_session_patiently(&options, deadline).await?;
+                let session = twindrive_net::open_session(&options)
+                    .await
+                    .context("the robot's ROS 2 network (the site's [ros] connect)")?;
                 let backend = twindrive_net::ros::RosBackend::open(
                     &session,
                     bridge,
@@ -129,8 +129,11 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
     let options = args.zenoh.clone();
     let deadline = Duration::from_secs_f64(args.run_for.unwrap_or(1e9));
     rt.block_on(async {
-        // A robot that boots before its router or its network keeps trying.
-        let session = twindrive_net::open_session_patiently(&options, deadline).await?;
+        // A robot that boots before its router or its network keeps trying
+        // (for --connect-timeout), and one that cannot listen stops at once.
+        let session = twindrive_net::open_session(&options)
+            .await
+            .context("the link to the master")?;
         eprintln!(
             "robot {}: listening on {} for plans signed by {} trusted key(s); every message sealed with key {}",
             args.id,

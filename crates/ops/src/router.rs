@@ -2,21 +2,38 @@
 
 use std::path::PathBuf;
 
-use twindrive_net::{SessionOptions, open_session};
+use twindrive_net::{SessionOptions, endpoints, open_session};
 
 use crate::runtime;
 
-/// Runs a zenoh router listening on `listen` until Ctrl-C.
+/// Where a router listens with neither `--listen` nor a configuration file.
+pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7447";
+
+/// Runs a zenoh router until Ctrl-C: on `listen` when given, else where
+/// the configuration file says (`twindrive certs`' `router.json5`: TLS),
+/// else on [`DEFAULT_LISTEN`].
 pub fn run(listen: Vec<String>, zenoh_config: Option<PathBuf>) -> anyhow::Result<()> {
+    let listen = if listen.is_empty() && zenoh_config.is_none() {
+        vec![DEFAULT_LISTEN.to_string()]
+    } else {
+        listen
+    };
     let options = SessionOptions {
-        listen: listen.clone(),
-        connect: Vec::new(),
+        listen,
         config_file: zenoh_config,
         mode: Some("router".into()),
+        ..SessionOptions::default()
     };
+    let config = options.config()?;
+    let listening = endpoints(&config, "listen");
+    if listening.is_empty() {
+        anyhow::bail!(
+            "the router has no endpoint to listen on: give --listen, or a configuration with listen.endpoints"
+        );
+    }
     runtime()?.block_on(async {
         let session = open_session(&options).await?;
-        eprintln!("router: listening on {}", listen.join(", "));
+        eprintln!("router: listening on {}", listening.join(", "));
         tokio::signal::ctrl_c().await.ok();
         let _ = session.close().await;
         anyhow::Ok(())

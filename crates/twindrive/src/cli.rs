@@ -259,11 +259,17 @@ pub enum Command {
     },
     /// Run a zenoh router for a fleet: robots and masters connect to it
     /// (`--connect tcp/HOST:PORT`) instead of to each other.
+    ///
+    /// Listens where --listen says; without it, where --zenoh-config's
+    /// listen.endpoints say (`twindrive certs`' router.json5: TLS on the
+    /// port it was made for); with neither, on tcp/127.0.0.1:7447.
     Router {
-        /// Endpoint to listen on.
-        #[arg(long, value_name = "ENDPOINT", default_value = "tcp/127.0.0.1:7447")]
+        /// Endpoint to listen on, in place of the configuration's;
+        /// repeatable (default without --zenoh-config: tcp/127.0.0.1:7447).
+        #[arg(long, value_name = "ENDPOINT")]
         listen: Vec<String>,
-        /// A zenoh JSON5 configuration file (mode is set to router).
+        /// A zenoh JSON5 configuration file (its mode is set to router;
+        /// certificate paths in it are relative to the file).
         #[arg(long, value_name = "FILE")]
         zenoh_config: Option<PathBuf>,
     },
@@ -466,9 +472,15 @@ pub struct ZenohArgs {
     /// A standard zenoh JSON5 configuration (client mode through a router,
     /// TLS with mutual authentication as `twindrive certs` writes it,
     /// timeouts; this build speaks TCP, UDP, TLS and QUIC); --listen and
-    /// --connect are added to it.
+    /// --connect replace its endpoints when given; certificate paths in
+    /// it are relative to the file.
     #[arg(long, value_name = "FILE")]
     pub zenoh_config: Option<PathBuf>,
+    /// While nothing answers at the endpoints to connect to (a router not
+    /// up yet), try again every second for this long, then exit 1 with
+    /// what was tried.
+    #[arg(long, value_name = "SECONDS", default_value_t = 60.0, value_parser = usage::seconds)]
+    pub connect_timeout: f64,
 }
 
 #[derive(Debug, clap::Args)]

@@ -6,6 +6,7 @@ mod commands;
 mod flags;
 mod usage;
 
+use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
 
 use clap::{CommandFactory, FromArgMatches};
@@ -13,13 +14,22 @@ use clap::{CommandFactory, FromArgMatches};
 fn main() -> ExitCode {
     let matches = usage::negative_numbers_as_values(cli::Args::command()).get_matches();
     let args = cli::Args::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
+    // Colour and zenoh's Rust source locations only on a terminal: a log
+    // file or a journal gets plain lines.
+    let terminal = std::io::stderr().is_terminal();
+    let subscriber = tracing_subscriber::fmt()
+        .with_ansi(terminal)
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .init();
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+                // zenoh's "scouting delay elapsed" says nothing a user can act on.
+                tracing_subscriber::EnvFilter::new("warn,zenoh::net::runtime::orchestrator=error")
+            }),
+        );
+    if terminal {
+        subscriber.with_writer(std::io::stderr).init();
+    } else {
+        subscriber.with_writer(|| PlainStderr).init();
+    }
     match commands::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
@@ -31,7 +41,7 @@ fn main() -> ExitCode {
             {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("error: {}", message(&err));
+            eprintln!("error: {}", twindrive_net::plain_error(&message(&err)));
             if usage::is_usage(&err) {
                 eprintln!("\nFor more information, try '--help'.");
                 ExitCode::from(2)
@@ -42,6 +52,27 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         }
+    }
+}
+
+/// Standard error for log lines when it is not a terminal: each line
+/// without colour codes and without the Rust source locations zenoh's
+/// errors carry.
+struct PlainStderr;
+
+impl Write for PlainStderr {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let text = String::from_utf8_lossy(buf);
+        let mut plain: Vec<String> = text.lines().map(twindrive_net::plain_error).collect();
+        if text.ends_with('\n') {
+            plain.push(String::new());
+        }
+        std::io::stderr().write_all(plain.join("\n").as_bytes())?;
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        std::io::stderr().flush()
     }
 }
 

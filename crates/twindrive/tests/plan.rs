@@ -19,7 +19,10 @@ fn s(p: &Path) -> &str {
 fn mission() -> &'static (PathBuf, PathBuf) {
     static M: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     M.get_or_init(|| {
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("plan-test-mission");
+        // One per test process: nextest runs each test in a process of its
+        // own, and they must not remove each other's.
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("plan-test-mission-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let log = dir.join("wf");

@@ -95,6 +95,9 @@ pub fn run(args: &ConsoleArgs) -> anyhow::Result<()> {
             connect: args.connect.clone(),
             config_file: args.zenoh_config.clone(),
             mode: None,
+            // The console serves the twin without its robots too: it keeps
+            // trying while no router answers, and says so on its log.
+            patience: std::time::Duration::from_secs(365 * 86_400),
         },
         link,
         seed: args.seed,

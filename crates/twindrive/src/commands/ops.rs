@@ -20,6 +20,7 @@ fn session_options(z: &ZenohArgs) -> SessionOptions {
         connect: z.connect.clone(),
         config_file: z.zenoh_config.clone(),
         mode: None,
+        patience: std::time::Duration::from_secs_f64(z.connect_timeout),
     }
 }
 

@@ -1,0 +1,364 @@
+//! A field team's first deployment, as the README tells it: the TLS recipe
+//! run as it is written (its shell block, through bash, with the built
+//! binary on PATH), and what happens when an endpoint is wrong: a process
+//! that cannot listen, or cannot reach its router, says why and exits 1
+//! within a bounded time, with no Rust source path in what it prints.
+
+mod common;
+
+use std::os::unix::process::CommandExt;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{Proc, fixture, python, repo, text, twindrive};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The shell block that follows README's `tls-recipe` marker.
+fn readme_tls_recipe() -> String {
+    let readme = std::fs::read_to_string(repo().join("README.md")).unwrap();
+    let from = readme
+        .find("<!-- tls-recipe")
+        .expect("README marks its TLS recipe");
+    let block = &readme[from..];
+    let start = block.find("```sh\n").expect("a sh block after the marker") + 6;
+    let end = start + block[start..].find("```").unwrap();
+    block[start..end].to_string()
+}
+
+/// A shell and everything it starts, killed as a process group when
+/// dropped.
+struct Group(std::process::Child);
+
+impl Group {
+    /// Waits (bounded: a test fails rather than hangs) for the shell.
+    fn wait(&mut self, limit_s: f64) -> Option<i32> {
+        let start = Instant::now();
+        loop {
+            if let Some(status) = self.0.try_wait().unwrap() {
+                return status.code();
+            }
+            assert!(
+                start.elapsed().as_secs_f64() < limit_s,
+                "the recipe did not finish in {limit_s} s"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for Group {
+    fn drop(&mut self) {
+        let pgid = self.0.id().to_string();
+        let _ = Command::new("kill")
+            .args(["-KILL", "--", &format!("-{pgid}")])
+            .status();
+        let _ = self.0.wait();
+    }
+}
+
+/// Whether something on 127.0.0.1 accepts connections on `port`.
+fn listening(port: u16) -> bool {
+    std::net::TcpStream::connect_timeout(
+        &std::net::SocketAddr::from(([127, 0, 0, 1], port)),
+        Duration::from_millis(200),
+    )
+    .is_ok()
+}
+
+/// `scripts/forger.py capture` for a second on `endpoint` over TLS,
+/// trusting `ca`, showing `cert` (certificate, key) if given: its exit code
+/// (3: it could not connect) and what it said.
+fn capture(
+    endpoint: &str,
+    file: &Path,
+    ca: &Path,
+    cert: Option<(&Path, &Path)>,
+) -> (Option<i32>, String) {
+    let mut args = vec![
+        "capture",
+        endpoint,
+        "twindrive/rover/up",
+        s(file),
+        "--for",
+        "1",
+        "--ca",
+        s(ca),
+    ];
+    if let Some((pem, key)) = cert {
+        args.extend(["--cert", s(pem), "--private-key", s(key)]);
+    }
+    common::finish(
+        Proc(
+            Command::new(python())
+                .arg(repo().join("scripts/forger.py"))
+                .args(&args)
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        ),
+        60.0,
+    )
+}
+
+#[test]
+fn the_readme_tls_recipe_runs_as_written() {
+    let recipe = readme_tls_recipe();
+    assert!(recipe.contains("twindrive certs"), "{recipe}");
+    // The recipe's router takes certs' default port on loopback.
+    assert!(
+        !listening(7447),
+        "127.0.0.1:7447 is taken: the README's recipe needs it free"
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    // Where the recipe runs: a checkout's scenarios, and a plan where the
+    // demo writes one (the fixture's 30 s plan stands in for the demo's).
+    std::os::unix::fs::symlink(repo().join("scenarios"), d.join("scenarios")).unwrap();
+    std::fs::create_dir_all(d.join("twindrive-out/plan")).unwrap();
+    std::fs::copy(
+        fixture().path("plan/plan.json"),
+        d.join("twindrive-out/plan/plan.json"),
+    )
+    .unwrap();
+    let bin_dir = Path::new(env!("CARGO_BIN_EXE_twindrive")).parent().unwrap();
+    let path = format!(
+        "{}:{}",
+        bin_dir.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let log = d.join("recipe.log");
+    let shell = Group(
+        Command::new("bash")
+            .args(["-e", "-c", &recipe])
+            .current_dir(d)
+            .env("PATH", path)
+            .stdin(Stdio::null())
+            .stdout(std::fs::File::create(&log).unwrap())
+            .stderr(std::fs::File::create(d.join("recipe.err")).unwrap())
+            .process_group(0)
+            .spawn()
+            .unwrap(),
+    );
+    // While the recipe's router runs: a client that trusts the fleet's CA
+    // but shows no certificate is refused.
+    let started = Instant::now();
+    while !listening(7447) {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the recipe's router never listened on 127.0.0.1:7447: {}",
+            std::fs::read_to_string(d.join("recipe.err")).unwrap_or_default()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (code, err) = capture(
+        "tls/localhost:7447",
+        &d.join("nothing.bin"),
+        &d.join("tls-trial/certs/ca.pem"),
+        None,
+    );
+    assert_eq!(
+        code,
+        Some(3),
+        "a client without a certificate got in: {err}"
+    );
+    let mut shell = shell;
+    let code = shell.wait(400.0);
+    let err = std::fs::read_to_string(d.join("recipe.err")).unwrap_or_default();
+    assert_eq!(code, Some(0), "the recipe failed: {err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("tls-trial/master/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["outcome"], "completed", "{report}");
+    assert!(
+        !err.contains(".cargo/registry") && !err.contains('\u{1b}'),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_fleets_files_work_where_they_are_copied() {
+    let tmp = tempfile::tempdir().unwrap();
+    let made = tmp.path().join("made");
+    let port = common::port().to_string();
+    let o = twindrive(&[
+        "certs",
+        "--out",
+        s(&made),
+        "--robot",
+        "rover",
+        "--port",
+        &port,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // The whole directory moved, as to the robot and the operator's machine.
+    let copied = tmp.path().join("elsewhere/certs");
+    std::fs::create_dir_all(copied.parent().unwrap()).unwrap();
+    std::fs::rename(&made, &copied).unwrap();
+    let router = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args(["router", "--zenoh-config", s(&copied.join("router.json5"))])
+            .current_dir(tmp.path())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let started = Instant::now();
+    while !listening(port.parse().unwrap()) {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "the router never listened on its configuration's port {port}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // A client with its copied configuration reaches it.
+    let (code, err) = capture(
+        &format!("tls/localhost:{port}"),
+        &tmp.path().join("got.bin"),
+        &copied.join("ca.pem"),
+        Some((&copied.join("rover.pem"), &copied.join("rover.key"))),
+    );
+    assert_eq!(code, Some(0), "the robot's certificate was refused: {err}");
+    drop(router);
+}
+
+#[test]
+fn a_robot_that_cannot_listen_says_why_and_exits_1() {
+    let f = fixture();
+    let tmp = tempfile::tempdir().unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let started = Instant::now();
+    let (code, err) = common::finish(
+        Proc(
+            Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                .args([
+                    "robot",
+                    "--id",
+                    "rover",
+                    "--site",
+                    s(&repo().join("scenarios/wall_following.toml")),
+                    "--trust",
+                    s(&f.path("keys/master.pub")),
+                    "--key",
+                    s(&f.path("keys/rover.key")),
+                    "--state-dir",
+                    s(&tmp.path().join("robot")),
+                    "--listen",
+                    &format!("tcp/127.0.0.1:{port}"),
+                ])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        ),
+        60.0,
+    );
+    assert_eq!(code, Some(1), "{err}");
+    assert!(started.elapsed() < Duration::from_secs(20), "{err}");
+    assert!(
+        err.contains(&format!("tcp/127.0.0.1:{port}")) && err.contains("cannot listen"),
+        "{err}"
+    );
+    assert!(
+        !err.contains(".rs:") && !err.contains('\u{1b}'),
+        "a source path or a colour code: {err}"
+    );
+    drop(taken);
+}
+
+#[test]
+fn a_master_that_reaches_nothing_says_why_and_exits_1() {
+    let f = fixture();
+    let tmp = tempfile::tempdir().unwrap();
+    // A TLS router (made by certs) that this master reaches over plain TCP,
+    // and a client configuration whose router is not there at all.
+    let certs = tmp.path().join("certs");
+    let port = common::port().to_string();
+    let o = twindrive(&[
+        "certs",
+        "--out",
+        s(&certs),
+        "--robot",
+        "rover",
+        "--port",
+        &port,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let _router = Proc(
+        Command::new(env!("CARGO_BIN_EXE_twindrive"))
+            .args(["router", "--zenoh-config", s(&certs.join("router.json5"))])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let idle = common::port().to_string();
+    for (how, endpoint_args, expect) in [
+        (
+            "plain TCP to the TLS router",
+            vec!["--connect".to_string(), format!("tcp/127.0.0.1:{port}")],
+            "connected to nothing",
+        ),
+        (
+            "TLS to a port where nothing listens",
+            vec![
+                "--zenoh-config".to_string(),
+                s(&certs.join("master.json5")).to_string(),
+                "--connect".to_string(),
+                format!("tls/localhost:{idle}"),
+            ],
+            "nothing answered",
+        ),
+    ] {
+        let out = tmp.path().join(format!("m-{idle}-{}", how.len()));
+        let mut args: Vec<String> = [
+            "master",
+            "--plan",
+            s(&f.path("plan/plan.json")),
+            "--key",
+            s(&f.path("keys/master.key")),
+            "--trust-robot",
+            s(&f.path("keys/rover.pub")),
+            "--link-state",
+            s(&tmp.path().join("link")),
+            "--robot",
+            "rover",
+            "--out",
+            s(&out),
+            "--connect-timeout",
+            "3",
+        ]
+        .map(String::from)
+        .to_vec();
+        args.extend(endpoint_args);
+        let started = Instant::now();
+        let (code, err) = common::finish(
+            Proc(
+                Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                    .args(&args)
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::piped())
+                    .spawn()
+                    .unwrap(),
+            ),
+            90.0,
+        );
+        assert_eq!(code, Some(1), "{how}: {err}");
+        assert!(
+            started.elapsed() < Duration::from_secs(40),
+            "{how}: {:?}",
+            started.elapsed()
+        );
+        assert!(err.contains(expect), "{how}: {err}");
+        assert!(
+            !err.contains(".rs:") && !err.contains('\u{1b}'),
+            "{how}: a source path or a colour code: {err}"
+        );
+    }
+}
