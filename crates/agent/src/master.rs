@@ -381,9 +381,15 @@ impl<S: ChunkStore> Master<S> {
                     nonce: self.next_nonce,
                 });
             }
+            // The robot's logs come home at the rate this master's own
+            // uploads go out at, once it drives nothing.
+            let backfill_bytes_s = self.config.upload.pace_bit_s.map_or(0, |bit_s| {
+                (bit_s / 8.0).clamp(1.0, f64::from(u32::MAX)) as u32
+            });
             return Some(self.stamper.stamp(
                 Body::Heartbeat {
                     telemetry_budget_bytes_s: budget,
+                    backfill_bytes_s,
                 },
                 now_ns,
             ));

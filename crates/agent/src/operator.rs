@@ -182,6 +182,8 @@ pub struct Operator<S: ChunkStore> {
     logs_received: usize,
     /// Logs pending on the robot, by its latest status since the decision.
     status_after_decision: Option<u32>,
+    /// The robot's latest status says a hand-back waits for acknowledgement.
+    handback_pending: bool,
     /// Robot logs (MCAP bytes, with the plan they belong to) for the owner
     /// to write.
     pub new_logs: VecDeque<(Option<Arc<MissionPlan>>, Vec<u8>)>,
@@ -234,6 +236,7 @@ impl<S: ChunkStore> Operator<S> {
             last_log_at_ns: None,
             logs_received: 0,
             status_after_decision: None,
+            handback_pending: false,
             new_logs: VecDeque::new(),
             new_plans: VecDeque::new(),
             awaiting: None,
@@ -300,10 +303,9 @@ impl<S: ChunkStore> Operator<S> {
         let Some(at) = self.waiting_since_ns() else {
             return false;
         };
-        // The robot has said, since, that no log of its waits for the master.
-        let logs_in = self
-            .status_after_decision
-            .is_some_and(|pending| pending == 0);
+        // The robot has said, since, that no log of its waits for the master
+        // (and no hand-back: the master acknowledges it first).
+        let logs_in = self.status_after_decision == Some(0) && !self.handback_pending;
         logs_in || self.now_ns >= at + (self.config.log_wait_s * 1e9) as u64
     }
 
@@ -383,6 +385,20 @@ impl<S: ChunkStore> Operator<S> {
                 MasterEvent::RobotLog { file, .. } => {
                     self.logs_received += 1;
                     self.last_log_at_ns = Some(now_ns);
+                    // What came is the log's digest: as a log file again.
+                    let digest_bytes = file.len();
+                    let file = match twindrive_log::digest::decode(&file).and_then(|log| {
+                        let mut mcap = std::io::Cursor::new(Vec::new());
+                        twindrive_log::write_mcap(&log, &mut mcap)
+                            .map_err(|e| twindrive_log::digest::DigestError::new(e.to_string()))?;
+                        Ok(mcap.into_inner())
+                    }) {
+                        Ok(mcap) => mcap,
+                        Err(e) => {
+                            self.note("robot_log_unreadable", e.to_string());
+                            continue;
+                        }
+                    };
                     // Logs come back in the order the plans ran.
                     let plan = self
                         .plans
@@ -390,14 +406,19 @@ impl<S: ChunkStore> Operator<S> {
                         .filter(|p| p.executed)
                         .nth(self.logs_received - 1)
                         .map(|p| p.plan.clone());
-                    self.note("robot_log", format!("{} bytes", file.len()));
+                    self.note("robot_log", format!("{digest_bytes} bytes on the link"));
                     self.new_logs.push_back((plan, file));
                 }
                 MasterEvent::Status(s) => {
                     self.report.status_messages += 1;
-                    if self.decided_at_ns.is_some() {
+                    // A status the robot sent while still driving (one that
+                    // crossed the hand-back on the way) does not yet count
+                    // the log of the plan it drove.
+                    let driving = matches!(s.plan, Some((_, PlanPhase::Executing)));
+                    if self.decided_at_ns.is_some() && !driving {
                         self.status_after_decision = Some(s.logs_pending);
                     }
+                    self.handback_pending = s.handback_pending;
                     self.report.collisions = s.collisions;
                     self.report.bumps = s.bumps;
                     self.report.robot_refused_messages = s.refused;

@@ -13,6 +13,8 @@ use twindrive_link::upload::{ChunkStore, MemoryStore};
 /// spreadsheets (`log.csv`, `log.meta.json`).
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct LogFiles {
+    /// What comes home: `twindrive_log::digest`.
+    pub digest: Vec<u8>,
     pub mcap: Vec<u8>,
     pub csv: Vec<u8>,
     pub meta_json: Vec<u8>,
@@ -38,8 +40,10 @@ pub trait RobotStore {
     fn store_plan(&mut self, plan_sha256: &str, plan_json: &[u8]) -> std::io::Result<()>;
     /// Keeps the robot's log of a plan it drove, until the master has it.
     fn store_log(&mut self, plan_sha256: &str, log: &LogFiles) -> std::io::Result<()>;
-    /// The MCAP of a kept log (what back-fills to the master).
+    /// The MCAP of a kept log (the full log).
     fn log_mcap(&mut self, plan_sha256: &str) -> std::io::Result<Vec<u8>>;
+    /// The digest of a kept log (what back-fills to the master).
+    fn log_digest(&mut self, plan_sha256: &str) -> std::io::Result<Vec<u8>>;
 }
 
 /// The journal's lines: every line that parses (a torn last line from a power cut is skipped).
@@ -68,6 +72,15 @@ struct MemoryInner {
 }
 
 impl MemoryRobotStore {
+    fn kept_log(&self, plan_sha256: &str) -> std::io::Result<LogFiles> {
+        self.inner().logs.get(plan_sha256).cloned().ok_or_else(|| {
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("no log of plan {plan_sha256}"),
+            )
+        })
+    }
+
     fn inner(&self) -> MutexGuard<'_, MemoryInner> {
         // A test that panicked while holding the lock leaves whole values.
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
@@ -142,15 +155,10 @@ impl RobotStore for MemoryRobotStore {
     }
 
     fn log_mcap(&mut self, plan_sha256: &str) -> std::io::Result<Vec<u8>> {
-        self.inner()
-            .logs
-            .get(plan_sha256)
-            .map(|l| l.mcap.clone())
-            .ok_or_else(|| {
-                std::io::Error::new(
-                    std::io::ErrorKind::NotFound,
-                    format!("no log of plan {plan_sha256}"),
-                )
-            })
+        self.kept_log(plan_sha256).map(|l| l.mcap)
+    }
+
+    fn log_digest(&mut self, plan_sha256: &str) -> std::io::Result<Vec<u8>> {
+        self.kept_log(plan_sha256).map(|l| l.digest)
     }
 }

@@ -667,15 +667,98 @@ fn telemetry_keeps_to_its_budget_and_every_log_arrives() {
             sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
             1,
         );
+        // While the plan runs, the robot keeps to its budget.
+        let (op, agent) = (&mut h.op, &mut h.agent);
+        assert!(
+            h.link
+                .run(op, agent, 600 * S, |_, agent| agent.is_executing())
+        );
+        let (sent0, t0) = (h.link.down.stats.bytes_sent, h.link.now_ns);
+        let (op, agent) = (&mut h.op, &mut h.agent);
+        assert!(
+            h.link
+                .run(op, agent, 1_200 * S, |_, agent| !agent.is_executing())
+        );
+        let sent = (h.link.down.stats.bytes_sent - sent0) as f64;
+        let took = (h.link.now_ns - t0) as f64 * 1e-9;
+        assert!(
+            sent / took <= budget * 1.1,
+            "{budget}: {} B/s while driving",
+            sent / took
+        );
         assert!(h.run_until(3_600.0));
-        let sent = h.link.down.stats.bytes_sent as f64;
-        let took = h.link.now_ns as f64 * 1e-9;
-        assert!(sent / took <= budget * 1.1, "{budget}: {} B/s", sent / took);
         assert_eq!(h.op.new_logs.len(), 1, "{budget}");
         assert!(h.op.report.status_messages > 10);
         h.op.finish_report();
         let rtt = h.op.report.link_rtt_median_s.unwrap();
         assert!((2.5..2.7).contains(&rtt), "{rtt}");
+    }
+}
+
+/// At default settings over the lunar profile, the case study's log costs
+/// at most 4 kB per second of mission on the link and is home within a
+/// minute of the mission's end; the robot keeps the full log.
+#[test]
+fn the_case_study_log_comes_home_over_lunar_within_a_minute() {
+    for seed in [61, 62] {
+        let store = MemoryRobotStore::default();
+        let key = test_key(12);
+        let mut h = harness(&store, "lunar", seed, &key, &key, "", OnHandback::Stop);
+        h.send(
+            sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+            1,
+        );
+        let (op, agent) = (&mut h.op, &mut h.agent);
+        assert!(
+            h.link
+                .run(op, agent, 600 * S, |_, agent| agent.is_executing())
+        );
+        let (op, agent) = (&mut h.op, &mut h.agent);
+        assert!(
+            h.link
+                .run(op, agent, 1_200 * S, |_, agent| !agent.is_executing())
+        );
+        let ended_ns = h.link.now_ns;
+        let (op, agent) = (&mut h.op, &mut h.agent);
+        assert!(
+            h.link.run(op, agent, ended_ns + 600 * S, |op, _| !op
+                .new_logs
+                .is_empty()),
+            "seed {seed}: no log in 10 minutes"
+        );
+        let home_s = (h.link.now_ns - ended_ns) as f64 * 1e-9;
+        assert!(
+            home_s <= 60.0,
+            "seed {seed}: the log came {home_s:.1} s after the end"
+        );
+        let written = events(&store, "log_written");
+        let digest_bytes = written[0]["digest_bytes"].as_f64().unwrap();
+        let mission_s = common::plan().samples.last().unwrap().t_s - common::plan().samples[0].t_s;
+        assert!(
+            digest_bytes <= 4_000.0 * mission_s,
+            "seed {seed}: {digest_bytes} bytes for {mission_s:.0} s"
+        );
+        // The log that came is the robot's, every step of it.
+        let (_, mcap) = &h.op.new_logs[0];
+        let home = twindrive_log::read_mcap_bytes(mcap, Path::new("home.mcap")).unwrap();
+        let full = store.log(&common::plan().sha256).unwrap();
+        let kept = twindrive_log::read_mcap_bytes(&full.mcap, Path::new("kept.mcap")).unwrap();
+        assert_eq!(home.steps.len(), kept.steps.len());
+        assert_eq!(
+            home.steps
+                .iter()
+                .map(|s| s.encoder_ticks)
+                .collect::<Vec<_>>(),
+            kept.steps
+                .iter()
+                .map(|s| s.encoder_ticks)
+                .collect::<Vec<_>>()
+        );
+        eprintln!(
+            "seed {seed}: {digest_bytes} bytes ({:.0} B per mission second, full MCAP {} bytes), home {home_s:.1} s after the end",
+            digest_bytes / mission_s,
+            full.mcap.len()
+        );
     }
 }
 

@@ -260,18 +260,18 @@ impl RobotSlot {
         self.timeline_told = op.report.timeline.len();
         let plans: Vec<_> = op.new_plans.drain(..).collect();
         let logs: Vec<_> = op.new_logs.drain(..).collect();
-        let report = (op.is_done() && !self.report_written).then(|| {
-            op.finish_report();
-            serde_json::to_vec_pretty(&op.report).unwrap_or_default()
-        });
-        let changed = !plans.is_empty() || !logs.is_empty() || report.is_some();
-        for (plan, json, signed) in plans {
-            let written = self.archive.write_plan(&plan, &json, Some(&signed));
+        let done = op.is_done();
+        for (plan, json, signed) in &plans {
+            let written = self.archive.write_plan(plan, json, Some(signed));
             self.noted("writing a plan", written);
         }
+        // Logs come home after the mission is decided: the report lists
+        // each as it arrives (written again when one comes after it).
+        let mut arrived = Vec::new();
         for (plan, mcap) in logs {
             match self.archive.write_robot_log(plan.as_deref(), &mcap) {
                 Ok(written) => {
+                    arrived.push(written.name.clone());
                     let log = written.log;
                     let every = (log.steps.len() / 20_000).max(1);
                     self.logs
@@ -282,6 +282,21 @@ impl RobotSlot {
                 Err(e) => self.notice(format!("the robot's log: {e:#}")),
             }
         }
+        let logs_arrived = !arrived.is_empty();
+        let first_report = !self.report_written;
+        let report = match self.link.as_mut() {
+            Some(Link::Operating(op)) => {
+                op.report.robot_logs.extend(arrived);
+                (done && (first_report || logs_arrived)).then(|| {
+                    if first_report {
+                        op.finish_report();
+                    }
+                    serde_json::to_vec_pretty(&op.report).unwrap_or_default()
+                })
+            }
+            _ => None,
+        };
+        let changed = !plans.is_empty() || logs_arrived || report.is_some();
         if let Some(report) = report {
             self.report_written = true;
             let written = self.archive.write_report(&report);
@@ -833,6 +848,7 @@ mod tests {
             range_residual_m: 0.02,
             wheel_travel_rad: 0.0,
             logs_pending: 0,
+            handback_pending: false,
             bumps: 0,
             collisions: 0,
             refused: 0,

@@ -90,6 +90,14 @@ pub fn twin_model(
 
 /// Runs the console until interrupted (Ctrl-C or SIGTERM).
 pub fn run(config: ConsoleConfig) -> anyhow::Result<()> {
+    // The address first: a console that cannot listen writes nothing.
+    let listener = std::net::TcpListener::bind(config.listen).with_context(|| {
+        format!(
+            "--listen {}: cannot listen there (another console or program holds it?); choose another address with --listen",
+            config.listen
+        )
+    })?;
+    listener.set_nonblocking(true)?;
     std::fs::create_dir_all(&config.out)
         .with_context(|| format!("creating {}", config.out.display()))?;
     let token = auth::token_in(&config.out.join("console.token"))?;
@@ -97,7 +105,7 @@ pub fn run(config: ConsoleConfig) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(serve(config, token))
+    runtime.block_on(serve(config, token, listener))
 }
 
 fn unix_now_s() -> f64 {
@@ -106,10 +114,13 @@ fn unix_now_s() -> f64 {
         .map_or(0.0, |d| d.as_secs_f64())
 }
 
-async fn serve(config: ConsoleConfig, token: String) -> anyhow::Result<()> {
-    let listener = tokio::net::TcpListener::bind(config.listen)
-        .await
-        .with_context(|| format!("--listen {}: binding", config.listen))?;
+async fn serve(
+    config: ConsoleConfig,
+    token: String,
+    listener: std::net::TcpListener,
+) -> anyhow::Result<()> {
+    let listener = tokio::net::TcpListener::from_std(listener)
+        .with_context(|| format!("--listen {}", config.listen))?;
     let bound = listener.local_addr()?;
     let access = Arc::new(auth::Access::new(token, bound, &config.allow_origins));
     let zero = Instant::now();

@@ -11,7 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Version of this message set; a message of another version is refused.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Nothing longer is decoded.
 pub const MAX_MESSAGE_BYTES: usize = 64 * 1024;
 /// Longest robot id.
@@ -83,9 +83,12 @@ pub enum Body {
     /// Master → robot: the master is there (a supervised plan's dead-man
     /// counts from the last message heard, of any kind), and the bytes per
     /// second the robot may send it (the robot keeps to the lower of this
-    /// and its own limit).
+    /// and its own limit), and the rate it may back-fill its logs at while
+    /// it drives no plan: the link's, as the master paces its own uploads
+    /// (0: the master knows no rate; as fast as the link takes them).
     Heartbeat {
         telemetry_budget_bytes_s: u32,
+        backfill_bytes_s: u32,
     },
     /// Either way: answer with `Pong` at once (round-trip time).
     Ping {
@@ -143,8 +146,12 @@ pub struct Status {
     pub wheel_travel_rad: f64,
     /// Robot logs not yet acknowledged by the master.
     pub logs_pending: u32,
-    /// Bumper contacts, and periods a collision held the robot (where the
-    /// backend can tell), since the agent started.
+    /// A hand-back not yet acknowledged (a master that came after it, or
+    /// whose first copies were refused, waits to hear it).
+    pub handback_pending: bool,
+    /// Bumper presses, and contacts that held the robot (where the backend
+    /// can tell), since the agent started: each counted once, however many
+    /// control periods or plans it lasts.
     pub bumps: u32,
     pub collisions: u32,
     /// Payloads refused before they were read (not authentic, replays)

@@ -39,6 +39,7 @@ fn samples() -> Vec<Vec<u8>> {
         },
         Body::Heartbeat {
             telemetry_budget_bytes_s: 8_000,
+            backfill_bytes_s: 32_000,
         },
         Body::Ping { nonce: 77 },
         Body::Pong { nonce: 77 },
@@ -58,6 +59,7 @@ fn samples() -> Vec<Vec<u8>> {
             range_residual_m: f64::NAN,
             wheel_travel_rad: 12.0,
             logs_pending: 1,
+            handback_pending: false,
             bumps: 2,
             collisions: 0,
             refused: 3,

@@ -7,6 +7,7 @@
 
 pub mod calib_csv;
 mod csv_io;
+pub mod digest;
 mod error;
 pub mod map_topic;
 mod mcap_io;

@@ -231,8 +231,18 @@ pub async fn drive_counting<E: Endpoint>(
             return Ok(());
         }
         if start.elapsed() > deadline {
+            // Heard from the other end, but nothing that authenticated:
+            // the keys do not match, and the message says which to check.
+            let keys = if stats.messages_received == 0 && stats.refused > 0 {
+                format!(
+                    "; all {} message(s) heard on {rx_key} were refused as not authentic: the two ends' keys do not match (each end must trust the other's public key: the robot's --trust, the master's --trust-robot {}.pub)",
+                    stats.refused, link.robot_id
+                )
+            } else {
+                String::new()
+            };
             anyhow::bail!(
-                "gave up after {:.1} s ({} messages sent, {} received)",
+                "gave up after {:.1} s ({} messages sent, {} received){keys}",
                 deadline.as_secs_f64(),
                 stats.messages_sent,
                 stats.messages_received

@@ -82,18 +82,25 @@ pub fn first_plan(
             pending.display()
         );
     }
-    let envelope = peek_envelope(&signed).map_err(|e| anyhow::anyhow!("the signed plan: {e}"))?;
+    // Errors name the file the signed plan came from.
+    let source = match &args.signed {
+        Some(path) => format!("--signed {}", path.display()),
+        None => "the signed plan".to_string(),
+    };
+    let damaged = |e: &dyn std::fmt::Display| {
+        anyhow::anyhow!("{source}: not a whole signed plan (damaged or cut short?): {e}")
+    };
+    let envelope = peek_envelope(&signed).map_err(|e| damaged(&e))?;
     if envelope.robot_id != robot {
         bail!(
-            "the signed plan is for robot `{}`, not --robot {robot}",
+            "{source} is for robot `{}`, not --robot {robot}",
             envelope.robot_id,
         );
     }
     // The plan inside, for the report and for continuations.
-    let plan_json = twindrive_link::envelope::open_unchecked(&signed)
-        .map_err(|e| anyhow::anyhow!("the signed plan: {e}"))?;
-    let plan: MissionPlan =
-        serde_json::from_slice(&plan_json).context("the signed plan's document")?;
+    let plan_json = twindrive_link::envelope::open_unchecked(&signed).map_err(|e| damaged(&e))?;
+    let plan: MissionPlan = serde_json::from_slice(&plan_json)
+        .with_context(|| format!("{source}: the plan document inside"))?;
     Ok(FirstPlan {
         plan: Arc::new(plan),
         plan_json,

@@ -15,8 +15,8 @@ use crate::{CounterFile, DirStore};
 /// - `plans/<sha256>.json`: every accepted plan document, byte for byte the
 ///   master's `plan.json` (named by its content hash);
 /// - `logs/<sha256>/`: the robot's own log of each plan it drove
-///   (`log.mcap`, `log.csv`, `log.meta.json`), kept until the master
-///   acknowledges it.
+///   (`log.mcap`, `log.csv`, `log.meta.json`, and `log.digest`, what comes
+///   home), kept until the master acknowledges it.
 #[derive(Debug, Clone)]
 pub struct RobotDir {
     dir: PathBuf,
@@ -48,6 +48,12 @@ impl RobotDir {
 
     fn log_dir(&self, plan_sha256: &str) -> PathBuf {
         self.dir.join("logs").join(plan_sha256)
+    }
+
+    fn read_log_file(&self, plan_sha256: &str, name: &str) -> std::io::Result<Vec<u8>> {
+        let path = self.log_dir(plan_sha256).join(name);
+        std::fs::read(&path)
+            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))
     }
 }
 
@@ -92,13 +98,16 @@ impl RobotStore for RobotDir {
         std::fs::create_dir_all(&dir)?;
         write_durably(&dir.join("log.csv"), &log.csv)?;
         write_durably(&dir.join("log.meta.json"), &log.meta_json)?;
+        write_durably(&dir.join("log.digest"), &log.digest)?;
         // The MCAP last: the one a restart looks for.
         write_durably(&dir.join("log.mcap"), &log.mcap)
     }
 
     fn log_mcap(&mut self, plan_sha256: &str) -> std::io::Result<Vec<u8>> {
-        let path = self.log_dir(plan_sha256).join("log.mcap");
-        std::fs::read(&path)
-            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))
+        self.read_log_file(plan_sha256, "log.mcap")
+    }
+
+    fn log_digest(&mut self, plan_sha256: &str) -> std::io::Result<Vec<u8>> {
+        self.read_log_file(plan_sha256, "log.digest")
     }
 }

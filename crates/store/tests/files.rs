@@ -122,6 +122,7 @@ fn the_robot_dir_keeps_its_layout_and_survives_a_reopen() {
     store.store_counter(7).unwrap();
     store.store_plan("ab12", b"{}").unwrap();
     let log = LogFiles {
+        digest: b"digest".to_vec(),
         mcap: b"mcap".to_vec(),
         csv: b"csv".to_vec(),
         meta_json: b"meta".to_vec(),
@@ -144,6 +145,7 @@ fn the_robot_dir_keeps_its_layout_and_survives_a_reopen() {
     assert_eq!(again.load_counter().unwrap(), 7);
     assert_eq!(std::fs::read(dir.join("plans/ab12.json")).unwrap(), b"{}");
     assert_eq!(again.log_mcap("ab12").unwrap(), b"mcap");
+    assert_eq!(again.log_digest("ab12").unwrap(), b"digest");
     assert_eq!(
         std::fs::read(dir.join("logs/ab12/log.csv")).unwrap(),
         b"csv"

@@ -37,16 +37,21 @@ pub enum Command {
         #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
         duration_s: Option<f64>,
     },
-    /// Estimate wheel diameters and wheelbase from encoders and an absolute pose.
+    /// Estimate wheel diameters and wheelbase from encoders and an absolute
+    /// pose, or with no pose reference (self-calibration) the wheels, the
+    /// lidar's mount and a gyro's errors from encoders, scans and gyro.
     ///
     /// Input: a simulator output directory (log.csv + log.meta.json), or
     /// --encoders E.csv (`t,left_ticks,right_ticks` cumulative counts, or
     /// `t,left_rad_s,right_rad_s`) with --poses P.csv (`t,x,y,theta`; theta
     /// may be empty for position-only references), or --bag BAG (a rosbag2
     /// recording, MCAP or sqlite3: JointState wheels or a tick topic, and a
-    /// PoseStamped, Odometry or TF reference). A calibration the data do
-    /// not support (too few reference poses accepted, most rejected, or
-    /// motion that leaves a parameter unpinned) exits 1 and writes nothing.
+    /// PoseStamped, Odometry or TF reference). Self-calibration: a
+    /// simulator log with a lidar and no --poses, or --bag BAG with
+    /// --scan-topic (and --imu-topic for a gyro) and no pose topic. A
+    /// calibration the data do not support (too few reference poses
+    /// accepted, most rejected, or motion that leaves a parameter unpinned)
+    /// exits 1 and writes nothing.
     /// Writes --out (JSON) and,
     /// beside it, figures of each parameter over time with its ±3σ band and
     /// of the innovations, and TUM trajectories of the reference and of dead
@@ -65,6 +70,11 @@ pub enum Command {
     /// verify-plan, console and robot take as the twin's site), poses.tum
     /// (the drive in the map) and map_report.json. The map's frame is the
     /// log's (its start pose), or the robot's first pose in a bag.
+    ///
+    /// Not mapped (an error that says which): a recording without a
+    /// LaserScan topic, or without the wheel joints in a JointState topic
+    /// (a bag with only /odom for its motion), and a log without a range
+    /// sensor of at least 30 beams.
     Map(Box<MapArgs>),
     /// Turn a mission run on the twin into a plan for the real robot.
     ///
@@ -86,7 +96,9 @@ pub enum Command {
     /// trajectory tracker on the robot's odometry). Writes
     /// report.json (collisions, bumps, max/mean deviation from the plan's
     /// path, duration, path length for each replay), the replayed tracks as
-    /// TUM and an overlay figure into DIR.
+    /// TUM and an overlay figure into DIR. Exit status 0: the plan passed;
+    /// 3: it failed verification (the report says why); 1: it could not be
+    /// verified (a bad file); 2: a usage error.
     VerifyPlan {
         /// The plan JSON.
         plan: PathBuf,

@@ -59,6 +59,33 @@ pub fn signing_key(path: &Path) -> anyhow::Result<twindrive_link::envelope::Sign
     read_private_key_pem(&text).map_err(|e| anyhow::anyhow!("--key {}: {e}", path.display()))
 }
 
+/// The master's key (`--key` of `sign` and `master`), read and checked not
+/// to be one of `robots`' own keys: by its name (`ID.key`, as `keygen
+/// --robot ID` writes it) or by its public half (`robot_keys`, the robots'
+/// `--trust-robot` keys).
+pub fn master_key(
+    path: &Path,
+    robots: &[String],
+    robot_keys: Option<&std::collections::BTreeMap<String, twindrive_link::envelope::VerifyingKey>>,
+) -> anyhow::Result<twindrive_link::envelope::SigningKey> {
+    let key = signing_key(path)?;
+    let public = key.verifying_key();
+    let by_name = path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .filter(|stem| robots.iter().any(|r| r == stem));
+    let by_key = robot_keys
+        .and_then(|keys| keys.iter().find(|(_, k)| **k == public))
+        .map(|(id, _)| id.as_str());
+    if let Some(id) = by_name.or(by_key) {
+        return Err(usage(format!(
+            "--key {}: that is robot {id}'s own key (keygen --robot {id}); plans are signed with the master's key (keygen without --robot writes master.key)",
+            path.display()
+        )));
+    }
+    Ok(key)
+}
+
 /// A public key that `flag` names, read (`--trust master.pub`,
 /// `--trust-robot ID.pub`).
 pub fn public_key(
@@ -79,6 +106,12 @@ pub fn robot_keys(
 ) -> anyhow::Result<std::collections::BTreeMap<String, twindrive_link::envelope::VerifyingKey>> {
     let mut files = Vec::new();
     for path in paths {
+        if !path.exists() {
+            return Err(usage(format!(
+                "--trust-robot {}: no such file or directory (give a robot's ID.pub, or a directory of them)",
+                path.display()
+            )));
+        }
         if path.is_dir() {
             let mut in_dir: Vec<_> = std::fs::read_dir(path)
                 .with_context(|| format!("--trust-robot: reading {}", path.display()))?

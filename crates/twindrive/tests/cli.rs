@@ -308,6 +308,93 @@ fn help_lists_the_commands() {
     }
 }
 
+/// Each command's --help names every kind of input it accepts (and, where
+/// it has them, what it refuses and its exit statuses): a newcomer reads
+/// it before the book.
+#[test]
+fn every_commands_help_names_each_input_it_takes() {
+    // Help wraps lines; compare with white space folded.
+    let help = |args: &[&str]| {
+        let out = twindrive(args, &repo());
+        assert!(out.status.success(), "{args:?}");
+        text(&out.stdout)
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let top = help(&["--help"]);
+    assert!(
+        top.contains("calibrate") && top.contains("self-calibration"),
+        "{top}"
+    );
+    for (command, names) in [
+        (
+            &["calibrate", "--help"][..],
+            &[
+                "simulator output directory",
+                "--encoders",
+                "--poses",
+                "--bag",
+                "self-calibration",
+                "--scan-topic",
+                "--imu-topic",
+            ][..],
+        ),
+        (
+            &["map", "--help"],
+            &[
+                "simulator output directory",
+                "--bag",
+                "LaserScan",
+                "JointState",
+                "/odom",
+                "Not mapped",
+            ],
+        ),
+        (
+            &["verify-plan", "--help"],
+            &[
+                "Exit status 0",
+                "3: it failed verification",
+                "2: a usage error",
+            ],
+        ),
+        (
+            &["router", "--help"],
+            &[
+                "--listen",
+                "--zenoh-config",
+                "tcp/127.0.0.1:7447",
+                "listen.endpoints",
+            ],
+        ),
+        (
+            &["robot", "--help"],
+            &[
+                "--zenoh-config",
+                "--listen",
+                "--connect",
+                "--connect-timeout",
+                "[ros]",
+            ],
+        ),
+        (
+            &["master", "--help"],
+            &["--plan", "--signed", "--zenoh-config", "--connect-timeout"],
+        ),
+        (&["bag", "info", "--help"], &["MCAP", "sqlite3"]),
+        (&["rosbag", "--help"], &["MCAP", "sqlite3"]),
+    ] {
+        let text = help(command);
+        for name in names {
+            assert!(
+                text.contains(name),
+                "{command:?} --help does not say {name:?}:\n{text}"
+            );
+        }
+    }
+}
+
 #[test]
 fn draw_map_reproduces_the_shipped_map() {
     let tmp = tempfile::tempdir().unwrap();

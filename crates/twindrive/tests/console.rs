@@ -843,7 +843,49 @@ async fn an_obstacle_the_twin_lacks_raises_the_hand_back_banner() {
         }
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
+    // The robot's logs come home after the mission is decided: the
+    // console's report.json lists each one that arrived.
+    let started = Instant::now();
+    loop {
+        let listed = reports_under(&m.out).into_iter().find_map(|(dir, report)| {
+            let logs = report["robot_logs"].as_array()?.clone();
+            (!logs.is_empty()).then_some((dir, logs))
+        });
+        if let Some((dir, logs)) = listed {
+            for log in logs {
+                let log = dir.join(log.as_str().unwrap());
+                assert!(log.join("log.mcap").is_file(), "{}", log.display());
+            }
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no report.json under {} lists a robot log",
+            m.out.display()
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
     c.clone().close().await.unwrap();
+}
+
+/// Every report.json under `dir`: its directory and its content.
+fn reports_under(dir: &Path) -> Vec<(PathBuf, serde_json::Value)> {
+    let mut found = Vec::new();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return found;
+    };
+    for e in entries.flatten() {
+        let path = e.path();
+        if path.is_dir() {
+            found.extend(reports_under(&path));
+        } else if path.file_name().is_some_and(|n| n == "report.json")
+            && let Ok(bytes) = std::fs::read(&path)
+            && let Ok(report) = serde_json::from_slice(&bytes)
+        {
+            found.push((dir.to_path_buf(), report));
+        }
+    }
+    found
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

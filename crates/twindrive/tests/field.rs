@@ -362,3 +362,117 @@ fn a_master_that_reaches_nothing_says_why_and_exits_1() {
         );
     }
 }
+
+#[test]
+fn a_console_that_cannot_listen_writes_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = taken.local_addr().unwrap().to_string();
+    let out = tmp.path().join("console");
+    let (code, err) = common::finish(
+        Proc(
+            Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                .args(["console", "--listen", &address, "--out", s(&out)])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        ),
+        60.0,
+    );
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains(&address) && err.contains("cannot listen"),
+        "{err}"
+    );
+    assert!(!out.exists(), "the console left {}", out.display());
+    drop(taken);
+}
+
+#[test]
+fn key_and_plan_mistakes_name_the_file_and_what_to_do() {
+    let f = fixture();
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    // A robot's own key given to sign with.
+    let signed = d.join("plan.signed");
+    let o = twindrive(&[
+        "sign",
+        s(&f.path("plan/plan.json")),
+        "--key",
+        s(&f.path("keys/rover.key")),
+        "--robot",
+        "rover",
+        "--out",
+        s(&signed),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("robot rover's own key"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(!signed.exists());
+    let o = twindrive(&[
+        "sign",
+        s(&f.path("plan/plan.json")),
+        "--key",
+        s(&f.path("keys/master.key")),
+        "--robot",
+        "rover",
+        "--out",
+        s(&signed),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // A signed plan cut short: the master names the file.
+    let bytes = std::fs::read(&signed).unwrap();
+    let cut = d.join("cut.signed");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let (master_key, link_state) = (f.path("keys/master.key"), d.join("link"));
+    let master = |extra: &[&str]| {
+        let mut args = vec![
+            "master",
+            "--key",
+            s(&master_key),
+            "--robot",
+            "rover",
+            "--link-state",
+            s(&link_state),
+            "--connect-timeout",
+            "1",
+        ];
+        args.extend_from_slice(extra);
+        twindrive(&args)
+    };
+    let o = master(&[
+        "--signed",
+        s(&cut),
+        "--trust-robot",
+        s(&f.path("keys/rover.pub")),
+        "--out",
+        s(&d.join("m1")),
+    ]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!("--signed {}", cut.display())),
+        "{err}"
+    );
+    assert!(err.contains("cut short"), "{err}");
+    // A --trust-robot that is not there.
+    let missing = d.join("no-such-keys");
+    let o = master(&[
+        "--plan",
+        s(&f.path("plan/plan.json")),
+        "--trust-robot",
+        s(&missing),
+        "--out",
+        s(&d.join("m2")),
+    ]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(&missing.display().to_string()) && err.contains("no such file or directory"),
+        "{err}"
+    );
+}

@@ -646,13 +646,17 @@ fn log_chunks_held(out: &Path) -> usize {
 #[test]
 fn every_robot_log_comes_home_through_a_dead_master_a_dead_link_and_a_robot_restart() {
     let mut m = Mission::new("site_box.toml", "keys", 10.0);
-    // The log back-filled at the robot's default pace: the masters are
-    // killed and the link cut while it arrives.
+    // The log back-filled over a slow link (2 kB/s, the rate the masters
+    // give the robot): the masters are killed and the link cut while it
+    // arrives.
     m.telemetry_budget = "8000";
     let robot = m.robot();
     // Master A: the robot hands back at the box; A waits two seconds for
     // the log and exits while the robot back-fills it.
-    let (code, err) = finish(m.master(&["--log-wait", "2"]), 120.0);
+    let (code, err) = finish(
+        m.master(&["--link", "lan,bandwidth_bit_s=16000", "--log-wait", "2"]),
+        120.0,
+    );
     assert_eq!(code, Some(3), "{err}");
     assert!(err.contains("HAND-BACK"), "{err}");
     assert!(!m.events("log_written").is_empty());
@@ -661,13 +665,21 @@ fn every_robot_log_comes_home_through_a_dead_master_a_dead_link_and_a_robot_rest
         "A took the log whole"
     );
     // Master B, another output directory, the link dead for its first
-    // four seconds. The robot stays where it handed back: the plan is
-    // refused before anything moves, and B says why.
+    // four seconds, then slow. The robot is killed mid back-fill and
+    // started again: its simulated site starts over at the plan's start, so
+    // B's plan may be driven (and handed back at the box again) or refused.
     let b = m.tmp.path().join("master_b");
-    let master_b = m.master_in(&b, &["--link", "lan,outage=0..4", "--log-wait", "120"]);
-    // The robot is killed mid back-fill and started again.
+    let master_b = m.master_in(
+        &b,
+        &[
+            "--link",
+            "lan,outage=0..4,bandwidth_bit_s=16000",
+            "--log-wait",
+            "120",
+        ],
+    );
     let start = Instant::now();
-    while log_chunks_held(&b) < 5 {
+    while log_chunks_held(&b) < 2 {
         assert!(
             start.elapsed() < Duration::from_secs(60),
             "B holds no chunk of the log after 60 s"
@@ -676,25 +688,35 @@ fn every_robot_log_comes_home_through_a_dead_master_a_dead_link_and_a_robot_rest
     }
     drop(robot);
     let _robot = m.robot();
-    let (code, err) = finish(master_b, 180.0);
-    assert_eq!(code, Some(4), "{err}");
-    assert!(err.contains("not at the plan's start"), "{err}");
+    let (code, err) = finish(master_b, 240.0);
+    assert!(matches!(code, Some(3 | 4)), "{err}");
     assert!(err.contains("robot log received"), "{err}");
-    // Every log the robot wrote is home, byte for byte, and acknowledged.
+    // Every log the robot wrote is home, every step of it, and
+    // acknowledged: A's cut short by A's exit, the link's outage and the
+    // robot's restart.
     let written = m.events("log_written");
-    assert_eq!(written.len(), 1);
-    assert_eq!(m.events("log_acknowledged").len(), 1);
+    assert!(!written.is_empty());
+    assert_eq!(m.events("log_acknowledged").len(), written.len());
+    // (B's plan, driven again from the start after the restart, is A's
+    // plan on the same simulated site: the same log, which comes once.)
+    let mut written: Vec<_> = written
+        .into_iter()
+        .map(|w| w["plan_sha256"].as_str().unwrap().to_string())
+        .collect();
+    written.dedup();
     let r: serde_json::Value =
         serde_json::from_slice(&std::fs::read(b.join("report.json")).unwrap()).unwrap();
     let logs = r["robot_logs"].as_array().unwrap();
-    assert_eq!(logs.len(), 1, "{r}");
-    let sha = written[0]["plan_sha256"].as_str().unwrap();
-    assert_eq!(
-        std::fs::read(Path::new(logs[0].as_str().unwrap()).join("log.mcap")).unwrap(),
-        std::fs::read(m.robot_dir().join("logs").join(sha).join("log.mcap")).unwrap()
-    );
-    // Nothing moved for B's plan.
-    assert_eq!(m.events("execution_started").len(), 1);
+    assert_eq!(logs.len(), written.len(), "{r}");
+    let read = |p: PathBuf| twindrive_log::read_mcap(&p).unwrap();
+    for (home, sha) in logs.iter().zip(&written) {
+        let home = read(Path::new(home.as_str().unwrap()).join("log.mcap"));
+        let kept = read(m.robot_dir().join("logs").join(sha).join("log.mcap"));
+        assert_eq!(home.steps.len(), kept.steps.len());
+        for (a, b) in home.steps.iter().zip(&kept.steps) {
+            assert_eq!((a.t_ns, a.encoder_ticks), (b.t_ns, b.encoder_ticks));
+        }
+    }
 }
 
 /// The master's stderr on a pipe: one line per event, `what` among them,

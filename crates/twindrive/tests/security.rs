@@ -319,6 +319,7 @@ fn forged_pings_do_not_keep_a_supervised_robot_driving_after_its_master_died() {
             Body::Ping { nonce: 1 },
             Body::Heartbeat {
                 telemetry_budget_bytes_s: 100,
+                backfill_bytes_s: 100,
             },
             Body::Offer(Offer {
                 transfer: fake,
@@ -452,6 +453,7 @@ fn forged_and_replayed_messages_change_nothing_at_the_master_or_the_robot() {
         range_residual_m: 0.0,
         wheel_travel_rad: 0.0,
         logs_pending: 0,
+        handback_pending: false,
         bumps: 7,
         collisions: 7,
         refused: 0,

@@ -1,6 +1,9 @@
 //! Robot logs home: each plan's log kept in the store once the hand-back
-//! has gone, then uploaded to the master (oldest first, paced to what the
-//! telemetry budget leaves) until it acknowledges it.
+//! has gone (in full, and as the digest that comes home:
+//! `twindrive_log::digest`, at most `log_budget_bytes_s` per second of
+//! mission), then the digest uploaded to the master, oldest first, until it
+//! acknowledges it: paced to what the telemetry budget leaves while a plan
+//! runs, at the link's rate (as the master says) once none does.
 
 use serde_json::json;
 use twindrive_link::upload::{Sender, SenderConfig};
@@ -29,9 +32,26 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 self.record(now_ns, event, json!({ "plan_sha256": b.plan_sha256 }));
                 continue;
             }
+            let pace = self.backfill_pace_bit_s();
+            let b = self.backfills.front_mut().expect("front");
+            b.sender.set_pace(pace);
             return b.sender.poll_transmit(now_ns);
         }
         None
+    }
+
+    /// How fast logs go home now (bit/s; `None`: as fast as the link
+    /// takes them).
+    fn backfill_pace_bit_s(&self) -> Option<f64> {
+        let budget = Some((8.0 * 0.7 * self.budget_bytes_s).max(800.0));
+        if self.running.is_some() {
+            return budget;
+        }
+        match self.backfill_bytes_s {
+            None => budget,
+            Some(r) if r <= 0.0 => None,
+            Some(r) => Some((8.0 * r).max(800.0)),
+        }
     }
 
     pub(super) fn backfill_timeout(&self) -> Option<u64> {
@@ -45,13 +65,17 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     }
 
     fn write_log(&mut self, plan_sha256: &str, log: &MissionLog, now_ns: u64) {
+        let mut digest_note = None;
         let result = (|| -> anyhow::Result<()> {
             let mut mcap = std::io::Cursor::new(Vec::new());
             let map = self.backend.map();
             twindrive_log::write_mcap_with_map(log, map.as_ref(), &mut mcap)?;
             let mut csv = Vec::new();
             twindrive_log::write_csv(log, &mut csv)?;
+            let (digest, kept) = twindrive_log::digest::encode(log, self.config.log_budget_bytes_s);
+            digest_note = Some((digest.len(), kept));
             let files = LogFiles {
+                digest,
                 mcap: mcap.into_inner(),
                 csv,
                 meta_json: serde_json::to_vec_pretty(&log.header)?,
@@ -68,6 +92,8 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                         "plan_sha256": plan_sha256,
                         "steps": log.steps.len(),
                         "dir": format!("logs/{plan_sha256}"),
+                        "digest_bytes": digest_note.map(|(n, _)| n),
+                        "sweeps_kept": digest_note.map(|(_, k)| k),
                     }),
                 );
                 self.queue_backfill(plan_sha256);
@@ -86,14 +112,23 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         if self.backfills.iter().any(|b| b.plan_sha256 == plan_sha256) {
             return;
         }
-        match self.store.log_mcap(plan_sha256) {
+        // A log kept before digests existed: its digest from its MCAP.
+        let digest = self.store.log_digest(plan_sha256).or_else(|e| {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                return Err(e);
+            }
+            let mcap = self.store.log_mcap(plan_sha256)?;
+            let log = twindrive_log::read_mcap_bytes(&mcap, std::path::Path::new("log.mcap"))
+                .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
+            Ok(twindrive_log::digest::encode(&log, self.config.log_budget_bytes_s).0)
+        });
+        match digest {
             Ok(file) => {
-                let pace = 8.0 * 0.7 * self.budget_bytes_s;
                 let sender = Sender::resume(
                     &self.config.robot_id,
                     file,
                     SenderConfig {
-                        pace_bit_s: Some(pace.max(800.0)),
+                        pace_bit_s: self.backfill_pace_bit_s(),
                         ..SenderConfig::default()
                     },
                 );

@@ -57,9 +57,12 @@ pub struct AgentConfig {
     pub trusted: Vec<VerifyingKey>,
     /// Unix time (s) at `now_ns = 0` of the clock the agent is driven by.
     pub unix_time_at_zero_s: f64,
-    /// Bytes per second the robot may spend on what it sends (status,
-    /// hand-back, log back-fill).
+    /// Bytes per second the robot may spend on what it sends while it
+    /// drives a plan (status, hand-back, log back-fill).
     pub telemetry_budget_bytes_s: f64,
+    /// What a plan's log may cost on the link: bytes per second of mission
+    /// (`twindrive_log::digest`; the full log stays on the robot).
+    pub log_budget_bytes_s: f64,
     /// Shortest time between two status summaries (s).
     pub status_period_s: f64,
     /// Backend seconds per second of the driving clock (1 for a real robot;
@@ -78,6 +81,7 @@ impl AgentConfig {
             trusted,
             unix_time_at_zero_s: 0.0,
             telemetry_budget_bytes_s: 8_000.0,
+            log_budget_bytes_s: twindrive_log::digest::DEFAULT_BUDGET_BYTES_PER_S,
             status_period_s: 1.0,
             time_scale: 1.0,
             max_plan_file_bytes: 16 << 20,
@@ -156,12 +160,19 @@ pub struct RobotAgent<B: RobotBackend, S: RobotStore> {
     bumps: u32,
     collisions: u32,
     last_bump: bool,
+    last_blocked: bool,
     /// Payloads refused before they were read (see [`Self::refused`]).
     refused: u32,
     /// Journal writes that failed (reported in the process log).
     pub journal_errors: u64,
     /// The telemetry budget in force (the master may lower it).
     budget_bytes_s: f64,
+    /// The rate logs may come home at while no plan runs, as the master
+    /// last said (0: as fast as the link takes them; `None`: not heard yet,
+    /// so the telemetry budget).
+    backfill_bytes_s: Option<f64>,
+    /// When an authentic message from a master last arrived.
+    last_heard_master_ns: Option<u64>,
     /// Journal lines not yet taken by [`RobotAgent::take_said`].
     said: VecDeque<String>,
 }
@@ -219,8 +230,11 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             collisions: 0,
             refused: 0,
             last_bump: false,
+            last_blocked: false,
             journal_errors: 0,
             budget_bytes_s: config.telemetry_budget_bytes_s,
+            backfill_bytes_s: None,
+            last_heard_master_ns: None,
             said: VecDeque::new(),
             config,
             backend,
@@ -345,6 +359,18 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         if let Some(r) = &mut self.running {
             r.exec.heard_from_master(self.backend_t_s);
         }
+        // A master heard after a silence (a restarted one, a link back from
+        // an outage) gets an unacknowledged hand-back at once, not at the
+        // next resend.
+        let silent_ns = self
+            .last_heard_master_ns
+            .map_or(u64::MAX, |t| now_ns.saturating_sub(t));
+        if silent_ns > (HANDBACK_RESEND_S * 1e9) as u64
+            && let Some((_, last)) = &mut self.handback
+        {
+            *last = 0;
+        }
+        self.last_heard_master_ns = Some(now_ns);
         match &message.body {
             Body::Offer(offer) => {
                 if let Some(phase) = self.known.get(&offer.transfer) {
@@ -393,7 +419,9 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             }
             Body::Heartbeat {
                 telemetry_budget_bytes_s,
+                backfill_bytes_s,
             } => {
+                self.backfill_bytes_s = Some(f64::from(*backfill_bytes_s));
                 let budget = f64::from(*telemetry_budget_bytes_s)
                     .clamp(100.0, self.config.telemetry_budget_bytes_s);
                 if budget != self.budget_bytes_s {
@@ -473,6 +501,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             range_residual_m,
             wheel_travel_rad: self.backend.wheel_travel_rad(),
             logs_pending: self.logs_pending() as u32,
+            handback_pending: self.handback.is_some(),
             bumps: self.bumps,
             collisions: self.collisions,
             refused: self.refused,

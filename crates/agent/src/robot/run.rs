@@ -196,13 +196,17 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         self.params_covariance = r.nav.params_covariance();
         self.pose = pose;
         self.pose_covariance = covariance;
+        // Each press and each contact counted once, however many periods
+        // or plans it lasts (a continuation can start against the box the
+        // plan before it met).
         if reading.bump && !self.last_bump {
             self.bumps += 1;
         }
         self.last_bump = reading.bump;
-        if reading.blocked {
+        if reading.blocked && !self.last_blocked {
             self.collisions += 1;
         }
+        self.last_blocked = reading.blocked;
         let stopped = r.exec.stopped().cloned();
         if let Some((transfer, fixes, failures)) = localization_changed {
             let event = if localized {

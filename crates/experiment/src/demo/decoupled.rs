@@ -296,7 +296,7 @@ pub fn print(d: &Decoupled, out: &Path, w: &mut impl Write) -> anyhow::Result<()
     let learnt: usize = r.twin_updates.iter().map(|u| u.obstacles_added.len()).sum();
     writeln!(
         w,
-        "  outcome {:?} after {:.0} s of link time; the twin learnt {learnt} block(s); {} collision period(s), {} bump(s) -> {}/",
+        "  outcome {:?} after {:.0} s of link time; the twin learnt {learnt} block(s); {} contact(s) that held the robot, {} bump(s) -> {}/",
         r.outcome.unwrap_or(Outcome::Failed),
         d.virtual_s,
         r.collisions,

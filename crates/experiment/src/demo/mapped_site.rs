@@ -471,7 +471,7 @@ pub fn add_to(r: &mut Report, m: &MappedSite) {
     );
     let d = &m.decoupled.report;
     r.paragraph(format!(
-        "The case-study mission (the wall follower on its side IR) is rehearsed on the mapped twin,          planned, and verified there ({}). The plan goes over the lunar link to the robot agent on the          true site: outcome {}, {} hand-back(s), {} collision period(s), {} bump(s).",
+        "The case-study mission (the wall follower on its side IR) is rehearsed on the mapped twin,          planned, and verified there ({}). The plan goes over the lunar link to the robot agent on the          true site: outcome {}, {} hand-back(s), {} contact(s) that held the robot, {} bump(s).",
         if m.verified { "passed" } else { "failed" },
         d.outcome.map_or("none".to_string(), |o| format!("{o:?}")),
         d.handbacks.len(),

@@ -214,7 +214,7 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
         ),
         (
             "collisions",
-            "collision periods per run",
+            "contacts per run",
             "collisions",
             &|c: &Cell| Some(c.collisions),
         ),

@@ -397,6 +397,13 @@ impl Sender {
         rtt + rtt / 4 + tx_ns
     }
 
+    /// Sends no faster than `pace_bit_s` from now on (`None`: as fast as
+    /// asked): a robot's log goes at the telemetry budget while a plan runs
+    /// and at the link's rate once none does.
+    pub fn set_pace(&mut self, pace_bit_s: Option<f64>) {
+        self.config.pace_bit_s = pace_bit_s;
+    }
+
     fn pace(&mut self, now_ns: u64, bytes: usize) {
         if let Some(rate) = self.config.pace_bit_s {
             self.next_send_ns = now_ns + (8.0 * bytes as f64 / rate * 1e9).ceil() as u64;

@@ -5,9 +5,7 @@ use std::io::Write;
 use std::path::Path;
 
 use anyhow::Context;
-use twindrive_link::envelope::{
-    Envelope, Supervision, read_private_key_pem, sha256_hex, sign_plan,
-};
+use twindrive_link::envelope::{Envelope, Supervision, sha256_hex, sign_plan};
 
 use crate::cli::SignArgs;
 
@@ -50,10 +48,7 @@ pub fn certs(request: twindrive_ops::certs::CertsRequest) -> anyhow::Result<()> 
 pub fn sign(args: &SignArgs) -> anyhow::Result<()> {
     let plan_json =
         std::fs::read(&args.plan).with_context(|| format!("reading {}", args.plan.display()))?;
-    let key_text = std::fs::read_to_string(&args.key)
-        .with_context(|| format!("--key: reading {}", args.key.display()))?;
-    let key = read_private_key_pem(&key_text)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.key.display()))?;
+    let key = crate::flags::master_key(&args.key, std::slice::from_ref(&args.robot), None)?;
     let plan = twindrive_workflow::inputs::parse_plan(&plan_json, &args.plan)?;
     let world = twindrive_workflow::inputs::world_bytes(
         &plan.header.robot.scenario,

@@ -72,7 +72,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
     }
     let robot_keys = crate::flags::robot_keys(&args.trust_robot)?;
     crate::flags::check_robot_keys(&args.robot, &robot_keys)?;
-    let key = crate::flags::signing_key(&args.key)?;
+    let key = crate::flags::master_key(&args.key, &args.robot, Some(&robot_keys))?;
     let settings = MasterSettings {
         plan: args.plan.clone(),
         signed: args.signed.clone(),
