@@ -196,6 +196,15 @@ impl Harness {
         );
     }
 
+    /// Runs until the robot drives a plan (`executing`) or drives none,
+    /// for at most `t_s` of link time.
+    fn run_until_executing(&mut self, executing: bool, t_s: f64) -> bool {
+        let (op, agent) = (&mut self.op, &mut self.agent);
+        self.link.run(op, agent, (t_s * 1e9) as u64, |_, agent| {
+            agent.is_executing() == executing
+        })
+    }
+
     fn run_until(&mut self, t_s: f64) -> bool {
         let (op, agent) = (&mut self.op, &mut self.agent);
         self.link
@@ -668,17 +677,9 @@ fn telemetry_keeps_to_its_budget_and_every_log_arrives() {
             1,
         );
         // While the plan runs, the robot keeps to its budget.
-        let (op, agent) = (&mut h.op, &mut h.agent);
-        assert!(
-            h.link
-                .run(op, agent, 600 * S, |_, agent| agent.is_executing())
-        );
+        assert!(h.run_until_executing(true, 600.0));
         let (sent0, t0) = (h.link.down.stats.bytes_sent, h.link.now_ns);
-        let (op, agent) = (&mut h.op, &mut h.agent);
-        assert!(
-            h.link
-                .run(op, agent, 1_200 * S, |_, agent| !agent.is_executing())
-        );
+        assert!(h.run_until_executing(false, 1_200.0));
         let sent = (h.link.down.stats.bytes_sent - sent0) as f64;
         let took = (h.link.now_ns - t0) as f64 * 1e-9;
         assert!(
@@ -708,16 +709,8 @@ fn the_case_study_log_comes_home_over_lunar_within_a_minute() {
             sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
             1,
         );
-        let (op, agent) = (&mut h.op, &mut h.agent);
-        assert!(
-            h.link
-                .run(op, agent, 600 * S, |_, agent| agent.is_executing())
-        );
-        let (op, agent) = (&mut h.op, &mut h.agent);
-        assert!(
-            h.link
-                .run(op, agent, 1_200 * S, |_, agent| !agent.is_executing())
-        );
+        assert!(h.run_until_executing(true, 600.0));
+        assert!(h.run_until_executing(false, 1_200.0));
         let ended_ns = h.link.now_ns;
         let (op, agent) = (&mut h.op, &mut h.agent);
         assert!(
