@@ -772,7 +772,8 @@ fn draw_chart<DB: DrawingBackend>(
             )
         }
         .map_err(|e| e.to_string())?;
-        if !s.label.is_empty() {
+        // A legend entry only for what is drawn.
+        if !s.label.is_empty() && s.pieces.iter().any(|p| !p.is_empty()) {
             let dash = if s.dashed { 5 } else { 100 };
             let mark: Vec<(i32, i32)> = match s.vertices {
                 None => vec![],
@@ -792,7 +793,7 @@ fn draw_chart<DB: DrawingBackend>(
             draw_shapes(&mut chart, &points, shape, color, radius)?;
         }
     }
-    for m in &spec.dots {
+    for m in spec.dots.iter().filter(|m| !m.points.is_empty()) {
         let color = m.color;
         chart
             .draw_series(
@@ -804,7 +805,11 @@ fn draw_chart<DB: DrawingBackend>(
             .label(m.label.as_str())
             .legend(move |(x, y)| Circle::new((x + 10, y), radius, color.filled()));
     }
-    if let Some(b) = &spec.beyond {
+    if let Some(b) = spec
+        .beyond
+        .as_ref()
+        .filter(|b| !b.up.is_empty() || !b.down.is_empty())
+    {
         let size = radius + 3;
         let up = move |c: (f64, f64), color: RGBColor| {
             EmptyElement::at(c)
@@ -1237,6 +1242,40 @@ mod tests {
         assert!(!svg.contains("off the axis"));
         // The single point is drawn (a circle in its colour).
         assert!(svg.contains("<circle") && svg.contains("#2CA02C"), "{svg}");
+
+        // A series or a set of markers with nothing in it has no legend
+        // entry: a legend names only what is drawn.
+        TimeFigure {
+            title: "innovations",
+            x_label: "t",
+            y_label: "m",
+            series: &[
+                Series {
+                    label: "accepted",
+                    points: &same,
+                    color: palette::GOOD,
+                },
+                Series {
+                    label: "nothing here",
+                    points: &[],
+                    color: palette::BAD,
+                },
+            ],
+            markers: &[Markers {
+                label: "rejected",
+                points: &[],
+                color: palette::BAD,
+            }],
+            bands: &[],
+        }
+        .write(&dir.path().join("innovations"))
+        .unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("innovations.svg")).unwrap();
+        assert!(svg.contains("accepted"), "{svg}");
+        assert!(
+            !svg.contains("nothing here") && !svg.contains("rejected"),
+            "{svg}"
+        );
     }
 
     #[test]
