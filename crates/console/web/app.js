@@ -222,6 +222,7 @@ function renderRobot(r) {
       `${pose}${when}${pred}<br>` +
       `deviation ${fmt(s.deviation_m, 3)} m (tolerance ${r.tolerances.deviation_m}) · range residual ${fmt(s.range_residual_m, 3)} m (tolerance ${r.tolerances.range_residual_m})<br>` +
       `wheels ${fmt(s.params[0], 4)}/${fmt(s.params[1], 4)} m, wheelbase ${fmt(s.params[2], 4)} m · bumps ${s.bumps} · logs pending ${s.logs_pending}` +
+      ' (a plan\'s log comes home as a digest of at most 4 kB per second of plan: within seconds of its end on a fast link, at the link\'s rate once no plan runs)' +
       (s.refused ? ` · <span class="stale">robot refused ${s.refused} message(s)</span>` : '');
   } else {
     $('robot-status').innerHTML = `state <b>${esc(r.state)}</b> · no status from the robot yet`;

@@ -694,6 +694,12 @@ async fn a_plan_uploaded_over_a_lossy_link_reaches_100_percent_and_runs() {
         "the plan executing",
     )
     .await;
+    // The robot's panel says how long its logs take to come home.
+    let status = text(c, "robot-status").await;
+    assert!(
+        status.contains("log comes home") && status.contains("4 kB per second of plan"),
+        "{status}"
+    );
     let drawn = drawn_robots(c).await;
     let reported = js(c, "return window.twindrive.S.state.robots[0].status.pose").await;
     assert_eq!(drawn.len(), 1, "{drawn:?}");
