@@ -387,12 +387,7 @@ impl<S: ChunkStore> Operator<S> {
                     self.last_log_at_ns = Some(now_ns);
                     // What came is the log's digest: as a log file again.
                     let digest_bytes = file.len();
-                    let file = match twindrive_log::digest::decode(&file).and_then(|log| {
-                        let mut mcap = std::io::Cursor::new(Vec::new());
-                        twindrive_log::write_mcap(&log, &mut mcap)
-                            .map_err(|e| twindrive_log::digest::DigestError::new(e.to_string()))?;
-                        Ok(mcap.into_inner())
-                    }) {
+                    let file = match log_file_of_digest(&file) {
                         Ok(mcap) => mcap,
                         Err(e) => {
                             self.note("robot_log_unreadable", e.to_string());
@@ -709,4 +704,12 @@ impl<S: ChunkStore> Operator<S> {
             .flatten()
             .min()
     }
+}
+
+/// A robot log's digest as it came over the link, as an MCAP log file again.
+fn log_file_of_digest(digest: &[u8]) -> anyhow::Result<Vec<u8>> {
+    let log = twindrive_log::digest::decode(digest)?;
+    let mut mcap = std::io::Cursor::new(Vec::new());
+    twindrive_log::write_mcap(&log, &mut mcap)?;
+    Ok(mcap.into_inner())
 }

@@ -159,10 +159,8 @@ pub struct BridgeStats {
     pub received: Vec<u64>,
     /// Messages that did not decode (logged and dropped).
     pub rejected: u64,
-    /// Wheel commands published, holds included.
+    /// Wheel commands published, zeros while no plan ran included.
     pub commands_sent: u64,
-    /// Zero commands published while no plan ran.
-    pub holds_sent: u64,
     /// Periods the wheels were stopped because `/joint_states` was stale.
     pub stale_periods: u64,
 }
@@ -483,7 +481,6 @@ impl RosBridge {
     /// The command of a period in which the agent drives no plan: zero.
     pub fn hold(&mut self, now_s: f64) -> Vec<u8> {
         self.stats.commands_sent += 1;
-        self.stats.holds_sent += 1;
         self.command_bytes([0.0, 0.0], now_s)
     }
 

@@ -42,12 +42,6 @@ const ZSTD_LEVEL: i32 = 19;
 #[error("not a twindrive log digest: {0}")]
 pub struct DigestError(String);
 
-impl DigestError {
-    pub fn new(message: impl Into<String>) -> Self {
-        Self(message.into())
-    }
-}
-
 /// A digest of `log` in at most `budget_bytes_per_s` per second of mission
 /// (its range sweeps thinned if need be), and the fraction of sampled
 /// sweeps it kept.
@@ -57,10 +51,10 @@ pub fn encode(log: &MissionLog, budget_bytes_per_s: f64) -> (Vec<u8>, f64) {
         _ => 1.0,
     };
     let budget = (budget_bytes_per_s * mission_s) as usize;
+    let sweeps = log.ranges.iter().any(|r| !r.is_nan());
     let mut keep_every = 1usize;
     loop {
         let bytes = encode_thinned(log, keep_every);
-        let sweeps = log.ranges.iter().any(|r| !r.is_nan());
         if bytes.len() <= budget || !sweeps || keep_every > log.steps.len() {
             return (bytes, 1.0 / keep_every as f64);
         }

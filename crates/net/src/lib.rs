@@ -19,9 +19,7 @@
 pub mod ros;
 mod session;
 
-pub use session::{
-    OPEN_TIMEOUT, SessionError, SessionOptions, endpoints, open_session, plain_error,
-};
+pub use session::{SessionOptions, endpoints, open_session, plain_error};
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;

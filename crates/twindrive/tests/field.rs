@@ -69,6 +69,26 @@ fn listening(port: u16) -> bool {
     .is_ok()
 }
 
+/// `twindrive ARGS` run to its end (bounded: `limit_s`): its exit code and
+/// what it said on stderr.
+fn run_bounded<I, A>(args: I, limit_s: f64) -> (Option<i32>, String)
+where
+    I: IntoIterator<Item = A>,
+    A: AsRef<std::ffi::OsStr>,
+{
+    common::finish(
+        Proc(
+            Command::new(env!("CARGO_BIN_EXE_twindrive"))
+                .args(args)
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        ),
+        limit_s,
+    )
+}
+
 /// `scripts/forger.py capture` for a second on `endpoint` over TLS,
 /// trusting `ca`, showing `cert` (certificate, key) if given: its exit code
 /// (3: it could not connect) and what it said.
@@ -234,29 +254,22 @@ fn a_robot_that_cannot_listen_says_why_and_exits_1() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let port = taken.local_addr().unwrap().port();
     let started = Instant::now();
-    let (code, err) = common::finish(
-        Proc(
-            Command::new(env!("CARGO_BIN_EXE_twindrive"))
-                .args([
-                    "robot",
-                    "--id",
-                    "rover",
-                    "--site",
-                    s(&repo().join("scenarios/wall_following.toml")),
-                    "--trust",
-                    s(&f.path("keys/master.pub")),
-                    "--key",
-                    s(&f.path("keys/rover.key")),
-                    "--state-dir",
-                    s(&tmp.path().join("robot")),
-                    "--listen",
-                    &format!("tcp/127.0.0.1:{port}"),
-                ])
-                .stdout(Stdio::null())
-                .stderr(Stdio::piped())
-                .spawn()
-                .unwrap(),
-        ),
+    let (code, err) = run_bounded(
+        [
+            "robot",
+            "--id",
+            "rover",
+            "--site",
+            s(&repo().join("scenarios/wall_following.toml")),
+            "--trust",
+            s(&f.path("keys/master.pub")),
+            "--key",
+            s(&f.path("keys/rover.key")),
+            "--state-dir",
+            s(&tmp.path().join("robot")),
+            "--listen",
+            &format!("tcp/127.0.0.1:{port}"),
+        ],
         60.0,
     );
     assert_eq!(code, Some(1), "{err}");
@@ -338,17 +351,7 @@ fn a_master_that_reaches_nothing_says_why_and_exits_1() {
         .to_vec();
         args.extend(endpoint_args);
         let started = Instant::now();
-        let (code, err) = common::finish(
-            Proc(
-                Command::new(env!("CARGO_BIN_EXE_twindrive"))
-                    .args(&args)
-                    .stdout(Stdio::null())
-                    .stderr(Stdio::piped())
-                    .spawn()
-                    .unwrap(),
-            ),
-            90.0,
-        );
+        let (code, err) = run_bounded(&args, 90.0);
         assert_eq!(code, Some(1), "{how}: {err}");
         assert!(
             started.elapsed() < Duration::from_secs(40),
@@ -369,17 +372,7 @@ fn a_console_that_cannot_listen_writes_nothing() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let address = taken.local_addr().unwrap().to_string();
     let out = tmp.path().join("console");
-    let (code, err) = common::finish(
-        Proc(
-            Command::new(env!("CARGO_BIN_EXE_twindrive"))
-                .args(["console", "--listen", &address, "--out", s(&out)])
-                .stdout(Stdio::null())
-                .stderr(Stdio::piped())
-                .spawn()
-                .unwrap(),
-        ),
-        60.0,
-    );
+    let (code, err) = run_bounded(["console", "--listen", &address, "--out", s(&out)], 60.0);
     assert_eq!(code, Some(1), "{err}");
     assert!(
         err.contains(&address) && err.contains("cannot listen"),
