@@ -10,7 +10,8 @@
 //!   twin's by more than three of their standard deviations (and by more
 //!   than a tenth of a millimetre: below that no plan changes);
 //! - its world: every range reading in the hand-back's sensor window that
-//!   ends well short of where the twin's world says it should, and a bumper
+//!   ends well short of where the world the twin knew before learning says
+//!   it should (so a block seen again is placed by every sighting), and a bumper
 //!   contact the twin did not predict, marks an obstacle point, kept with
 //!   where it was seen from; a reading that ends well beyond where the twin
 //!   says it should is free space, and removes the points learnt before
@@ -233,8 +234,8 @@ impl Twin {
     }
 
     /// The hand-back window's readings against the twin's predictions:
-    /// obstacle points (readings well short of the prediction, contacts the
-    /// twin did not predict) and free rays (sensor to reading, for readings
+    /// obstacle points (readings well short of what the world known before
+    /// learning predicts, contacts the twin did not predict) and free rays (sensor to reading, for readings
     /// well beyond a prediction that ended on a learnt obstacle).
     fn readings(
         &self,
@@ -243,13 +244,23 @@ impl Twin {
         settings: &LearnSettings,
     ) -> (Vec<Evidence>, Vec<Ray>) {
         let mut model = SensorModel::new(&self.scenario);
+        // What the twin knew before learning: a reading it does not explain
+        // is evidence, whether or not a block learnt before explains it
+        // too (a face seen again, from elsewhere, places it better).
+        let known_site = Scenario {
+            world: self.known.clone(),
+            ..self.scenario.clone()
+        };
+        let mut known_model = SensorModel::new(&known_site);
         let mut predicted = vec![0.0; model.beams()];
+        let mut predicted_known = vec![0.0; model.beams()];
         let (mut points, mut free) = (Vec::new(), Vec::new());
         let sensors = &self.scenario.range_sensors;
         for w in &h.window {
             let [x, y, heading] = refined.correct(w.pose);
             let pose = Pose::new(x, y, heading);
             let bump_predicted = model.read(&pose, &mut predicted);
+            known_model.read(&pose, &mut predicted_known);
             let mut beam = 0;
             for s in sensors {
                 let info = &s.info;
@@ -259,6 +270,7 @@ impl Twin {
                     };
                     let measured = f64::from(measured);
                     let expected = predicted[beam];
+                    let expected_known = predicted_known[beam];
                     beam += 1;
                     if !measured.is_finite() {
                         continue;
@@ -268,7 +280,7 @@ impl Twin {
                     let (sn, cs) = angle.sin_cos();
                     let at = |r: f64| [mx + r * cs, my + r * sn];
                     if measured < info.max_range_m - 0.02
-                        && measured < expected - settings.shorter_by_m
+                        && measured < expected_known - settings.shorter_by_m
                     {
                         points.push(Evidence {
                             point: at(measured),
@@ -778,6 +790,81 @@ mod tests {
             }));
             assert_eq!(update.obstacles_removed.len(), 1, "{update:?}");
             assert_eq!(update.evidence_removed, 1);
+        }
+    }
+
+    /// A block learnt a few centimetres off from one side (the hand-back's
+    /// pose was), then seen by a lidar from another, with sight lines that
+    /// run along the face it first saw: the twin still holds the whole box.
+    /// A face seen again is evidence again, so readings that end beyond the
+    /// old guess but on the box do not simply erase it. (Whole but for its
+    /// edges: a face seen at a grazing angle is not seen to its very end,
+    /// and a sight line past the end cuts the block back to the last point
+    /// seen.)
+    #[test]
+    fn a_block_seen_again_from_elsewhere_still_holds_the_whole_box() {
+        const EDGE_M: f64 = 0.04;
+        let text = format!(
+            "{}{}",
+            twindrive_sim::builtin::WALL_FOLLOWING,
+            r#"
+[[range_sensors]]
+name = "lidar"
+mount = { x_m = 0.0, y_m = 0.0, heading_rad = 0.0 }
+beams = 181
+fov_rad = 3.141592653589793
+max_range_m = 4.0
+noise_std_m = 0.01
+rate_hz = 10.0
+"#
+        );
+        let twin_site = Scenario::from_toml(&text, std::path::Path::new("<lidar>.toml")).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        for _ in 0..10 {
+            let (w, h) = (rng.random_range(0.15..0.3), rng.random_range(0.2..0.35));
+            let min = [rng.random_range(1.8..3.3), rng.random_range(0.75..0.95)];
+            let max = [min[0] + w, min[1] + h];
+            let mut site = twin_site.clone();
+            site.world = site.world.with_blocks(&[(min, max)]);
+            let mut twin = Twin::new(twin_site.clone(), twin_site.robot.true_params);
+            // The east face, learnt from the east, `off` too far east.
+            let off = rng.random_range(0.015..0.03);
+            let mut y = min[1];
+            while y <= max[1] {
+                twin.evidence.push(Evidence {
+                    point: [max[0] + off, y],
+                    seen_from: [max[0] + 0.9, y],
+                    contact: false,
+                });
+                y += 0.01;
+            }
+            twin.learnt = cluster(&twin.evidence, &[], &LearnSettings::default());
+            twin.scenario.world = twin.known.with_blocks(&twin.learnt);
+            // Then the lidar, standing south-east of it and facing west.
+            let at = Pose::new(
+                max[0] + rng.random_range(0.05..0.15),
+                min[1] - rng.random_range(0.25..0.35),
+                std::f64::consts::PI,
+            );
+            twin.apply(&handback(&site, &[at; 5]), &LearnSettings::default());
+            let inside = |p: [f64; 2]| {
+                twin.learnt
+                    .iter()
+                    .any(|b| b.0[0] <= p[0] && p[0] <= b.1[0] && b.0[1] <= p[1] && p[1] <= b.1[1])
+            };
+            for i in 0..=10 {
+                for j in 0..=10 {
+                    let p = [
+                        min[0] + EDGE_M + (w - 2.0 * EDGE_M) * f64::from(i) / 10.0,
+                        min[1] + EDGE_M + (h - 2.0 * EDGE_M) * f64::from(j) / 10.0,
+                    ];
+                    assert!(
+                        inside(p),
+                        "{p:?} of the box {min:?}-{max:?} is in no learnt block: {:?}",
+                        twin.learnt
+                    );
+                }
+            }
         }
     }
 }

@@ -185,7 +185,8 @@ pub struct Handback {
 pub struct WindowSample {
     pub plan_t_s: f64,
     pub pose: [f64; 3],
-    /// The latest reading of each range beam (m; NaN: none).
+    /// Each range beam's reading taken at this pose (m; NaN: the beam did
+    /// not read this period).
     pub ranges_m: Vec<f32>,
     pub bump: bool,
 }

@@ -103,6 +103,7 @@ struct Running {
     t0_s: Option<f64>,
     max_deviation_m: f64,
     window: VecDeque<WindowSample>,
+    pace: run::WindowPace,
     tick: u64,
 }
 
@@ -117,7 +118,8 @@ pub const START_HEADING_RAD: f64 = 0.35;
 
 /// Sent this many times a second at most while a hand-back is unacknowledged.
 const HANDBACK_RESEND_S: f64 = 5.0;
-/// Ticks in the hand-back's sensor window, and one kept in this many.
+/// Ticks in the hand-back's sensor window, and a sample at most every this
+/// many ticks (and at every sweep of a sensor that reads less often).
 const WINDOW_TICKS: usize = 200;
 const WINDOW_EVERY: u64 = 4;
 

@@ -106,6 +106,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             t0_s: None,
             max_deviation_m: 0.0,
             window: VecDeque::new(),
+            pace: WindowPace::default(),
             tick: 0,
         });
         self.next_tick_ns = now_ns;
@@ -176,18 +177,22 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 r.localized = localized;
                 (hex(&r.transfer), localizer.fixes, localizer.failures)
             });
-        // Every few ticks, and every tick with a contact or a stop.
-        if r.tick.is_multiple_of(WINDOW_EVERY) || reading.bump || r.exec.stopped().is_some() {
+        // A sample holds only the readings taken at its pose: a beam read
+        // periods earlier, paired with this pose, would put what it saw
+        // where the robot no longer looked from (a turning robot's walls
+        // would come home bent, as obstacles the twin lacks).
+        let beams = reading.fresh_ranges_m.len();
+        let force = reading.bump || r.exec.stopped().is_some();
+        if r.pace.take(r.tick, &reading.fresh_ranges_m, force) {
             r.window.push_back(WindowSample {
                 plan_t_s: reading.t_s - t0,
                 pose,
-                ranges_m: reading.ranges_m.iter().map(|&v| v as f32).collect(),
+                ranges_m: reading.fresh_ranges_m.iter().map(|&v| v as f32).collect(),
                 bump: reading.bump,
             });
             // As many samples as fit the hand-back message: a lidar's
             // hundreds of beams a sample would otherwise make it too long
             // to send, and the hand-back would never arrive.
-            let beams = reading.ranges_m.len();
             if r.window.len() > window_samples(beams) {
                 r.window.pop_front();
             }
@@ -298,6 +303,39 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     }
 }
 
+/// When the hand-back's window takes a sample: on a tick with a range
+/// reading, at most every [`WINDOW_EVERY`] ticks, but at every sweep of a
+/// sensor that reads less often than that (a lidar's); and at every tick
+/// with a contact or a stop.
+#[derive(Debug, Default)]
+pub(super) struct WindowPace {
+    /// The tick each range beam last read on.
+    last_read: Vec<Option<u64>>,
+    last_sample: Option<u64>,
+}
+
+impl WindowPace {
+    /// Whether tick `tick`, whose fresh readings are `fresh_ranges_m` (NaN:
+    /// the beam did not read), is sampled; `force` for a contact or a stop.
+    pub(super) fn take(&mut self, tick: u64, fresh_ranges_m: &[f64], force: bool) -> bool {
+        self.last_read.resize(fresh_ranges_m.len(), None);
+        let (mut any_read, mut slow_sweep) = (false, false);
+        for (last, v) in self.last_read.iter_mut().zip(fresh_ranges_m) {
+            if v.is_finite() {
+                any_read = true;
+                slow_sweep |= last.is_none_or(|t| tick - t >= WINDOW_EVERY);
+                *last = Some(tick);
+            }
+        }
+        let due = self.last_sample.is_none_or(|t| tick - t >= WINDOW_EVERY);
+        let take = force || (any_read && (due || slow_sweep));
+        if take {
+            self.last_sample = Some(tick);
+        }
+        take
+    }
+}
+
 /// Samples of `beams` readings the hand-back's window keeps: at most
 /// [`WINDOW_TICKS`] / [`WINDOW_EVERY`], and no more than fill three
 /// quarters of a message (4 bytes a beam, about 40 more a sample).
@@ -310,6 +348,44 @@ fn window_samples(beams: usize) -> usize {
 mod window_tests {
     use super::*;
     use twindrive_link::wire::{Body, Handback, Stamper, WindowSample, decode, encode};
+
+    /// A 50 Hz side IR (every second tick, either phase) and a 10 Hz lidar
+    /// (every tenth tick, any phase), at 100 Hz: every lidar sweep is
+    /// sampled, the IR every fourth tick, and nothing between readings
+    /// unless forced.
+    #[test]
+    fn the_window_samples_every_slow_sweep_and_fast_readings_at_its_pace() {
+        for (ir_phase, lidar_phase) in [(0, 0), (1, 0), (1, 3), (0, 7)] {
+            let mut pace = WindowPace::default();
+            let mut taken = Vec::new();
+            for tick in 0..200u64 {
+                let ir = (tick + ir_phase) % 2 == 0;
+                let lidar = (tick + lidar_phase) % 10 == 0;
+                let fresh = [
+                    if ir { 0.5 } else { f64::NAN },
+                    if lidar { 2.0 } else { f64::NAN },
+                    if lidar { 2.5 } else { f64::NAN },
+                ];
+                if pace.take(tick, &fresh, tick == 101) {
+                    taken.push((tick, ir, lidar));
+                }
+            }
+            let sweeps = taken.iter().filter(|t| t.2).count();
+            assert_eq!(sweeps, 20, "{taken:?}");
+            let ir_only: Vec<u64> = taken.iter().filter(|t| t.1 && !t.2).map(|t| t.0).collect();
+            assert!(ir_only.len() >= 200 / 4 - 20 - 2, "{taken:?}");
+            // (A beam's very first reading is a sweep of its own.)
+            for w in taken.windows(2).filter(|w| w[0].0 >= 10) {
+                let (a, b) = (w[0], w[1]);
+                assert!(b.2 || b.0 == 101 || b.0 - a.0 >= WINDOW_EVERY, "{taken:?}");
+                assert!(
+                    b.0 == 101 || b.1 || b.2,
+                    "a sample with nothing read: {taken:?}"
+                );
+            }
+            assert!(taken.iter().any(|t| t.0 == 101), "forced");
+        }
+    }
 
     #[test]
     fn a_full_window_fits_a_hand_back_message_for_any_sensor() {
