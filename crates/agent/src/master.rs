@@ -35,8 +35,14 @@ pub enum MasterEvent {
     },
     /// The robot handed control back (reported once per plan).
     Handback(Box<Handback>),
-    /// A robot log (MCAP) arrived whole.
+    /// A robot log arrived whole (a digest, or a full-rate MCAP asked for
+    /// with [`Master::request_log`]).
     RobotLog { transfer: TransferId, file: Vec<u8> },
+    /// The robot keeps no log of a plan asked for (by its document hash).
+    LogRefused {
+        plan_sha256: [u8; 32],
+        reason: String,
+    },
     /// A status summary.
     Status(Box<Status>),
 }
@@ -182,6 +188,15 @@ impl<S: ChunkStore> Master<S> {
     }
 
     /// The upload under way or last finished.
+    /// Asks the robot for the full-rate log of the plan whose document
+    /// hash is `plan_sha256` (it comes as a [`MasterEvent::RobotLog`] after
+    /// the logs already on their way, or a [`MasterEvent::LogRefused`]).
+    /// The link may lose the request: the owner asks again until one of
+    /// them comes.
+    pub fn request_log(&mut self, plan_sha256: [u8; 32]) {
+        self.outbox.push_back(Body::LogRequest { plan_sha256 });
+    }
+
     pub fn uploading(&self) -> Option<TransferId> {
         self.upload.as_ref().map(|u| u.sender.transfer())
     }
@@ -250,6 +265,11 @@ impl<S: ChunkStore> Master<S> {
                 {
                     u.sender.handle(message, now_ns);
                     self.upload_events(now_ns);
+                } else if let Body::Refused { reason, .. } = &message.body {
+                    self.events.push_back(MasterEvent::LogRefused {
+                        plan_sha256: *transfer,
+                        reason: reason.clone(),
+                    });
                 }
             }
             Body::Offer(_) | Body::Chunk { .. } | Body::Repair { .. } | Body::EndOfFile { .. } => {
@@ -292,7 +312,7 @@ impl<S: ChunkStore> Master<S> {
                     self.rtt_s.push(rtt_s);
                 }
             }
-            Body::Heartbeat { .. } | Body::HandbackAck { .. } => {}
+            Body::Heartbeat { .. } | Body::HandbackAck { .. } | Body::LogRequest { .. } => {}
         }
     }
 

@@ -64,6 +64,9 @@ pub struct OperatorConfig {
     pub max_continuations: usize,
     /// How continuations go around what the twin learnt.
     pub continuation: ContinuationSettings,
+    /// Once the digests are in, ask the robot for every executed plan's
+    /// full-rate log too (the whole MCAP it keeps), and wait for them.
+    pub full_rate_logs: bool,
 }
 
 impl OperatorConfig {
@@ -92,6 +95,7 @@ impl OperatorConfig {
             log_wait_s: 120.0,
             max_continuations: 10,
             continuation: ContinuationSettings::default(),
+            full_rate_logs: false,
         }
     }
 }
@@ -123,6 +127,20 @@ pub struct HandbackEntry {
     pub params: [f64; 3],
     pub params_std: [f64; 3],
 }
+
+/// A robot log as it arrived, as an MCAP file.
+#[derive(Debug, Clone)]
+pub struct ArrivedLog {
+    /// The plan it is the log of, when known.
+    pub plan: Option<Arc<MissionPlan>>,
+    pub mcap: Vec<u8>,
+    /// The robot's full-rate log, asked for; else made from its digest.
+    pub full_rate: bool,
+}
+
+/// How often the full-rate log asked for is asked again while neither it
+/// nor a refusal has come (the link may have lost the request), ns.
+const FULL_LOG_ASK_EVERY_NS: u64 = 10_000_000_000;
 
 /// One moment of the mission, for the timeline.
 #[derive(Debug, Clone, Serialize)]
@@ -184,9 +202,12 @@ pub struct Operator<S: ChunkStore> {
     status_after_decision: Option<u32>,
     /// The robot's latest status says a hand-back waits for acknowledgement.
     handback_pending: bool,
-    /// Robot logs (MCAP bytes, with the plan they belong to) for the owner
-    /// to write.
-    pub new_logs: VecDeque<(Option<Arc<MissionPlan>>, Vec<u8>)>,
+    /// Robot logs for the owner to write.
+    pub new_logs: VecDeque<ArrivedLog>,
+    /// With `full_rate_logs`, once asked: the plans whose full-rate logs
+    /// are still to come, the first asked for (and when, last).
+    full_logs: Option<VecDeque<Arc<MissionPlan>>>,
+    full_log_asked_ns: Option<u64>,
     /// Continuation plans signed (document bytes, signed file) for the
     /// owner to keep.
     pub new_plans: VecDeque<(Arc<MissionPlan>, Vec<u8>, Vec<u8>)>,
@@ -238,6 +259,8 @@ impl<S: ChunkStore> Operator<S> {
             status_after_decision: None,
             handback_pending: false,
             new_logs: VecDeque::new(),
+            full_logs: None,
+            full_log_asked_ns: None,
             new_plans: VecDeque::new(),
             awaiting: None,
             last_handback: None,
@@ -297,16 +320,68 @@ impl<S: ChunkStore> Operator<S> {
         }
     }
 
-    /// The mission is decided, and the robot's logs are in (or the next
-    /// one was waited for long enough).
+    /// The mission is decided, and the robot's logs are in (with
+    /// `full_rate_logs`, the full-rate ones too), or the next one was
+    /// waited for long enough.
     pub fn is_done(&self) -> bool {
         let Some(at) = self.waiting_since_ns() else {
             return false;
         };
-        // The robot has said, since, that no log of its waits for the master
-        // (and no hand-back: the master acknowledges it first).
-        let logs_in = self.status_after_decision == Some(0) && !self.handback_pending;
-        logs_in || self.now_ns >= at + (self.config.log_wait_s * 1e9) as u64
+        let full_in =
+            !self.config.full_rate_logs || self.full_logs.as_ref().is_some_and(VecDeque::is_empty);
+        (self.digests_in() && full_in) || self.now_ns >= at + (self.config.log_wait_s * 1e9) as u64
+    }
+
+    /// The robot has said, since the decision, that no log of its waits
+    /// for the master (and no hand-back: the master acknowledges it first).
+    fn digests_in(&self) -> bool {
+        self.status_after_decision == Some(0) && !self.handback_pending
+    }
+
+    /// With `full_rate_logs`: once the digests are in, the executed plans'
+    /// full-rate logs are asked for, one at a time, each again every
+    /// [`FULL_LOG_ASK_EVERY_NS`] until it (or a refusal) comes.
+    fn ask_for_full_logs(&mut self, now_ns: u64) {
+        if !self.config.full_rate_logs || self.decided_at_ns.is_none() {
+            return;
+        }
+        if self.full_logs.is_none() {
+            if !self.digests_in() {
+                return;
+            }
+            let plans: VecDeque<Arc<MissionPlan>> = self
+                .plans
+                .iter()
+                .filter(|p| p.executed)
+                .map(|p| p.plan.clone())
+                .collect();
+            self.note(
+                "full_rate_logs_asked",
+                format!("{} plan(s)' full-rate logs", plans.len()),
+            );
+            self.full_logs = Some(plans);
+        }
+        let Some(next) = self.full_logs.as_ref().and_then(|q| q.front()) else {
+            return;
+        };
+        let due = self
+            .full_log_asked_ns
+            .is_none_or(|t| now_ns.saturating_sub(t) >= FULL_LOG_ASK_EVERY_NS);
+        match next.sha256_bytes() {
+            Some(sha) if due => {
+                self.master.request_log(sha);
+                self.full_log_asked_ns = Some(now_ns);
+            }
+            Some(_) => {}
+            None => {
+                let sha = next.sha256.clone();
+                self.full_logs.as_mut().map(VecDeque::pop_front);
+                self.note(
+                    "robot_log_refused",
+                    format!("plan {sha:?} has no SHA-256 to ask by"),
+                );
+            }
+        }
     }
 
     /// Once the mission is decided, the wait for the robot's next log runs
@@ -382,6 +457,40 @@ impl<S: ChunkStore> Operator<S> {
                 }
                 MasterEvent::Phase { transfer, phase } => self.phase(transfer, phase),
                 MasterEvent::Handback(h) => self.handback(&h),
+                MasterEvent::RobotLog { file, .. } if twindrive_log::is_mcap(&file) => {
+                    // A full-rate log: the one asked for (one at a time).
+                    self.last_log_at_ns = Some(now_ns);
+                    let plan = self.full_logs.as_mut().and_then(VecDeque::pop_front);
+                    self.full_log_asked_ns = None;
+                    self.note(
+                        "robot_log_full_rate",
+                        format!(
+                            "{} bytes, plan {}",
+                            file.len(),
+                            plan.as_ref().map_or("?", |p| &p.sha256[..12])
+                        ),
+                    );
+                    self.new_logs.push_back(ArrivedLog {
+                        plan,
+                        mcap: file,
+                        full_rate: true,
+                    });
+                }
+                MasterEvent::LogRefused {
+                    plan_sha256,
+                    reason,
+                } => {
+                    let asked = self
+                        .full_logs
+                        .as_ref()
+                        .and_then(|q| q.front())
+                        .is_some_and(|p| p.sha256_bytes() == Some(plan_sha256));
+                    if asked {
+                        self.full_logs.as_mut().map(VecDeque::pop_front);
+                        self.full_log_asked_ns = None;
+                        self.note("robot_log_refused", reason);
+                    }
+                }
                 MasterEvent::RobotLog { file, .. } => {
                     self.logs_received += 1;
                     self.last_log_at_ns = Some(now_ns);
@@ -402,7 +511,11 @@ impl<S: ChunkStore> Operator<S> {
                         .nth(self.logs_received - 1)
                         .map(|p| p.plan.clone());
                     self.note("robot_log", format!("{digest_bytes} bytes on the link"));
-                    self.new_logs.push_back((plan, file));
+                    self.new_logs.push_back(ArrivedLog {
+                        plan,
+                        mcap: file,
+                        full_rate: false,
+                    });
                 }
                 MasterEvent::Status(s) => {
                     self.report.status_messages += 1;
@@ -420,6 +533,7 @@ impl<S: ChunkStore> Operator<S> {
                 }
             }
         }
+        self.ask_for_full_logs(now_ns);
     }
 
     fn phase(&mut self, transfer: TransferId, phase: PlanPhase) {
@@ -699,7 +813,10 @@ impl<S: ChunkStore> Operator<S> {
         let wait = self
             .waiting_since_ns()
             .map(|at| at + (self.config.log_wait_s * 1e9) as u64);
-        [self.master.poll_timeout(), wait]
+        let ask_again = self
+            .full_log_asked_ns
+            .map(|t| t.saturating_add(FULL_LOG_ASK_EVERY_NS));
+        [self.master.poll_timeout(), wait, ask_again]
             .into_iter()
             .flatten()
             .min()

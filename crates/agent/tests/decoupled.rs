@@ -176,6 +176,7 @@ fn harness_with_budget(
             log_wait_s: 1_200.0,
             max_continuations: 6,
             continuation: Default::default(),
+            full_rate_logs: false,
         },
     );
     Harness {
@@ -286,8 +287,10 @@ fn a_box_the_twin_lacks_is_handed_back_learnt_and_the_continuation_completes() {
             "seed {seed}: {:#?}",
             r.timeline
         );
-        for (k, (_, mcap)) in h.op.new_logs.iter().enumerate() {
-            let log = twindrive_log::read_mcap_bytes(mcap, Path::new("received.mcap")).unwrap();
+        for (k, arrived) in h.op.new_logs.iter().enumerate() {
+            assert!(!arrived.full_rate);
+            let log =
+                twindrive_log::read_mcap_bytes(&arrived.mcap, Path::new("received.mcap")).unwrap();
             assert!(log.steps.len() > 100);
             // The period whose reading ended the plan (a hand-back or the
             // plan's end) commanded zero itself; the plan was driving just
@@ -732,7 +735,7 @@ fn the_case_study_log_comes_home_over_lunar_within_a_minute() {
             "seed {seed}: {digest_bytes} bytes for {mission_s:.0} s"
         );
         // The log that came is the robot's, every step of it.
-        let (_, mcap) = &h.op.new_logs[0];
+        let mcap = &h.op.new_logs[0].mcap;
         let home = twindrive_log::read_mcap_bytes(mcap, Path::new("home.mcap")).unwrap();
         let full = store.log(&common::plan().sha256).unwrap();
         let kept = twindrive_log::read_mcap_bytes(&full.mcap, Path::new("kept.mcap")).unwrap();
@@ -753,6 +756,53 @@ fn the_case_study_log_comes_home_over_lunar_within_a_minute() {
             full.mcap.len()
         );
     }
+}
+
+/// Asked for, the full-rate log of every plan driven comes home after its
+/// digest, byte for byte as the robot keeps it, over a link that loses a
+/// fifth of the messages (requests included: they are asked again); a
+/// plan the robot has no log of is refused, and the robot says so.
+#[test]
+fn full_rate_logs_come_home_whole_when_asked_for() {
+    let store = MemoryRobotStore::default();
+    let key = test_key(13);
+    let mut h = harness(
+        &store,
+        "lan,loss=0.2",
+        63,
+        &key,
+        &key,
+        BOX,
+        OnHandback::Stop,
+    );
+    h.op.config_mut().full_rate_logs = true;
+    h.send(
+        sign_plan(&key, &plan_json(), envelope(1, u64::MAX, None)).unwrap(),
+        1,
+    );
+    assert!(h.run_until(3_600.0), "{:#?}", h.op.report.timeline);
+    assert_eq!(h.op.report.handbacks.len(), 1);
+    let logs: Vec<_> = h.op.new_logs.iter().collect();
+    assert_eq!(logs.len(), 2, "{:#?}", h.op.report.timeline);
+    assert!(!logs[0].full_rate && logs[1].full_rate);
+    let plan = logs[1].plan.as_ref().expect("the plan it is the log of");
+    assert_eq!(plan.sha256, common::plan().sha256);
+    let kept = store.log(&plan.sha256).unwrap();
+    assert_eq!(logs[1].mcap, kept.mcap, "byte for byte");
+    assert!(events(&store, "log_requested").len() == 1);
+    // A plan this robot never drove.
+    h.op.master.request_log([9; 32]);
+    let until = h.link.now_ns + 30 * S;
+    let (op, agent) = (&mut h.op, &mut h.agent);
+    h.link.run(op, agent, until, |_, _| false);
+    let refused = events(&store, "log_request_refused");
+    assert!(!refused.is_empty());
+    assert!(
+        refused[0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains(&"09".repeat(32))
+    );
 }
 
 /// A plan rehearsed for another site is refused after its signature

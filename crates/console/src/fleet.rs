@@ -268,8 +268,11 @@ impl RobotSlot {
         // Logs come home after the mission is decided: the report lists
         // each as it arrives (written again when one comes after it).
         let mut arrived = Vec::new();
-        for (plan, mcap) in logs {
-            match self.archive.write_robot_log(plan.as_deref(), &mcap) {
+        for log in logs {
+            match self
+                .archive
+                .write_robot_log(log.plan.as_deref(), &log.mcap, log.full_rate)
+            {
                 Ok(written) => {
                     arrived.push(written.name.clone());
                     let log = written.log;

@@ -170,10 +170,10 @@ async fn serve(
     let core = Arc::new(Mutex::new(core));
     let stop = Arc::new(AtomicBool::new(false));
 
-    // The robots' links, on one zenoh session, opened in the background:
+    // The robots' links, on one network (zenoh), opened in the background:
     // the page serves at once, and the robots show an outage until the
-    // session (a router not up yet, a network coming up) is there.
-    let (session_tx, session_rx) = tokio::sync::oneshot::channel::<twindrive_net::Session>();
+    // network (a router not up yet, a network coming up) is there.
+    let (network_tx, network_rx) = tokio::sync::oneshot::channel::<twindrive_net::Network>();
     let links = if robots.is_empty() {
         None
     } else {
@@ -184,10 +184,10 @@ async fn serve(
         let seed = config.seed;
         let stop = stop.clone();
         Some(tokio::spawn(async move {
-            let session = match twindrive_net::open_session(&options).await {
-                Ok(s) => s,
+            let network = match twindrive_net::Network::open(&options).await {
+                Ok(n) => n,
                 Err(e) => {
-                    tracing::error!("no zenoh session: {e:#}");
+                    tracing::error!("no network to the robots: {e:#}");
                     return;
                 }
             };
@@ -195,7 +195,7 @@ async fn serve(
             for (k, (slot, peers)) in robots.iter().zip(robot_links).enumerate() {
                 let id = slot.lock().id.clone();
                 let mut link_end = twindrive_net::LinkEnd::master(&id, peers);
-                let session = session.clone();
+                let network = network.clone();
                 let mut endpoint = slot.clone();
                 let stop = stop.clone();
                 let emulation = link.clone().map(|p| Emulation {
@@ -206,7 +206,7 @@ async fn serve(
                     let mut stats = twindrive_net::DriveStats::default();
                     let result = twindrive_net::drive_counting(
                         &mut endpoint,
-                        &session,
+                        &network,
                         &mut link_end,
                         emulation,
                         Duration::from_secs(100 * 365 * 86_400),
@@ -223,7 +223,7 @@ async fn serve(
             for d in drivers {
                 let _ = d.await;
             }
-            let _ = session_tx.send(session);
+            let _ = network_tx.send(network);
         }))
     };
 
@@ -306,12 +306,12 @@ async fn serve(
     stop.store(true, Ordering::Relaxed);
     let _ = ticker.await;
     if let Some(links) = links {
-        // The drivers see `stop` within 50 ms; a session still being
+        // The drivers see `stop` within 50 ms; a network still being
         // opened is given up.
         match tokio::time::timeout(Duration::from_secs(2), links).await {
             Ok(_) => {
-                if let Ok(s) = session_rx.await {
-                    let _ = s.close().await;
+                if let Ok(n) = network_rx.await {
+                    n.close().await;
                 }
             }
             Err(_) => tracing::warn!("the robots' links did not stop within 2 s"),

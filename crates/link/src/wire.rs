@@ -106,6 +106,15 @@ pub enum Body {
     HandbackAck {
         plan: TransferId,
     },
+    /// Master → robot: send the full-rate log (its MCAP as the robot keeps
+    /// it, not the digest) of the plan whose document hash is
+    /// `plan_sha256` (`MissionPlan::sha256`), after any log already on its
+    /// way. Answered by a transfer of it, or by `Refused` with `transfer`
+    /// set to `plan_sha256` when the robot keeps none. Sent again until
+    /// one of them comes.
+    LogRequest {
+        plan_sha256: [u8; 32],
+    },
 }
 
 /// Where the robot stands with one plan file.

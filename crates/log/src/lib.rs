@@ -18,7 +18,7 @@ pub use csv_io::{read_csv, read_csv_from, write_csv};
 pub use error::LogError;
 pub use map_topic::{MapGrid, WorldMap};
 pub use mcap_io::{
-    Track, read_mcap, read_mcap_bytes, write_mcap, write_mcap_with_map, write_tracks_mcap,
+    Track, is_mcap, read_mcap, read_mcap_bytes, write_mcap, write_mcap_with_map, write_tracks_mcap,
 };
 pub use time::{format_seconds, ns_from_seconds, push_seconds, seconds_from_ns};
 pub use tum::{read_tum, write_tum};

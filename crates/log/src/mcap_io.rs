@@ -549,6 +549,11 @@ pub fn read_mcap(path: &Path) -> Result<MissionLog, LogError> {
     read_mcap_bytes(&bytes, path)
 }
 
+/// Whether `bytes` begin as an MCAP file does (its magic).
+pub fn is_mcap(bytes: &[u8]) -> bool {
+    bytes.starts_with(mcap::MAGIC)
+}
+
 /// Reads a log written by [`write_mcap`] from its bytes; `path` names them
 /// in errors.
 pub fn read_mcap_bytes(bytes: &[u8], path: &Path) -> Result<MissionLog, LogError> {

@@ -17,7 +17,7 @@ use twindrive_link::secure::{Peers, key_from_seed, memory_pair};
 use twindrive_link::upload::{MemoryStore, Receiver, ReceiverConfig, Sender, SenderConfig};
 use twindrive_link::vtime::Endpoint;
 use twindrive_link::wire::{Body, Message, Stamper};
-use twindrive_net::{LinkEnd, SessionOptions, drive, open_session};
+use twindrive_net::{LinkEnd, Network, SessionOptions, drive};
 
 const ROBOT: &str = "bench";
 
@@ -110,7 +110,7 @@ fn runtime() -> tokio::runtime::Runtime {
 
 fn robot(port: u16) -> anyhow::Result<()> {
     runtime().block_on(async {
-        let session = open_session(&SessionOptions {
+        let network = Network::open(&SessionOptions {
             listen: vec![format!("tcp/127.0.0.1:{port}")],
             ..SessionOptions::default()
         })
@@ -131,7 +131,7 @@ fn robot(port: u16) -> anyhow::Result<()> {
         let mut link = LinkEnd::robot(ROBOT, ends().1);
         let _ = drive(
             &mut side,
-            &session,
+            &network,
             &mut link,
             None,
             Duration::from_secs(300),
@@ -172,7 +172,7 @@ fn main() -> anyhow::Result<()> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     let file: Vec<u8> = (0..(mb * 1e6) as usize).map(|_| rng.random()).collect();
     runtime().block_on(async {
-        let session = open_session(&SessionOptions {
+        let network = Network::open(&SessionOptions {
             connect: vec![format!("tcp/127.0.0.1:{port}")],
             ..SessionOptions::default()
         })
@@ -192,7 +192,7 @@ fn main() -> anyhow::Result<()> {
         let start = Instant::now();
         drive(
             &mut sender,
-            &session,
+            &network,
             &mut link,
             None,
             Duration::from_secs(240),
@@ -215,7 +215,7 @@ fn main() -> anyhow::Result<()> {
         };
         drive(
             &mut pinger,
-            &session,
+            &network,
             &mut link,
             None,
             Duration::from_secs(120),

@@ -1,14 +1,21 @@
-//! The master-robot link over zenoh.
+//! The master-robot link over a network: zenoh in the field, an
+//! in-process bus in tests.
 //!
-//! [`open_session`] opens a zenoh session: peer mode with multicast
-//! scouting off by default (loopback, or `--listen` / `--connect` endpoints
-//! for two machines), or any standard zenoh JSON5 configuration (TLS, QUIC,
-//! client mode through a router), within a bounded time (`session`). [`drive`] runs one of `twindrive-link`'s
-//! state machines over a session: it publishes what the machine wants sent
-//! on one key expression, feeds it what arrives on another, and wakes it
-//! when it asks; with a [`twindrive_link::LinkEmulator`] pair it puts the
-//! emulated link on every message both ways. The protocol code knows nothing
-//! of zenoh: time goes in as nanoseconds since the driver started.
+//! [`Network`] is the transport seam ([`transport`]): a link sends on one
+//! key expression and receives on another, and that is all the processes
+//! and [`drive`] ask of the network; none of them holds a zenoh type.
+//! [`Network::open`] opens zenoh as [`SessionOptions`] say (peer mode with
+//! multicast scouting off by default: loopback, or `--listen` /
+//! `--connect` endpoints for two machines; or any standard zenoh JSON5
+//! configuration: TLS, QUIC, client mode through a router), within a
+//! bounded time ([`session`]'s one place where flags and a configuration
+//! file become endpoints); [`MemoryBus`] is the same seam in one process.
+//! [`drive`] runs one of `twindrive-link`'s state machines over a network:
+//! it sends what the machine wants sent on one key expression, feeds it
+//! what arrives on another, and wakes it when it asks; with a
+//! [`twindrive_link::LinkEmulator`] pair it puts the emulated link on every
+//! message both ways. The protocol code knows nothing of the network: time
+//! goes in as nanoseconds since the driver started.
 //!
 //! Key expressions, per robot id `ID`: `twindrive/ID/up` (master → robot)
 //! and `twindrive/ID/down` (robot → master). Every payload is one
@@ -17,19 +24,25 @@
 //! fragments a large message.
 
 pub mod ros;
-mod session;
+pub mod session;
+pub mod transport;
 
-pub use session::{SessionOptions, endpoints, open_session, plain_error};
+pub use session::{SessionOptions, plain_error};
+pub use transport::{MemoryBus, Network};
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::time::{Duration, Instant};
-pub use zenoh::Session;
 
 use twindrive_link::LinkEmulator;
 use twindrive_link::secure::{Peers, Refusal};
 use twindrive_link::vtime::{Endpoint, InFlight};
 use twindrive_link::wire;
+
+/// Log directives (`tracing_subscriber::EnvFilter` syntax) that keep the
+/// network's routine chatter out of a process's log: zenoh's "scouting
+/// delay elapsed" says nothing a user can act on.
+pub const QUIET_LOG_DIRECTIVES: &str = "zenoh::net::runtime::orchestrator=error";
 
 /// Master → robot messages for robot `id`.
 pub fn up_key(robot_id: &str) -> String {
@@ -127,14 +140,14 @@ pub struct Emulation {
     pub incoming: LinkEmulator,
 }
 
-/// Runs `endpoint` over `session` on `link` (sealing what it sends on
+/// Runs `endpoint` over `network` on `link` (sealing what it sends on
 /// `link.tx_key`, opening what arrives on `link.rx_key`), until `done`
 /// says so or `deadline` passes (an error). Payloads that do not open are
 /// refused before anything reads them; messages not for the link's robot
 /// are dropped as garbage.
 pub async fn drive<E: Endpoint>(
     endpoint: &mut E,
-    session: &zenoh::Session,
+    network: &Network,
     link: &mut LinkEnd,
     emulation: Option<Emulation>,
     deadline: Duration,
@@ -143,7 +156,7 @@ pub async fn drive<E: Endpoint>(
     let mut stats = DriveStats::default();
     let zero = Instant::now();
     drive_counting(
-        endpoint, session, link, emulation, deadline, zero, &mut stats, done,
+        endpoint, network, link, emulation, deadline, zero, &mut stats, done,
     )
     .await
     .map(|()| stats)
@@ -156,7 +169,7 @@ pub async fn drive<E: Endpoint>(
 #[allow(clippy::too_many_arguments)]
 pub async fn drive_counting<E: Endpoint>(
     endpoint: &mut E,
-    session: &zenoh::Session,
+    network: &Network,
     link: &mut LinkEnd,
     mut emulation: Option<Emulation>,
     deadline: Duration,
@@ -165,24 +178,17 @@ pub async fn drive_counting<E: Endpoint>(
     mut done: impl FnMut(&mut E) -> bool,
 ) -> anyhow::Result<()> {
     let (tx_key, rx_key) = (link.tx_key.clone(), link.rx_key.clone());
-    let publisher = session
-        .declare_publisher(tx_key.clone())
-        .await
-        .map_err(|e| anyhow::anyhow!("declaring the publisher on {tx_key}: {e}"))?;
-    let subscriber = session
-        .declare_subscriber(rx_key.clone())
-        .await
-        .map_err(|e| anyhow::anyhow!("declaring the subscriber on {rx_key}: {e}"))?;
-    // Messages put before zenoh has a route to the other side are lost:
-    // wait (a bounded while) until a subscriber matches. The protocol
+    let mut channel = network.channel(&tx_key, &rx_key).await?;
+    // Messages put before the network has a route to the other side are
+    // lost: wait (a bounded while) until someone listens. The protocol
     // copes either way; this keeps a fresh upload's first pass whole.
     let waiting = Instant::now();
     while waiting.elapsed() < STARTUP_WAIT {
-        match publisher.matching_status().await {
-            Ok(m) if m.matching() => break,
-            Ok(_) => tokio::time::sleep(Duration::from_millis(20)).await,
+        match channel.listened().await {
+            Ok(true) => break,
+            Ok(false) => tokio::time::sleep(Duration::from_millis(20)).await,
             Err(e) => {
-                tracing::warn!(error = %e, "the publisher's matching status");
+                tracing::warn!(error = %e, "whether anyone listens");
                 break;
             }
         }
@@ -198,10 +204,7 @@ pub async fn drive_counting<E: Endpoint>(
         while delayed.peek().is_some_and(|Reverse(d)| d.0 <= now) {
             let Reverse((_, _, outgoing, bytes)) = delayed.pop().expect("peeked");
             if outgoing {
-                publisher
-                    .put(bytes)
-                    .await
-                    .map_err(|e| anyhow::anyhow!("publishing on {tx_key}: {e}"))?;
+                channel.send(bytes).await?;
             } else {
                 deliver(endpoint, link, &bytes, now, stats);
             }
@@ -219,10 +222,7 @@ pub async fn drive_counting<E: Endpoint>(
                         delayed.push(Reverse((at, order, true, bytes)));
                     }
                 }
-                None => publisher
-                    .put(bytes)
-                    .await
-                    .map_err(|e| anyhow::anyhow!("publishing on {tx_key}: {e}"))?,
+                None => channel.send(bytes).await?,
             }
         }
         if done(endpoint) {
@@ -258,9 +258,8 @@ pub async fn drive_counting<E: Endpoint>(
             Duration::from_nanos(t.saturating_sub(now)).min(Duration::from_millis(50))
         });
         tokio::select! {
-            sample = subscriber.recv_async() => {
-                let sample = sample.map_err(|e| anyhow::anyhow!("the subscriber on {rx_key} closed: {e}"))?;
-                let mut bytes = sample.payload().to_bytes().into_owned();
+            bytes = channel.recv() => {
+                let mut bytes = bytes?;
                 let now = now_ns();
                 match &mut emulation {
                     Some(e) => {

@@ -41,14 +41,18 @@ fn unix_ns() -> i64 {
 }
 
 impl RosBackend {
-    /// Declares the agent on `session` (the robot's ROS network) and
-    /// starts listening. `clock` is the bridge's time zero.
+    /// Declares the agent on `network` (the robot's ROS network, which
+    /// rmw_zenoh makes a zenoh one) and starts listening. `clock` is the
+    /// bridge's time zero.
     pub async fn open(
-        session: &zenoh::Session,
+        network: &crate::Network,
         bridge: RosBridge,
         clock: Instant,
         map: Option<WorldMap>,
     ) -> anyhow::Result<Self> {
+        let session = network.zenoh().ok_or_else(|| {
+            anyhow::anyhow!("a ROS 2 robot is reached through rmw_zenoh: it needs a zenoh network")
+        })?;
         let config = bridge.config().clone();
         let zid = session.zid().to_string();
         let node = NodeId {

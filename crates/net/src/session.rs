@@ -69,8 +69,15 @@ impl std::fmt::Display for SessionError {
 impl std::error::Error for SessionError {}
 
 impl SessionOptions {
+    /// The endpoints these options listen on (`"listen"`) or connect to
+    /// (`"connect"`), flags and configuration file together, as a session
+    /// opened with them would.
+    pub fn endpoints(&self, which: &str) -> anyhow::Result<Vec<String>> {
+        Ok(endpoints(&self.config()?, which))
+    }
+
     /// The zenoh configuration these options make.
-    pub fn config(&self) -> anyhow::Result<zenoh::Config> {
+    pub(crate) fn config(&self) -> anyhow::Result<zenoh::Config> {
         let mut config = match &self.config_file {
             Some(path) => load_config(path)?,
             None => {
@@ -110,7 +117,7 @@ fn mode_of(config: &zenoh::Config) -> String {
 
 /// The endpoints `config` listens on (`"listen"`) or connects to
 /// (`"connect"`) in its mode.
-pub fn endpoints(config: &zenoh::Config, which: &str) -> Vec<String> {
+pub(crate) fn endpoints(config: &zenoh::Config, which: &str) -> Vec<String> {
     let mode = mode_of(config);
     let Ok(json) = config.get_json(&format!("{which}/endpoints")) else {
         return Vec::new();
@@ -141,7 +148,7 @@ fn strings(items: &[serde_json::Value]) -> Vec<String> {
 /// use, a refused configuration) ends it at once. A robot that boots
 /// before its link does not give up at the first try, and one that can
 /// never connect says so and stops.
-pub async fn open_session(options: &SessionOptions) -> anyhow::Result<zenoh::Session> {
+pub(crate) async fn open_session(options: &SessionOptions) -> anyhow::Result<zenoh::Session> {
     let started = Instant::now();
     let mut said = false;
     loop {

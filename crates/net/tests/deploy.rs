@@ -8,7 +8,7 @@ use std::time::Duration;
 use twindrive_link::upload::{
     MemoryStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
 };
-use twindrive_net::{SessionOptions, drive, open_session};
+use twindrive_net::{Network, SessionOptions, drive};
 
 fn deploy(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -38,9 +38,11 @@ async fn robot_and_master_configured_by_deploy_meet_through_its_router() {
         config_file: Some(deploy(file)),
         ..SessionOptions::default()
     };
-    let router = open_session(&options("router.json5", true)).await.unwrap();
-    let robot = open_session(&options("robot.json5", false)).await.unwrap();
-    let master = open_session(&options("master.json5", false)).await.unwrap();
+    let router = Network::open(&options("router.json5", true)).await.unwrap();
+    let robot = Network::open(&options("robot.json5", false)).await.unwrap();
+    let master = Network::open(&options("master.json5", false))
+        .await
+        .unwrap();
     let data: Vec<u8> = (0..20_000u32).map(|k| (k % 241) as u8).collect();
     let mut sender = Sender::new(
         "rover-1",
@@ -94,7 +96,7 @@ async fn robot_and_master_configured_by_deploy_meet_through_its_router() {
     m.unwrap();
     assert_eq!(got.as_deref(), Some(&data[..]));
     for s in [master, robot, router] {
-        s.close().await.unwrap();
+        s.close().await;
     }
 }
 

@@ -2,14 +2,14 @@
 //! router for a fleet: `twindrive robot`, `twindrive master` and
 //! `twindrive router` read their flags into these configurations and call
 //! these. The protocol is twindrive-agent's state machines; this crate
-//! opens the session, drives them on the clock and writes what they
+//! opens the network, drives them on the clock and writes what they
 //! produce (through `twindrive-store`).
 //!
 //! - [`robot`]: the robot agent on a simulated site or a ROS 2 robot;
 //! - [`master`]: one robot or a fleet, each with its operator, twin and
 //!   output folder;
 //! - [`first_plan`]: the signed plan a master starts with (or resumes);
-//! - [`supervise`]: one robot's operator driven over the session;
+//! - [`supervise`]: one robot's operator driven over the network;
 //! - [`settings`]: a master's checked configuration ([`MasterSettings`]);
 //! - [`site_maps`]: the twin's map of its site kept across missions
 //!   (`--site-maps`);

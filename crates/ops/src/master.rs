@@ -1,5 +1,5 @@
 //! `twindrive master`: one robot or a fleet, each with its operator, twin
-//! and output folder, over one zenoh session.
+//! and output folder, over one network.
 
 use std::io::Write;
 use std::time::Duration;
@@ -12,7 +12,7 @@ use twindrive_agent::twin::Twin;
 use twindrive_files::write_durably;
 use twindrive_link::emulator::LinkEmulator;
 use twindrive_link::envelope::Supervision;
-use twindrive_net::{Emulation, open_session};
+use twindrive_net::{Emulation, Network};
 use twindrive_store::MasterArchive;
 
 use crate::first_plan::first_plan;
@@ -21,7 +21,7 @@ use crate::site_maps::{KeptSite, ReturnedLogs};
 use crate::supervise::{Supervised, WriteError, supervise};
 use crate::{runtime, unix_now_s};
 
-/// Runs the master: one robot, or a fleet over one zenoh session, each
+/// Runs the master: one robot, or a fleet over one network, each
 /// robot with its own operator, twin and output directory. Says one line
 /// per robot (and one for the fleet) on `stdout`, writes each
 /// `report.json` and `fleet.json`, and returns the worst outcome.
@@ -104,6 +104,7 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
                     dead_man_timeout_s: args.supervise,
                 },
                 log_wait_s: args.log_wait,
+                full_rate_logs: args.full_logs,
                 // Continuations build on the world the first plan was signed for.
                 ..OperatorConfig::replanning(
                     robot,
@@ -153,8 +154,8 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
     let options = args.zenoh.clone();
     let deadline = Duration::from_secs_f64(args.timeout);
     let results: Vec<anyhow::Result<()>> = rt.block_on(async {
-        let session = match open_session(&options).await {
-            Ok(s) => s,
+        let network = match Network::open(&options).await {
+            Ok(n) => n,
             Err(e) => return vec![Err(e)],
         };
         let runs = members.iter_mut().enumerate().map(|(k, m)| {
@@ -163,15 +164,15 @@ pub fn run(args: &MasterSettings, stdout: &mut impl Write) -> anyhow::Result<Out
                 outgoing: LinkEmulator::new(p.clone(), args.seed, 2 * k as u64),
                 incoming: LinkEmulator::new(p, args.seed, 2 * k as u64 + 1),
             });
-            supervise(m, &session, emulation, deadline, zero, !fleet, verbosity)
+            supervise(m, &network, emulation, deadline, zero, !fleet, verbosity)
         });
         let results = futures::future::join_all(runs).await;
-        let _ = session.close().await;
+        network.close().await;
         results
     });
     let mut first_error = None;
     if results.len() != members.len() {
-        // The session did not open.
+        // The network did not open.
         for m in &mut members {
             m.op.fail(
                 format!("{:#}", results[0].as_ref().expect_err("an error")),

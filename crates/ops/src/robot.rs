@@ -68,18 +68,18 @@ pub fn run(args: &RobotConfig) -> anyhow::Result<()> {
                 patience: args.zenoh.patience,
                 ..SessionOptions::default()
             };
-            let (backend, ros_session) = rt.block_on(async {
-                let session = twindrive_net::open_session(&options)
+            let (backend, ros_network) = rt.block_on(async {
+                let network = twindrive_net::Network::open(&options)
                     .await
                     .context("the robot's ROS 2 network (the site's [ros] connect)")?;
                 let backend = twindrive_net::ros::RosBackend::open(
-                    &session,
+                    &network,
                     bridge,
                     zero,
                     Some(site.world.log_map()),
                 )
                 .await?;
-                anyhow::Ok((backend, session))
+                anyhow::Ok((backend, network))
             })?;
             eprintln!(
                 "robot {}: driving a ROS 2 robot through rmw_zenoh at {}",
@@ -87,9 +87,7 @@ pub fn run(args: &RobotConfig) -> anyhow::Result<()> {
                 options.connect.join(", ")
             );
             let result = run_agent(args, config, backend, zero, &rt);
-            rt.block_on(async {
-                let _ = ros_session.close().await;
-            });
+            rt.block_on(ros_network.close());
             result
         }
     }
@@ -131,7 +129,7 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
     rt.block_on(async {
         // A robot that boots before its router or its network keeps trying
         // (for --connect-timeout), and one that cannot listen stops at once.
-        let session = twindrive_net::open_session(&options)
+        let network = twindrive_net::Network::open(&options)
             .await
             .context("the link to the master")?;
         eprintln!(
@@ -145,7 +143,7 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
         let mut voice = twindrive_progress::Voice::new();
         let drive = twindrive_net::drive_counting(
             &mut agent,
-            &session,
+            &network,
             &mut link,
             None,
             deadline,
@@ -169,7 +167,7 @@ fn run_agent<B: twindrive_agent::backend::RobotBackend>(
             }
             _ = tokio::signal::ctrl_c() => eprintln!("robot {}: stopping", args.id),
         }
-        let _ = session.close().await;
+        network.close().await;
         anyhow::Ok(())
     })
 }

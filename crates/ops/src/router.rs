@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use twindrive_net::{SessionOptions, endpoints, open_session};
+use twindrive_net::{Network, SessionOptions};
 
 use crate::runtime;
 
@@ -24,18 +24,17 @@ pub fn run(listen: Vec<String>, zenoh_config: Option<PathBuf>) -> anyhow::Result
         mode: Some("router".into()),
         ..SessionOptions::default()
     };
-    let config = options.config()?;
-    let listening = endpoints(&config, "listen");
+    let listening = options.endpoints("listen")?;
     if listening.is_empty() {
         anyhow::bail!(
             "the router has no endpoint to listen on: give --listen, or a configuration with listen.endpoints"
         );
     }
     runtime()?.block_on(async {
-        let session = open_session(&options).await?;
+        let network = Network::open(&options).await?;
         eprintln!("router: listening on {}", listening.join(", "));
         tokio::signal::ctrl_c().await.ok();
-        let _ = session.close().await;
+        network.close().await;
         anyhow::Ok(())
     })
 }

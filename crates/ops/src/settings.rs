@@ -37,6 +37,8 @@ pub struct MasterSettings {
     pub timeout: f64,
     pub telemetry_budget: f64,
     pub log_wait: f64,
+    /// Ask for the robot's full-rate logs once the digests are in.
+    pub full_logs: bool,
     pub allow_failed_verification: bool,
     pub verbosity: Verbosity,
 }

@@ -1,4 +1,4 @@
-//! One robot's operator driven over the master's zenoh session until its
+//! One robot's operator driven over the master's network until its
 //! mission is decided and its logs are in, its plans and logs written as
 //! they come, and what happens said as `-q`/`-v` ask.
 
@@ -73,11 +73,11 @@ impl Speaker {
     }
 }
 
-/// Drives one robot's operator over the session until its mission is
+/// Drives one robot's operator over the network until its mission is
 /// decided and its logs are in; writes its plans and logs as they come.
 pub async fn supervise(
     m: &mut Supervised,
-    session: &twindrive_net::Session,
+    network: &twindrive_net::Network,
     emulation: Option<Emulation>,
     deadline: Duration,
     zero: std::time::Instant,
@@ -90,7 +90,7 @@ pub async fn supervise(
     let mut write_error: Option<anyhow::Error> = None;
     let r = twindrive_net::drive_counting(
         &mut m.op,
-        session,
+        network,
         &mut m.link,
         emulation,
         deadline,
@@ -109,8 +109,8 @@ pub async fn supervise(
                     );
                 }
             }
-            while let Some((plan, mcap)) = op.new_logs.pop_front() {
-                match archive.write_robot_log(plan.as_deref(), &mcap) {
+            while let Some(log) = op.new_logs.pop_front() {
+                match archive.write_robot_log(log.plan.as_deref(), &log.mcap, log.full_rate) {
                     Ok(written) => {
                         let dir = written.dir.display().to_string();
                         speaker.say(&format!("{robot}: robot log written to {dir}"));

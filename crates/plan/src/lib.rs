@@ -224,6 +224,20 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 impl MissionPlan {
+    /// `sha256` as bytes (`None` if it is not 64 hex digits).
+    pub fn sha256_bytes(&self) -> Option<[u8; 32]> {
+        let text = self.sha256.as_bytes();
+        if text.len() != 64 {
+            return None;
+        }
+        let mut out = [0u8; 32];
+        for (k, pair) in text.chunks(2).enumerate() {
+            let pair = std::str::from_utf8(pair).ok()?;
+            out[k] = u8::from_str_radix(pair, 16).ok()?;
+        }
+        Some(out)
+    }
+
     /// A plan with its hash filled in.
     pub fn new(header: PlanHeader, samples: Vec<PlanSample>) -> Self {
         let mut plan = Self {

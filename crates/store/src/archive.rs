@@ -111,16 +111,20 @@ impl MasterArchive {
         Ok(path)
     }
 
-    /// The next robot log, `robot_logs/NN_<sha12>/` (`NN` without a plan).
+    /// The next robot log, `robot_logs/NN_<sha12>/` (`NN` without a plan;
+    /// `_full` after it for a full-rate log, else it is made from the
+    /// digest that came over the link).
     pub fn write_robot_log(
         &mut self,
         plan: Option<&MissionPlan>,
         mcap: &[u8],
+        full_rate: bool,
     ) -> anyhow::Result<ArchivedLog> {
         let n = self.logs_written + 1;
+        let full = if full_rate { "_full" } else { "" };
         let name = match plan {
-            Some(p) => format!("robot_logs/{n:02}_{}", &p.sha256[..12]),
-            None => format!("robot_logs/{n:02}"),
+            Some(p) => format!("robot_logs/{n:02}_{}{full}", &p.sha256[..12]),
+            None => format!("robot_logs/{n:02}{full}"),
         };
         let dir = self.dir.join(&name);
         let log = crate::robot_log::write_robot_log(&dir, plan, mcap)?;

@@ -611,6 +611,12 @@ pub struct MasterArgs {
     /// (the wait starts again with each log received), seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 120.0, value_parser = usage::seconds_or_zero)]
     pub log_wait: f64,
+    /// Once the digests of the robot's logs are in, ask it for every
+    /// executed plan's full-rate log too (the whole MCAP it keeps in its
+    /// --state-dir, every range sweep; written as robot_logs/NN_SHA_full/)
+    /// and wait for them. They cost the link far more than the digests.
+    #[arg(long)]
+    pub full_logs: bool,
     /// Send the plan even if it fails verification on the twin (its open-
     /// or closed-loop replay touches something or departs from the plan's
     /// path by more than the robot's deviation tolerance). Said and logged.

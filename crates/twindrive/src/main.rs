@@ -14,15 +14,17 @@ use clap::{CommandFactory, FromArgMatches};
 fn main() -> ExitCode {
     let matches = usage::negative_numbers_as_values(cli::Args::command()).get_matches();
     let args = cli::Args::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    // Colour and zenoh's Rust source locations only on a terminal: a log
+    // Colour and the network's Rust source locations only on a terminal: a log
     // file or a journal gets plain lines.
     let terminal = std::io::stderr().is_terminal();
     let subscriber = tracing_subscriber::fmt()
         .with_ansi(terminal)
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
-                // zenoh's "scouting delay elapsed" says nothing a user can act on.
-                tracing_subscriber::EnvFilter::new("warn,zenoh::net::runtime::orchestrator=error")
+                tracing_subscriber::EnvFilter::new(format!(
+                    "warn,{}",
+                    twindrive_net::QUIET_LOG_DIRECTIVES
+                ))
             }),
         );
     if terminal {

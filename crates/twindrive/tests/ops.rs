@@ -192,7 +192,7 @@ fn assert_no_wheel_moved(m: &Mission) {
 fn an_obstacle_the_twin_lacks_is_handed_back_and_the_continuation_completes() {
     let m = Mission::new("site_box.toml", "keys", 10.0);
     let _robot = m.robot();
-    let (code, err) = finish(m.master(&["--on-handback", "replan"]), 240.0);
+    let (code, err) = finish(m.master(&["--on-handback", "replan", "--full-logs"]), 240.0);
     assert_eq!(code, Some(0), "{err}");
     let r = m.report();
     assert_eq!(r["outcome"], "completed");
@@ -215,6 +215,18 @@ fn an_obstacle_the_twin_lacks_is_handed_back_and_the_continuation_completes() {
         assert_eq!(
             std::fs::read(m.robot_dir().join("plans").join(&name)).unwrap(),
             std::fs::read(m.out().join("plans").join(&name)).unwrap()
+        );
+        // Asked for (--full-logs), each plan's full-rate log came home as
+        // the robot keeps it, beside the one made from its digest.
+        let suffix = format!("_{}_full", &sha[..12]);
+        let full = std::fs::read_dir(m.out().join("robot_logs"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.to_string_lossy().ends_with(&suffix))
+            .unwrap_or_else(|| panic!("no robot_logs/NN{suffix}: {:#?}", r["robot_logs"]));
+        assert_eq!(
+            std::fs::read(full.join("log.mcap")).unwrap(),
+            std::fs::read(m.robot_dir().join("logs").join(sha).join("log.mcap")).unwrap()
         );
     }
     assert!(!r["robot_logs"].as_array().unwrap().is_empty());

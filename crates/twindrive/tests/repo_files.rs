@@ -235,6 +235,60 @@ fn link_and_agent_touch_no_file_system_socket_clock_or_randomness() {
     );
 }
 
+/// The transport seam: only `twindrive-net` knows zenoh; every other crate
+/// (the processes in `twindrive-ops`, the console, the binary, their tests)
+/// takes a `twindrive_net::Network`.
+#[test]
+fn only_the_net_crate_names_zenoh() {
+    let mut found = Vec::new();
+    let crates = std::fs::read_dir(repo().join("crates")).unwrap();
+    let mut checked = 0;
+    for entry in crates {
+        let dir = entry.unwrap().path();
+        if dir.file_name().is_some_and(|n| n == "net") || !dir.join("Cargo.toml").exists() {
+            continue;
+        }
+        checked += 1;
+        let mut files = Vec::new();
+        for sub in ["src", "tests", "benches", "examples"] {
+            rust_files(&dir.join(sub), &mut files);
+        }
+        for file in files {
+            let text = std::fs::read_to_string(&file).unwrap();
+            for (k, line) in text.lines().enumerate() {
+                let code = line.trim_start();
+                if code.starts_with("//") {
+                    continue;
+                }
+                // `zenoh::` as a path of its own (not `rmw_zenoh::`).
+                let named = code.match_indices(concat!("zenoh", "::")).any(|(at, _)| {
+                    !code[..at]
+                        .chars()
+                        .next_back()
+                        .is_some_and(|c| c.is_alphanumeric() || c == '_')
+                });
+                if named {
+                    found.push(format!("{}:{}", file.display(), k + 1));
+                }
+            }
+        }
+        let manifest: toml::Table =
+            toml::from_str(&std::fs::read_to_string(dir.join("Cargo.toml")).unwrap()).unwrap();
+        for table in ["dependencies", "dev-dependencies"] {
+            let deps = manifest.get(table).and_then(|d| d.as_table());
+            if deps.is_some_and(|d| d.contains_key("zenoh")) {
+                found.push(format!("{}/Cargo.toml [{table}]", dir.display()));
+            }
+        }
+    }
+    assert!(checked > 10, "{checked} crates");
+    assert!(
+        found.is_empty(),
+        "zenoh outside twindrive-net:\n{}",
+        found.join("\n")
+    );
+}
+
 /// The module a source file is (`src/robot/run.rs`: `robot::run`;
 /// `src/robot/mod.rs`: `robot`; the crate root: nothing).
 fn module_of(src: &Path, file: &Path) -> Vec<String> {

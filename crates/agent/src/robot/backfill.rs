@@ -3,12 +3,15 @@
 //! `twindrive_log::digest`, at most `log_budget_bytes_s` per second of
 //! mission), then the digest uploaded to the master, oldest first, until it
 //! acknowledges it: paced to what the telemetry budget leaves while a plan
-//! runs, at the link's rate (as the master says) once none does.
+//! runs, at the link's rate (as the master says) once none does. A plan's
+//! full-rate log goes the same way when the master asks for it
+//! (`Body::LogRequest`), after what is already on its way.
 
 use serde_json::json;
 use twindrive_link::upload::{Sender, SenderConfig};
-use twindrive_link::wire::Message;
+use twindrive_link::wire::{Body, Message};
 use twindrive_log::MissionLog;
+use twindrive_mission::plan::hex;
 
 use super::{Backfill, RobotAgent};
 use crate::backend::RobotBackend;
@@ -29,7 +32,11 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 } else {
                     "log_refused"
                 };
-                self.record(now_ns, event, json!({ "plan_sha256": b.plan_sha256 }));
+                self.record(
+                    now_ns,
+                    event,
+                    json!({ "plan_sha256": b.plan_sha256, "full_rate": b.full_rate }),
+                );
                 continue;
             }
             let pace = self.backfill_pace_bit_s();
@@ -109,7 +116,11 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     }
 
     pub(super) fn queue_backfill(&mut self, plan_sha256: &str) {
-        if self.backfills.iter().any(|b| b.plan_sha256 == plan_sha256) {
+        if self
+            .backfills
+            .iter()
+            .any(|b| b.plan_sha256 == plan_sha256 && !b.full_rate)
+        {
             return;
         }
         // A log kept before digests existed: its digest from its MCAP.
@@ -134,11 +145,62 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 );
                 self.backfills.push_back(Backfill {
                     plan_sha256: plan_sha256.into(),
+                    full_rate: false,
                     sender,
                 });
             }
             Err(e) => {
                 tracing::error!(plan_sha256, error = %e, "a robot log to back-fill")
+            }
+        }
+    }
+
+    /// The master asks for the full-rate log of the plan whose document
+    /// hash is `plan`: its MCAP joins the logs on their way (once: a
+    /// request heard again while it is queued changes nothing), or the
+    /// master hears that none is kept here.
+    pub(super) fn queue_full_log(&mut self, plan: &[u8; 32], now_ns: u64) {
+        let plan_sha256 = hex(plan);
+        if self
+            .backfills
+            .iter()
+            .any(|b| b.plan_sha256 == plan_sha256 && b.full_rate)
+        {
+            return;
+        }
+        match self.store.log_mcap(&plan_sha256) {
+            Ok(file) => {
+                let bytes = file.len();
+                let sender = Sender::resume(
+                    &self.config.robot_id,
+                    file,
+                    SenderConfig {
+                        pace_bit_s: self.backfill_pace_bit_s(),
+                        ..SenderConfig::default()
+                    },
+                );
+                self.backfills.push_back(Backfill {
+                    plan_sha256: plan_sha256.clone(),
+                    full_rate: true,
+                    sender,
+                });
+                self.record(
+                    now_ns,
+                    "log_requested",
+                    json!({ "plan_sha256": plan_sha256, "bytes": bytes }),
+                );
+            }
+            Err(e) => {
+                let reason = format!("no log of plan {plan_sha256} is kept on this robot ({e})");
+                self.record(
+                    now_ns,
+                    "log_request_refused",
+                    json!({ "plan_sha256": plan_sha256, "reason": reason }),
+                );
+                self.outbox.push_back(Body::Refused {
+                    transfer: *plan,
+                    reason,
+                });
             }
         }
     }

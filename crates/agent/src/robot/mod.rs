@@ -110,6 +110,8 @@ struct Running {
 /// A robot log on its way to the master.
 struct Backfill {
     plan_sha256: String,
+    /// The full-rate MCAP, asked for by the master; else the digest.
+    full_rate: bool,
     sender: Sender,
 }
 
@@ -432,6 +434,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 }
             }
             Body::Ping { nonce } => self.outbox.push_back(Body::Pong { nonce: *nonce }),
+            Body::LogRequest { plan_sha256 } => self.queue_full_log(plan_sha256, now_ns),
             Body::Pong { .. } | Body::Status(_) | Body::Handback(_) => {}
         }
         self.receiver_events(now_ns);

@@ -113,8 +113,8 @@ pub fn run_on_site(
     let mut real_paths: Vec<Vec<(f64, f64)>> = Vec::new();
     // The master's output folder, as `twindrive master` lays it out.
     let mut archive = MasterArchive::new(dir);
-    while let Some((p, mcap)) = op.new_logs.pop_front() {
-        let written = archive.write_robot_log(p.as_deref(), &mcap)?;
+    while let Some(log) = op.new_logs.pop_front() {
+        let written = archive.write_robot_log(log.plan.as_deref(), &log.mcap, log.full_rate)?;
         op.report.robot_logs.push(written.name);
         real_paths.push(
             written

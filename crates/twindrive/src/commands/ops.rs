@@ -95,6 +95,7 @@ pub fn master(args: &MasterArgs) -> anyhow::Result<()> {
         timeout: args.timeout,
         telemetry_budget: args.telemetry_budget,
         log_wait: args.log_wait,
+        full_logs: args.full_logs,
         allow_failed_verification: args.allow_failed_verification,
         verbosity: if args.quiet {
             Verbosity::Quiet
