@@ -295,8 +295,15 @@ def main():
                                 range=float(values[0]), variance=0.0))
                 else:
                     fov = float(sensor.get("fov_rad", 2 * math.pi))
-                    put(T[kind](header=header(sensor["name"] + "_link"), angle_min=-fov / 2, angle_max=fov / 2,
-                                angle_increment=fov / max(beams - 1, 1), time_increment=0.0, scan_time=period,
+                    # twindrive's beam angles: a full circle is beams steps
+                    # of 2 pi / beams from -pi (no beam twice at +-pi).
+                    if fov >= 2 * math.pi - 1e-9:
+                        lo, inc = -math.pi, 2 * math.pi / beams
+                    else:
+                        lo, inc = -fov / 2, fov / max(beams - 1, 1)
+                    put(T[kind](header=header(sensor["name"] + "_link"), angle_min=lo,
+                                angle_max=lo + inc * (beams - 1),
+                                angle_increment=inc, time_increment=0.0, scan_time=period,
                                 range_min=float(sensor["min_range_m"]), range_max=float(sensor["max_range_m"]),
                                 ranges=np.array(values, dtype=np.float32), intensities=np.array([], dtype=np.float32)))
             next_tick += period

@@ -202,10 +202,17 @@ class MujocoSite:
             oy = y + m["x_m"] * math.sin(th) + m["y_m"] * math.cos(th)
             beams = s.get("beams", 1)
             fov = s.get("fov_rad", 0.0)
-            step = fov / max(beams - 1, 1) if beams > 1 else 0.0
+            # twindrive's beam angles: a full circle is beams steps of
+            # 2 pi / beams from -pi; a fan spans its field of view.
+            if beams <= 1:
+                first, step = 0.0, 0.0
+            elif fov >= 2 * math.pi - 1e-9:
+                first, step = -math.pi, 2 * math.pi / beams
+            else:
+                first, step = -fov / 2, fov / (beams - 1)
             lo, hi = s.get("min_range_m", 0.0), s["max_range_m"]
             for k in range(beams):
-                a = th + m["heading_rad"] + (-fov / 2 + k * step if beams > 1 else 0.0)
+                a = th + m["heading_rad"] + first + k * step
                 d = mujoco.mj_ray(self.model, self.data, np.array([ox, oy, z]),
                                   np.array([math.cos(a), math.sin(a), 0.0]), groups, 1, -1, geomid)
                 r = hi if d < 0 or d >= hi else d
