@@ -1173,11 +1173,12 @@ fn draw_chart<DB: DrawingBackend>(
     for layer in layers(spec) {
         draw_layer(&mut chart, spec, layer, true)?;
     }
+    let position = legend_position(&chart, spec)?;
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
-        .position(emptiest_corner(spec))
+        .position(position)
         .draw()
         .map_err(|e| e.to_string())?;
     root.present().map_err(|e| e.to_string())
@@ -1290,10 +1291,46 @@ fn misleading(spec: &ChartSpec, size: (u32, u32)) -> Result<Vec<Misleading>, Str
     Ok(found)
 }
 
+/// Where the legend goes: the emptiest corner of the values' area, which
+/// ends below a strip (a legend at the top would cover the strip's marks).
+fn legend_position<DB: DrawingBackend>(
+    chart: &Chart<'_, DB>,
+    spec: &ChartSpec,
+) -> Result<SeriesLabelPosition, String> {
+    let corner = emptiest_corner(spec);
+    let Some(strip) = &spec.strip else {
+        return Ok(corner);
+    };
+    let area = chart.plotting_area();
+    let (xs, ys) = area.get_pixel_range();
+    let top = chart.backend_coord(&(spec.range.0, strip.from_y)).1 - ys.start + 8;
+    // plotters' legend: a 30 pixel symbol, 10 pixel margins, 12 pixel text.
+    let font: TextStyle = ("sans-serif", 12).into_font().into();
+    let mut text_w = 0;
+    for layer in layers(spec) {
+        if let Some(label) = legend_label(spec, layer) {
+            let (w, _) = area
+                .estimate_text_size(label, &font)
+                .map_err(|e| e.to_string())?;
+            text_w = text_w.max(w as i32);
+        }
+    }
+    let legend_w = text_w + 30 + 2 * 10;
+    Ok(match corner {
+        SeriesLabelPosition::UpperLeft => SeriesLabelPosition::Coordinate(8, top),
+        SeriesLabelPosition::UpperRight => {
+            SeriesLabelPosition::Coordinate(xs.end - xs.start - legend_w - 8, top)
+        }
+        lower => lower,
+    })
+}
+
 /// The corner of the chart with the least drawn in it, for the legend
-/// (segments sampled along their length).
+/// (segments sampled along their length); with a strip, of the values'
+/// area below it.
 fn emptiest_corner(spec: &ChartSpec) -> SeriesLabelPosition {
     let (x0, x1, y0, y1) = spec.range;
+    let y1 = spec.strip.as_ref().map_or(y1, |s| s.from_y);
     let mut drawn: Vec<(f64, f64)> = Vec::new();
     let mut path = |points: &[(f64, f64)]| {
         for w in points.windows(2) {
@@ -1322,17 +1359,12 @@ fn emptiest_corner(spec: &ChartSpec) -> SeriesLabelPosition {
     if let Some(b) = &spec.beyond {
         b.up.iter().chain(&b.down).for_each(|(c, _)| path(&[*c]));
     }
-    // A strip fills the top from side to side: no room for the legend.
-    if let Some(s) = &spec.strip {
-        let mid = 0.5 * (s.from_y + y1);
-        drawn.extend((0..=1000).map(|i| (x0 + (x1 - x0) * i as f64 / 1000.0, mid)));
-    }
     let (wx, wy) = (0.45 * (x1 - x0), 0.4 * (y1 - y0));
     // Upper right, upper left, lower right, lower left.
     let mut count = [0usize; 4];
     for (x, y) in drawn {
         let (right, left) = (x >= x1 - wx, x <= x0 + wx);
-        let (up, low) = (y >= y1 - wy, y <= y0 + wy);
+        let (up, low) = (y >= y1 - wy && y <= y1, y <= y0 + wy);
         for (k, inside) in [up && right, up && left, low && right, low && left]
             .into_iter()
             .enumerate()

@@ -432,13 +432,20 @@ mod tests {
         figures(&cells, &settings, dir.path()).unwrap();
         let svg = std::fs::read_to_string(dir.path().join("completion_time.svg")).unwrap();
         for text in [
-            "direct (a) hold-last: not completed (top rows)",
-            "direct (b) watchdog: not completed (top rows)",
+            "direct (a) hold-last: not completed (strip above the times)",
+            "direct (b) watchdog: not completed (strip above the times)",
             "direct (b) watchdog (dashed: same points as direct (a) hold-last)",
         ] {
             assert!(svg.contains(text), "no `{text}` in the figure");
         }
         assert!(!svg.contains("move-and-wait: not completed"));
+        // The strip is named, and no number on the time axis reaches above
+        // the slowest completion (the marks are not times).
+        let texts: Vec<&str> = svg.lines().map(str::trim).collect();
+        assert!(texts.contains(&"not completed"), "{svg}");
+        let ticks: Vec<f64> = texts.iter().filter_map(|t| t.parse().ok()).collect();
+        assert!(ticks.iter().any(|&v| v >= 400.0), "{ticks:?}");
+        assert!(ticks.iter().all(|&v| v <= 504.0 * 1.05), "{ticks:?}");
         assert!(dir.path().join("completion_time.png").is_file());
         assert!(dir.path().join("collisions.png").is_file());
     }
