@@ -263,7 +263,7 @@ pub(super) fn case_study_report(c: &CaseStudy) -> Report {
     );
     r.figure(
         "decoupled/twin",
-        "The twin's world after the mission: the blocks it learnt from the robot, the plans, and the robot's true path",
+        "The twin's world after the mission: the blocks it learnt from the robot (shaded), the plans (pale bands), and the robot's true path over them",
     );
     r.figure(
         "decoupled/timeline",
@@ -321,7 +321,7 @@ pub(super) fn case_study_report(c: &CaseStudy) -> Report {
     );
     r.figure(
         "experiment/completion_time",
-        "Mission completion time against one-way latency, one line per method",
+        "Mission completion time against one-way latency, one line per method; runs that did not complete are marked in the \"not completed\" strip above the time axis",
     );
     r.figure(
         "experiment/collisions",
