@@ -5,8 +5,12 @@
 //!
 //! Time plots look after their reader: the y range ignores a few outliers
 //! (see [`robust_range`]) and says so, a series that would hide exactly
-//! under another is drawn dashed with marked points and says so, and a
-//! series of one point is drawn as a point.
+//! under another is drawn dashed with marked points and says so, a series
+//! of one point is drawn as a point, and x values without a y go in a named
+//! strip above the axis. World figures draw reference paths as pale bands
+//! under the paths measured against them. For either kind, `misleading`
+//! rasterises each layer as the PNG draws it and names every legend entry
+//! with nothing drawn or hidden under what is drawn after it.
 
 use std::path::{Path, PathBuf};
 
