@@ -39,6 +39,7 @@ pub fn write_outputs(report: &Report, art: &Artefacts, out: &Path) -> anyhow::Re
         let figures = figures::calibration_figures(
             &art.trace(),
             art.reported,
+            art.truth,
             &art.history.innovations,
             staging.dir(),
             &stem,

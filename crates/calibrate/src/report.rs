@@ -91,6 +91,9 @@ pub struct Artefacts {
     /// Where dead reckoning starts, and the time span it covers.
     pub start_pose: Pose,
     pub span_s: (f64, f64),
+    /// The true [dL, dR, b] when the drive was simulated (the log does not
+    /// carry them; the caller that simulated it does), for the figures.
+    pub truth: Option<[f64; 3]>,
 }
 
 impl Artefacts {

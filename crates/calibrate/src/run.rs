@@ -308,6 +308,7 @@ pub fn calibrate(
         wheels: job.wheels,
         start_pose,
         span_s: (report.data.start_s, report.data.end_s),
+        truth: None,
     };
     Ok((report, artefacts))
 }

@@ -5,17 +5,22 @@
 //!
 //! Time plots look after their reader: the y range ignores a few outliers
 //! (see [`robust_range`]) and says so, a series that would hide exactly
-//! under another is drawn dashed with marked points and says so, and a
-//! series of one point is drawn as a point.
+//! under another is drawn dashed with marked points and says so, a series
+//! of one point is drawn as a point, and x values without a y go in a named
+//! strip above the axis. World figures draw reference paths as pale bands
+//! under the paths measured against them. For either kind, `misleading`
+//! rasterises each layer as the PNG draws it and names every legend entry
+//! with nothing drawn or hidden under what is drawn after it.
 
 use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
-use plotters::coord::ranged1d::SegmentValue;
+use plotters::coord::ranged1d::{SegmentValue, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 pub use plotters::style::RGBColor;
 
@@ -49,6 +54,11 @@ pub enum PlotError {
     Draw { path: PathBuf, message: String },
     #[error("{what}: {message}")]
     Data { what: String, message: String },
+    #[error("{what} would mislead: {}", found.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))]
+    Misleading {
+        what: String,
+        found: Vec<Misleading>,
+    },
 }
 
 /// A line through points.
@@ -87,12 +97,28 @@ pub struct Outline<'a> {
     pub color: RGBColor,
 }
 
-/// A top-down view of walls, paths, markers and outlines, axes equal.
+/// A closed area (a block, say) drawn shaded with a solid edge under the
+/// paths, with its own legend entry.
+#[derive(Debug, Clone, Copy)]
+pub struct Region<'a> {
+    pub label: &'a str,
+    /// The corners in order; the last joins the first.
+    pub corners: &'a [(f64, f64)],
+    pub color: RGBColor,
+}
+
+/// A top-down view of walls, regions, paths, markers and outlines, axes
+/// equal. `references` are the paths the others are measured against (a
+/// plan, the true path): they are drawn as wide pale bands under the
+/// `paths`, so a path that follows one closely runs inside it and cannot
+/// hide it.
 #[derive(Debug, Clone, Copy)]
 pub struct WorldFigure<'a> {
     pub title: &'a str,
     pub walls: &'a [[(f64, f64); 2]],
+    pub regions: &'a [Region<'a>],
     pub paths: &'a [Series<'a>],
+    pub references: &'a [Series<'a>],
     pub markers: &'a [Markers<'a>],
     pub outlines: &'a [Outline<'a>],
 }
@@ -101,7 +127,8 @@ pub struct WorldFigure<'a> {
 /// everything drawn: points beyond it are drawn as triangles at the axis'
 /// edge, and the legend says how many and how far they went. A series
 /// whose points are another's, or among another's, is drawn dashed with
-/// marked points, and the legend says whose.
+/// marked points, and the legend says whose. x values that have no y (runs
+/// that did not complete, say) go in a [`Strip`] above the axis.
 #[derive(Debug, Clone, Copy)]
 pub struct TimeFigure<'a> {
     pub title: &'a str,
@@ -110,6 +137,25 @@ pub struct TimeFigure<'a> {
     pub series: &'a [Series<'a>],
     pub markers: &'a [Markers<'a>],
     pub bands: &'a [Band<'a>],
+    pub strip: Option<Strip<'a>>,
+}
+
+/// x values with no y value, one row of marks each, in a shaded strip
+/// above the y axis' numbers, named where the numbers would be: outside the
+/// axis, so they cannot be read as values.
+#[derive(Debug, Clone, Copy)]
+pub struct Strip<'a> {
+    /// Stands in for the y value ("not completed").
+    pub name: &'a str,
+    pub rows: &'a [StripRow<'a>],
+}
+
+/// One row of a [`Strip`].
+#[derive(Debug, Clone, Copy)]
+pub struct StripRow<'a> {
+    pub label: &'a str,
+    pub xs: &'a [f64],
+    pub color: RGBColor,
 }
 
 /// One named row of a [`LaneFigure`]: spans (from, to) drawn as bars and
@@ -364,6 +410,13 @@ fn overlap(a: &[(f64, f64)], b: &[(f64, f64)], tol: f64) -> Option<Overlap> {
     (among(a, b) || among(b, a)).then_some(Overlap::Within)
 }
 
+/// A reference path in a world figure: a band this wide and this opaque
+/// under the paths, so a path along it runs visibly inside it.
+const REFERENCE_PX: u32 = 7;
+/// How much wider each reference is than the one drawn after it.
+const REFERENCE_STEP_PX: u32 = 6;
+const REFERENCE_ALPHA: f64 = 0.35;
+
 /// Shapes of marked points.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Shape {
@@ -379,6 +432,9 @@ struct Line {
     color: RGBColor,
     pieces: Vec<Vec<(f64, f64)>>,
     dashed: bool,
+    /// A pale band this many pixels wide (a reference path, drawn under
+    /// the others); 0 for a line.
+    band_px: u32,
     vertices: Option<Shape>,
 }
 
@@ -389,11 +445,19 @@ struct Dots {
     points: Vec<(f64, f64)>,
 }
 
-/// A band as drawn.
+/// A band or a region as drawn.
 struct Shade {
     label: String,
     color: RGBColor,
     outline: Vec<(f64, f64)>,
+    /// A solid edge (a region) or none (a band).
+    edge: bool,
+}
+
+/// A strip as drawn: it starts at `from_y` and runs to the top of the axes.
+struct StripSpec {
+    name: String,
+    from_y: f64,
 }
 
 /// Points beyond the y range, drawn as triangles at its edge.
@@ -413,15 +477,21 @@ fn short(v: f64) -> String {
     format!("{v:.digits$}")
 }
 
-impl WorldFigure<'_> {
-    /// Writes `<base>.svg` and `<base>.png`. Paths are thinned to about four
-    /// pixels between points.
-    pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+impl<'a> WorldFigure<'a> {
+    /// What is drawn and the figure's size in pixels. Paths are thinned to
+    /// about four pixels between points.
+    fn spec(&self) -> Result<(ChartSpec<'a>, (u32, u32)), PlotError> {
         let all = self
             .walls
             .iter()
             .flat_map(|w| w.iter())
-            .chain(self.paths.iter().flat_map(|s| s.points.iter()))
+            .chain(self.regions.iter().flat_map(|r| r.corners.iter()))
+            .chain(
+                self.paths
+                    .iter()
+                    .chain(self.references)
+                    .flat_map(|s| s.points.iter()),
+            )
             .chain(self.markers.iter().flat_map(|m| m.points.iter()))
             .chain(self.outlines.iter().flat_map(|o| o.corners.iter()));
         let ((x0, x1), (y0, y1)) = bounds(all).ok_or_else(|| PlotError::Data {
@@ -436,15 +506,30 @@ impl WorldFigure<'_> {
         let plot_h = (plot_w * (y1 - y0) / (x1 - x0)).clamp(200.0, 1400.0);
         let size = (width, plot_h as u32 + 130);
         let step = (x1 - x0).max(y1 - y0) / 250.0;
-        let lines = self
-            .paths
+        let line = |s: &Series, band_px: u32| Line {
+            label: s.label.to_string(),
+            color: s.color,
+            pieces: vec![decimate(s.points, step)],
+            dashed: false,
+            band_px,
+            vertices: (s.points.len() == 1).then_some(Shape::Circle),
+        };
+        // Each reference narrower than the one before: one that follows
+        // another (a continuation along the plan) runs inside it.
+        let n = self.references.len() as u32;
+        let lines = (0..n)
+            .zip(self.references)
+            .map(|(k, s)| line(s, REFERENCE_PX + REFERENCE_STEP_PX * (n - 1 - k)))
+            .chain(self.paths.iter().map(|s| line(s, 0)))
+            .collect();
+        let shades = self
+            .regions
             .iter()
-            .map(|s| Line {
-                label: s.label.to_string(),
-                color: s.color,
-                pieces: vec![decimate(s.points, step)],
-                dashed: false,
-                vertices: (s.points.len() == 1).then_some(Shape::Circle),
+            .map(|r| Shade {
+                label: r.label.to_string(),
+                color: r.color,
+                outline: r.corners.to_vec(),
+                edge: true,
             })
             .collect();
         let spec = ChartSpec {
@@ -455,17 +540,47 @@ impl WorldFigure<'_> {
             walls: self.walls,
             lines,
             dots: self.markers.iter().map(Dots::from).collect(),
-            shades: Vec::new(),
+            shades,
             outlines: self.outlines,
             beyond: None,
+            strip: None,
             marker_radius: 5,
         };
+        Ok((spec, size))
+    }
+
+    /// Writes `<base>.svg` and `<base>.png`.
+    pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+        let (spec, size) = self.spec()?;
         write_both(
             base,
             size,
             |r| draw_chart(&r, &spec),
             |r| draw_chart(&r, &spec),
         )
+    }
+
+    /// Every legend entry that shows nothing or hides under what is drawn
+    /// after it (see [`Misleading`]), as the PNG would draw them.
+    pub fn misleading(&self) -> Result<Vec<Misleading>, PlotError> {
+        let (spec, size) = self.spec()?;
+        misleading(&spec, size).map_err(|message| PlotError::Data {
+            what: self.title.into(),
+            message,
+        })
+    }
+
+    /// [`WorldFigure::write`], refused with [`PlotError::Misleading`] when
+    /// [`WorldFigure::misleading`] finds anything.
+    pub fn write_checked(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+        let found = self.misleading()?;
+        if !found.is_empty() {
+            return Err(PlotError::Misleading {
+                what: self.title.into(),
+                found,
+            });
+        }
+        self.write(base)
     }
 }
 
@@ -533,6 +648,14 @@ impl<'a> TimeFigure<'a> {
             message: "nothing to draw".into(),
         };
         let ((x0, x1), (y0, y1)) = bounds(all()).ok_or_else(nothing)?;
+        // The strip's marks widen the x range, never the y range.
+        let strip_xs = self
+            .strip
+            .iter()
+            .flat_map(|s| s.rows.iter())
+            .flat_map(|r| r.xs.iter().copied())
+            .filter(|x| x.is_finite());
+        let (x0, x1) = strip_xs.fold((x0, x1), |(a, b), x| (a.min(x), b.max(x)));
         let ys: Vec<f64> = all().filter(|p| p.0.is_finite()).map(|p| p.1).collect();
         let r = robust_range(&ys).ok_or_else(nothing)?;
         let (lo, hi) = (r.lo, r.hi);
@@ -585,6 +708,7 @@ impl<'a> TimeFigure<'a> {
                 color: s.color,
                 pieces: clip_y(s.points, lo, hi),
                 dashed,
+                band_px: 0,
                 vertices,
             });
         }
@@ -613,6 +737,7 @@ impl<'a> TimeFigure<'a> {
                     .chain(b.lower.iter().rev())
                     .map(|&(x, y)| (x, y.clamp(lo, hi)))
                     .collect(),
+                edge: false,
             })
             .collect();
         let beyond = r.clips().then(|| {
@@ -631,28 +756,57 @@ impl<'a> TimeFigure<'a> {
             beyond
         });
         let ypad = 0.05 * (hi - lo).max(1e-6);
-        // Markers at the x extremes (a row of "not completed", say) would
-        // be cut in half by the frame.
-        let xpad = if self.markers.is_empty() {
+        // Markers at the x extremes would be cut in half by the frame.
+        let xpad = if self.markers.is_empty() && self.strip.is_none() {
             0.0
         } else {
             0.02 * (x1 - x0)
         };
+        // The strip: a row per entry above the axis' top, and a margin.
+        let mut top = hi + ypad;
+        let mut strip = None;
+        if let Some(s) = self
+            .strip
+            .filter(|s| s.rows.iter().any(|r| !r.xs.is_empty()))
+        {
+            let row_h = 0.08 * (hi - lo).max(1e-6);
+            let from_y = top;
+            for (k, r) in s.rows.iter().enumerate() {
+                dots.push(Dots {
+                    label: r.label.to_string(),
+                    color: r.color,
+                    points: r
+                        .xs
+                        .iter()
+                        .map(|&x| (x, from_y + row_h * (k as f64 + 0.75)))
+                        .collect(),
+                });
+            }
+            top = from_y + row_h * (s.rows.len() as f64 + 0.5);
+            strip = Some(StripSpec {
+                name: s.name.to_string(),
+                from_y,
+            });
+        }
         Ok(ChartSpec {
             title: self.title,
             x_label: self.x_label,
             y_label: self.y_label,
-            range: (x0 - xpad, (x1 + xpad).max(x0 + 1e-9), lo - ypad, hi + ypad),
+            range: (x0 - xpad, (x1 + xpad).max(x0 + 1e-9), lo - ypad, top),
             walls: &[],
             lines,
             dots,
             shades,
             outlines: &[],
             beyond,
+            strip,
             marker_radius: 3,
         })
     }
 }
+
+/// The size of a time figure in pixels.
+const TIME_FIGURE_PX: (u32, u32) = (1100, 450);
 
 impl TimeFigure<'_> {
     /// Writes `<base>.svg` and `<base>.png`.
@@ -660,10 +814,20 @@ impl TimeFigure<'_> {
         let spec = self.spec()?;
         write_both(
             base,
-            (1100, 450),
+            TIME_FIGURE_PX,
             |r| draw_chart(&r, &spec),
             |r| draw_chart(&r, &spec),
         )
+    }
+
+    /// Every legend entry that shows nothing or hides under what is drawn
+    /// after it (see [`Misleading`]), as [`TimeFigure::write`] draws them.
+    pub fn misleading(&self) -> Result<Vec<Misleading>, PlotError> {
+        let spec = self.spec()?;
+        misleading(&spec, TIME_FIGURE_PX).map_err(|message| PlotError::Data {
+            what: self.title.into(),
+            message,
+        })
     }
 }
 
@@ -679,6 +843,7 @@ struct ChartSpec<'a> {
     shades: Vec<Shade>,
     outlines: &'a [Outline<'a>],
     beyond: Option<Beyond>,
+    strip: Option<StripSpec>,
     marker_radius: i32,
 }
 
@@ -714,155 +879,462 @@ fn draw_shapes<DB: DrawingBackend>(
     .map_err(|e| e.to_string())
 }
 
-fn draw_chart<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
+/// One thing drawn on a chart, in the order drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Layer {
+    Walls,
+    Strip,
+    Shade(usize),
+    Line(usize),
+    Dots(usize),
+    Beyond,
+    Outline(usize),
+}
+
+/// Everything a chart draws, bottom to top.
+fn layers(spec: &ChartSpec) -> Vec<Layer> {
+    let mut all = vec![Layer::Walls];
+    all.extend(spec.strip.as_ref().map(|_| Layer::Strip));
+    all.extend((0..spec.shades.len()).map(Layer::Shade));
+    all.extend((0..spec.lines.len()).map(Layer::Line));
+    all.extend((0..spec.dots.len()).map(Layer::Dots));
+    all.push(Layer::Beyond);
+    all.extend((0..spec.outlines.len()).map(Layer::Outline));
+    all
+}
+
+/// The legend entry of a layer: `None` when it has none (nothing drawn,
+/// or no label).
+fn legend_label<'s>(spec: &'s ChartSpec, layer: Layer) -> Option<&'s str> {
+    let label = match layer {
+        Layer::Walls | Layer::Strip => None,
+        Layer::Shade(i) => Some(spec.shades[i].label.as_str()),
+        Layer::Line(i) => {
+            let s = &spec.lines[i];
+            s.pieces
+                .iter()
+                .any(|p| !p.is_empty())
+                .then_some(s.label.as_str())
+        }
+        Layer::Dots(i) => {
+            let m = &spec.dots[i];
+            (!m.points.is_empty()).then_some(m.label.as_str())
+        }
+        Layer::Beyond => spec
+            .beyond
+            .as_ref()
+            .filter(|b| !b.up.is_empty() || !b.down.is_empty())
+            .map(|b| b.label.as_str()),
+        Layer::Outline(i) => Some(spec.outlines[i].label),
+    };
+    label.filter(|l| !l.is_empty())
+}
+
+/// The frame of a chart: caption, axes and their labels (a strip's rows
+/// get no numbers but the strip's name).
+fn frame<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
     spec: &ChartSpec,
-) -> Result<(), String> {
+) -> Result<Chart<'a, DB>, String> {
     let (x0, x1, y0, y1) = spec.range;
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let y_area = if spec.strip.is_some() { 90 } else { 60 };
     let mut chart = ChartBuilder::on(root)
         .caption(spec.title, ("sans-serif", 22))
         .margin(15)
         .x_label_area_size(40)
-        .y_label_area_size(60)
+        .y_label_area_size(y_area)
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(|e| e.to_string())?;
+    let data_top = spec.strip.as_ref().map_or(f64::INFINITY, |s| s.from_y);
+    let ticks = |v: &f64| {
+        if *v > data_top {
+            String::new()
+        } else {
+            RangedCoordf64::format(v)
+        }
+    };
     chart
         .configure_mesh()
         .x_desc(spec.x_label)
         .y_desc(spec.y_label)
+        .y_label_formatter(&ticks)
         .light_line_style(RGBColor(235, 235, 235))
         .draw()
         .map_err(|e| e.to_string())?;
-    chart
-        .draw_series(
-            spec.walls
-                .iter()
-                .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
-        )
-        .map_err(|e| e.to_string())?;
-    for b in &spec.shades {
-        let color = b.color;
-        chart
-            .draw_series(std::iter::once(Polygon::new(
-                b.outline.clone(),
-                color.mix(0.25).filled(),
-            )))
-            .map_err(|e| e.to_string())?
-            .label(b.label.as_str())
-            .legend(move |(x, y)| {
-                Rectangle::new([(x, y - 5), (x + 20, y + 5)], color.mix(0.25).filled())
-            });
-    }
-    // Width 1: plotters' bitmap backend leaves gaps in thicker polylines.
-    // A series with an empty label draws without a legend entry (several
-    // pieces of one thing).
+    Ok(chart)
+}
+
+/// Draws one layer, with its legend entry when `legend`.
+fn draw_layer<'c, DB: DrawingBackend + 'c>(
+    chart: &mut Chart<'c, DB>,
+    spec: &ChartSpec,
+    layer: Layer,
+    legend: bool,
+) -> Result<(), String> {
+    let label = legend_label(spec, layer).filter(|_| legend);
     let radius = spec.marker_radius;
-    for s in &spec.lines {
-        let color = s.color;
-        let drawn = if s.dashed {
-            chart.draw_series(s.pieces.iter().map(|piece| {
-                DashedPathElement::new(piece.iter().copied(), 8, 5, color.stroke_width(2))
-            }))
-        } else {
-            chart.draw_series(
-                s.pieces
-                    .iter()
-                    .map(|piece| PathElement::new(piece.clone(), color.stroke_width(1))),
-            )
+    match layer {
+        Layer::Walls => {
+            chart
+                .draw_series(
+                    spec.walls
+                        .iter()
+                        .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
+                )
+                .map_err(|e| e.to_string())?;
         }
-        .map_err(|e| e.to_string())?;
-        // A legend entry only for what is drawn.
-        if !s.label.is_empty() && s.pieces.iter().any(|p| !p.is_empty()) {
-            let dash = if s.dashed { 5 } else { 100 };
-            let mark: Vec<(i32, i32)> = match s.vertices {
-                None => vec![],
-                Some(Shape::Circle) => vec![(8, -2), (12, -2), (12, 2), (8, 2), (8, -2)],
-                Some(Shape::Triangle) => vec![(10, -5), (14, 3), (6, 3), (10, -5)],
-                Some(Shape::Square) => vec![(6, -4), (14, -4), (14, 4), (6, 4), (6, -4)],
-                Some(Shape::Cross) => vec![(6, -4), (14, 4), (10, 0), (14, -4), (6, 4)],
+        Layer::Strip => {
+            let Some(strip) = &spec.strip else {
+                return Ok(());
             };
-            drawn.label(s.label.as_str()).legend(move |(x, y)| {
-                EmptyElement::at((x, y))
-                    + DashedPathElement::new(vec![(0, 0), (20, 0)], dash, 3, color.stroke_width(2))
-                    + PathElement::new(mark.clone(), color.stroke_width(2))
-            });
+            let (x0, x1, _, y1) = spec.range;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(x0, strip.from_y), (x1, y1)],
+                    RGBColor(225, 225, 225).mix(0.6).filled(),
+                )))
+                .map_err(|e| e.to_string())?;
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(x0, strip.from_y), (x1, strip.from_y)],
+                    BLACK.stroke_width(1),
+                )))
+                .map_err(|e| e.to_string())?;
+            // The strip's name where its numbers would be (in pixels from
+            // the plotting area's corner).
+            let (left, mid) = chart.backend_coord(&(x0, 0.5 * (strip.from_y + y1)));
+            let (xs, ys) = chart.plotting_area().get_pixel_range();
+            let (left, mid) = (left - xs.start, mid - ys.start);
+            let font = ("sans-serif", 13)
+                .into_font()
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Right, VPos::Center));
+            chart
+                .plotting_area()
+                .strip_coord_spec()
+                .draw(&Text::new(strip.name.clone(), (left - 6, mid), font))
+                .map_err(|e| e.to_string())?;
         }
-        if let Some(shape) = s.vertices {
-            let points: Vec<(f64, f64)> = s.pieces.concat();
-            draw_shapes(&mut chart, &points, shape, color, radius)?;
-        }
-    }
-    for m in spec.dots.iter().filter(|m| !m.points.is_empty()) {
-        let color = m.color;
-        chart
-            .draw_series(
-                m.points
-                    .iter()
-                    .map(|&p| Circle::new(p, radius, color.filled())),
-            )
-            .map_err(|e| e.to_string())?
-            .label(m.label.as_str())
-            .legend(move |(x, y)| Circle::new((x + 10, y), radius, color.filled()));
-    }
-    if let Some(b) = spec
-        .beyond
-        .as_ref()
-        .filter(|b| !b.up.is_empty() || !b.down.is_empty())
-    {
-        let size = radius + 3;
-        let up = move |c: (f64, f64), color: RGBColor| {
-            EmptyElement::at(c)
-                + Polygon::new(vec![(-size, 0), (size, 0), (0, -2 * size)], color.filled())
-        };
-        let down = move |c: (f64, f64), color: RGBColor| {
-            EmptyElement::at(c)
-                + Polygon::new(vec![(-size, 0), (size, 0), (0, 2 * size)], color.filled())
-        };
-        chart
-            .draw_series(b.down.iter().map(|&(c, color)| down(c, color)))
+        Layer::Shade(i) => {
+            let b = &spec.shades[i];
+            let color = b.color;
+            let fill = Polygon::new(b.outline.clone(), color.mix(0.25).filled());
+            let drawn = if b.edge {
+                chart
+                    .draw_series(std::iter::once(fill))
+                    .map_err(|e| e.to_string())?;
+                let mut ring = b.outline.clone();
+                ring.extend(b.outline.first().copied());
+                chart.draw_series(std::iter::once(PathElement::new(
+                    ring,
+                    color.stroke_width(2),
+                )))
+            } else {
+                chart.draw_series(std::iter::once(fill))
+            }
             .map_err(|e| e.to_string())?;
-        chart
-            .draw_series(b.up.iter().map(|&(c, color)| up(c, color)))
-            .map_err(|e| e.to_string())?
-            .label(b.label.as_str())
-            .legend(move |(x, y)| {
-                EmptyElement::at((x + 10, y))
-                    + Polygon::new(vec![(-5, 4), (5, 4), (0, -6)], BLACK.filled())
-            });
-    }
-    // Outlines last: nothing may hide them.
-    for o in spec.outlines {
-        let color = o.color;
-        let mut ring = o.corners.to_vec();
-        if let Some(&first) = o.corners.first() {
-            ring.push(first);
+            if let Some(label) = label {
+                let edge: ShapeStyle = if b.edge {
+                    color.stroke_width(2)
+                } else {
+                    color.mix(0.25).stroke_width(2)
+                };
+                drawn.label(label).legend(move |(x, y)| {
+                    EmptyElement::at((x, y))
+                        + Rectangle::new([(0, -5), (20, 5)], color.mix(0.25).filled())
+                        + Rectangle::new([(0, -5), (20, 5)], edge)
+                });
+            }
         }
-        chart
-            .draw_series(
-                ring.windows(2)
-                    .map(|w| DashedPathElement::new(w.to_vec(), 6, 4, color.stroke_width(3))),
-            )
-            .map_err(|e| e.to_string())?
-            .label(o.label)
-            .legend(move |(x, y)| {
-                Rectangle::new([(x + 2, y - 5), (x + 18, y + 5)], color.stroke_width(2))
-            });
+        Layer::Line(i) => {
+            // Width 1: plotters' bitmap backend leaves gaps in thicker
+            // polylines. A series with an empty label draws without a
+            // legend entry (several pieces of one thing).
+            let s = &spec.lines[i];
+            let color = s.color;
+            let band_px = s.band_px;
+            let drawn = if band_px > 0 {
+                let style = color.mix(REFERENCE_ALPHA).stroke_width(band_px);
+                chart.draw_series(
+                    s.pieces
+                        .iter()
+                        .map(move |piece| PathElement::new(piece.clone(), style)),
+                )
+            } else if s.dashed {
+                chart.draw_series(s.pieces.iter().map(|piece| {
+                    DashedPathElement::new(piece.iter().copied(), 8, 5, color.stroke_width(2))
+                }))
+            } else {
+                chart.draw_series(
+                    s.pieces
+                        .iter()
+                        .map(|piece| PathElement::new(piece.clone(), color.stroke_width(1))),
+                )
+            }
+            .map_err(|e| e.to_string())?;
+            if let (Some(label), true) = (label, band_px > 0) {
+                drawn.label(label).legend(move |(x, y)| {
+                    PathElement::new(
+                        vec![(x, y), (x + 20, y)],
+                        color.mix(REFERENCE_ALPHA).stroke_width(band_px.min(10)),
+                    )
+                });
+            } else if let Some(label) = label {
+                let dash = if s.dashed { 5 } else { 100 };
+                let mark: Vec<(i32, i32)> = match s.vertices {
+                    None => vec![],
+                    Some(Shape::Circle) => vec![(8, -2), (12, -2), (12, 2), (8, 2), (8, -2)],
+                    Some(Shape::Triangle) => vec![(10, -5), (14, 3), (6, 3), (10, -5)],
+                    Some(Shape::Square) => vec![(6, -4), (14, -4), (14, 4), (6, 4), (6, -4)],
+                    Some(Shape::Cross) => vec![(6, -4), (14, 4), (10, 0), (14, -4), (6, 4)],
+                };
+                drawn.label(label).legend(move |(x, y)| {
+                    EmptyElement::at((x, y))
+                        + DashedPathElement::new(
+                            vec![(0, 0), (20, 0)],
+                            dash,
+                            3,
+                            color.stroke_width(2),
+                        )
+                        + PathElement::new(mark.clone(), color.stroke_width(2))
+                });
+            }
+            if let Some(shape) = s.vertices {
+                let points: Vec<(f64, f64)> = s.pieces.concat();
+                draw_shapes(chart, &points, shape, color, radius)?;
+            }
+        }
+        Layer::Dots(i) => {
+            let m = &spec.dots[i];
+            let color = m.color;
+            let drawn = chart
+                .draw_series(
+                    m.points
+                        .iter()
+                        .map(|&p| Circle::new(p, radius, color.filled())),
+                )
+                .map_err(|e| e.to_string())?;
+            if let Some(label) = label {
+                drawn
+                    .label(label)
+                    .legend(move |(x, y)| Circle::new((x + 10, y), radius, color.filled()));
+            }
+        }
+        Layer::Beyond => {
+            let Some(b) = &spec.beyond else {
+                return Ok(());
+            };
+            let size = radius + 3;
+            let up = move |c: (f64, f64), color: RGBColor| {
+                EmptyElement::at(c)
+                    + Polygon::new(vec![(-size, 0), (size, 0), (0, -2 * size)], color.filled())
+            };
+            let down = move |c: (f64, f64), color: RGBColor| {
+                EmptyElement::at(c)
+                    + Polygon::new(vec![(-size, 0), (size, 0), (0, 2 * size)], color.filled())
+            };
+            chart
+                .draw_series(b.down.iter().map(|&(c, color)| down(c, color)))
+                .map_err(|e| e.to_string())?;
+            let drawn = chart
+                .draw_series(b.up.iter().map(|&(c, color)| up(c, color)))
+                .map_err(|e| e.to_string())?;
+            if let Some(label) = label {
+                drawn.label(label).legend(move |(x, y)| {
+                    EmptyElement::at((x + 10, y))
+                        + Polygon::new(vec![(-5, 4), (5, 4), (0, -6)], BLACK.filled())
+                });
+            }
+        }
+        Layer::Outline(i) => {
+            let o = &spec.outlines[i];
+            let color = o.color;
+            let mut ring = o.corners.to_vec();
+            ring.extend(o.corners.first().copied());
+            let drawn = chart
+                .draw_series(
+                    ring.windows(2)
+                        .map(|w| DashedPathElement::new(w.to_vec(), 6, 4, color.stroke_width(3))),
+                )
+                .map_err(|e| e.to_string())?;
+            if let Some(label) = label {
+                drawn.label(label).legend(move |(x, y)| {
+                    Rectangle::new([(x + 2, y - 5), (x + 18, y + 5)], color.stroke_width(2))
+                });
+            }
+        }
     }
+    Ok(())
+}
+
+fn draw_chart<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    spec: &ChartSpec,
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let mut chart = frame(root, spec)?;
+    // Outlines last: nothing may hide them.
+    for layer in layers(spec) {
+        draw_layer(&mut chart, spec, layer, true)?;
+    }
+    let position = legend_position(&chart, spec)?;
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
-        .position(emptiest_corner(spec))
+        .position(position)
         .draw()
         .map_err(|e| e.to_string())?;
     root.present().map_err(|e| e.to_string())
 }
 
+/// What makes a figure mislead its reader.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Misleading {
+    /// The legend names it, but nothing of it (fewer than [`MIN_PIXELS`])
+    /// shows inside the axes.
+    NothingDrawn { label: String },
+    /// Almost all of it lies under what is drawn after it.
+    Hidden {
+        label: String,
+        /// The fraction of its pixels still seen.
+        visible_fraction: f64,
+    },
+}
+
+impl std::fmt::Display for Misleading {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Misleading::NothingDrawn { label } => {
+                write!(f, "\"{label}\" is in the legend but nothing of it is drawn")
+            }
+            Misleading::Hidden {
+                label,
+                visible_fraction,
+            } => write!(
+                f,
+                "\"{label}\" is hidden under what is drawn after it ({:.0} % of it shows)",
+                100.0 * visible_fraction
+            ),
+        }
+    }
+}
+
+/// A legend entry is hidden when less than this fraction of its pixels
+/// shows; a pixel next to one drawn later counts as covered (a line a pixel
+/// beside another merges with it).
+pub const MIN_VISIBLE_FRACTION: f64 = 0.15;
+
+/// A legend entry with fewer pixels than this inside the axes shows
+/// nothing a reader can find.
+pub const MIN_PIXELS: usize = 9;
+
+/// The pixels of the plot area that `layer` covers, drawn alone at `size`.
+fn layer_mask(spec: &ChartSpec, size: (u32, u32), layer: Layer) -> Result<Vec<bool>, String> {
+    let (w, h) = size;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    let (xs, ys) = {
+        let root = BitMapBackend::with_buffer(&mut buf, size).into_drawing_area();
+        let mut chart = frame(&root, spec)?;
+        // The frame drawn, then wiped: only the layer's own pixels count.
+        let range = chart.plotting_area().get_pixel_range();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        draw_layer(&mut chart, spec, layer, false)?;
+        root.present().map_err(|e| e.to_string())?;
+        range
+    };
+    let mut mask = vec![false; (w * h) as usize];
+    for y in ys.start.max(0)..ys.end.min(h as i32) {
+        for x in xs.start.max(0)..xs.end.min(w as i32) {
+            let i = (y as u32 * w + x as u32) as usize;
+            mask[i] = buf[3 * i..3 * i + 3] != [255, 255, 255];
+        }
+    }
+    Ok(mask)
+}
+
+/// Every legend entry of `spec`, drawn at `size`, that shows nothing in the
+/// axes or lies almost wholly under what is drawn after it; found on the
+/// rasterised layers, so widths, dashes and markers count as drawn.
+fn misleading(spec: &ChartSpec, size: (u32, u32)) -> Result<Vec<Misleading>, String> {
+    register_fonts();
+    let all = layers(spec);
+    let masks = all
+        .iter()
+        .map(|&l| layer_mask(spec, size, l))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (w, h) = (size.0 as usize, size.1 as usize);
+    // What is drawn above the current layer, grown by a pixel each way.
+    let mut above = vec![false; w * h];
+    let mut found = Vec::new();
+    for (layer, mask) in all.iter().zip(&masks).rev() {
+        if let Some(label) = legend_label(spec, *layer) {
+            let drawn = mask.iter().filter(|&&m| m).count();
+            let seen = mask.iter().zip(&above).filter(|&(&m, &a)| m && !a).count();
+            if drawn < MIN_PIXELS {
+                found.push(Misleading::NothingDrawn {
+                    label: label.to_string(),
+                });
+            } else if (seen as f64) < MIN_VISIBLE_FRACTION * drawn as f64 {
+                found.push(Misleading::Hidden {
+                    label: label.to_string(),
+                    visible_fraction: seen as f64 / drawn as f64,
+                });
+            }
+        }
+        for (i, _) in mask.iter().enumerate().filter(|&(_, &m)| m) {
+            let (x, y) = (i % w, i / w);
+            for yy in y.saturating_sub(1)..(y + 2).min(h) {
+                for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                    above[yy * w + xx] = true;
+                }
+            }
+        }
+    }
+    found.reverse();
+    Ok(found)
+}
+
+/// Where the legend goes: the emptiest corner of the values' area, which
+/// ends below a strip (a legend at the top would cover the strip's marks).
+fn legend_position<DB: DrawingBackend>(
+    chart: &Chart<'_, DB>,
+    spec: &ChartSpec,
+) -> Result<SeriesLabelPosition, String> {
+    let corner = emptiest_corner(spec);
+    let Some(strip) = &spec.strip else {
+        return Ok(corner);
+    };
+    let area = chart.plotting_area();
+    let (xs, ys) = area.get_pixel_range();
+    let top = chart.backend_coord(&(spec.range.0, strip.from_y)).1 - ys.start + 8;
+    // plotters' legend: a 30 pixel symbol, 10 pixel margins, 12 pixel text.
+    let font: TextStyle = ("sans-serif", 12).into_font().into();
+    let mut text_w = 0;
+    for layer in layers(spec) {
+        if let Some(label) = legend_label(spec, layer) {
+            let (w, _) = area
+                .estimate_text_size(label, &font)
+                .map_err(|e| e.to_string())?;
+            text_w = text_w.max(w as i32);
+        }
+    }
+    let legend_w = text_w + 30 + 2 * 10;
+    Ok(match corner {
+        SeriesLabelPosition::UpperLeft => SeriesLabelPosition::Coordinate(8, top),
+        SeriesLabelPosition::UpperRight => {
+            SeriesLabelPosition::Coordinate(xs.end - xs.start - legend_w - 8, top)
+        }
+        lower => lower,
+    })
+}
+
 /// The corner of the chart with the least drawn in it, for the legend
-/// (segments sampled along their length).
+/// (segments sampled along their length); with a strip, of the values'
+/// area below it.
 fn emptiest_corner(spec: &ChartSpec) -> SeriesLabelPosition {
     let (x0, x1, y0, y1) = spec.range;
+    let y1 = spec.strip.as_ref().map_or(y1, |s| s.from_y);
     let mut drawn: Vec<(f64, f64)> = Vec::new();
     let mut path = |points: &[(f64, f64)]| {
         for w in points.windows(2) {
@@ -896,7 +1368,7 @@ fn emptiest_corner(spec: &ChartSpec) -> SeriesLabelPosition {
     let mut count = [0usize; 4];
     for (x, y) in drawn {
         let (right, left) = (x >= x1 - wx, x <= x0 + wx);
-        let (up, low) = (y >= y1 - wy, y <= y0 + wy);
+        let (up, low) = (y >= y1 - wy && y <= y1, y <= y0 + wy);
         for (k, inside) in [up && right, up && left, low && right, low && left]
             .into_iter()
             .enumerate()
@@ -1036,11 +1508,13 @@ mod tests {
         let files = WorldFigure {
             title: "test world",
             walls: &walls,
+            regions: &[],
             paths: &[Series {
                 label: "path",
                 points: &path,
                 color: palette::TRUTH,
             }],
+            references: &[],
             markers: &[Markers {
                 label: "bump",
                 points: &[(2.0, 0.5)],
@@ -1073,6 +1547,7 @@ mod tests {
                 upper: &path,
                 color: palette::TRUTH,
             }],
+            strip: None,
         }
         .write(&dir.path().join("series"))
         .unwrap();
@@ -1089,6 +1564,7 @@ mod tests {
             series: &[],
             markers: &[],
             bands: &[],
+            strip: None,
         }
         .write(&dir.path().join("e"))
         .unwrap_err();
@@ -1192,6 +1668,7 @@ mod tests {
             }],
             markers: &[],
             bands: &[],
+            strip: None,
         }
         .write(&dir.path().join("spikes"))
         .unwrap();
@@ -1231,6 +1708,7 @@ mod tests {
             ],
             markers: &[],
             bands: &[],
+            strip: None,
         }
         .write(&dir.path().join("methods"))
         .unwrap();
@@ -1267,6 +1745,7 @@ mod tests {
                 color: palette::BAD,
             }],
             bands: &[],
+            strip: None,
         }
         .write(&dir.path().join("innovations"))
         .unwrap();
@@ -1276,6 +1755,159 @@ mod tests {
             !svg.contains("nothing here") && !svg.contains("rejected"),
             "{svg}"
         );
+    }
+
+    type Points = Vec<(f64, f64)>;
+
+    /// An oval loop, and the same loop two millimetres off.
+    fn loop_and_follower() -> (Points, Points) {
+        let lap: Vec<(f64, f64)> = (0..400)
+            .map(|i| {
+                let a = i as f64 * std::f64::consts::TAU / 400.0;
+                (2.0 + a.cos(), 2.0 + 0.8 * a.sin())
+            })
+            .collect();
+        let follower = lap.iter().map(|&(x, y)| (x + 0.002, y)).collect();
+        (lap, follower)
+    }
+
+    #[test]
+    fn a_world_path_under_another_is_found_and_a_reference_stays_visible() {
+        let (lap, follower) = loop_and_follower();
+        let plan = Series {
+            label: "plan",
+            points: &lap,
+            color: palette::ALT,
+        };
+        let robot = Series {
+            label: "robot",
+            points: &follower,
+            color: palette::TRUTH,
+        };
+        let figure = |paths: &[Series], references: &[Series]| {
+            WorldFigure {
+                title: "hidden",
+                walls: &[],
+                regions: &[],
+                paths,
+                references,
+                markers: &[],
+                outlines: &[],
+            }
+            .misleading()
+            .unwrap()
+        };
+        // The plan drawn first, the robot over it: the plan is lost.
+        let found = figure(&[plan, robot], &[]);
+        assert!(
+            matches!(&found[..], [Misleading::Hidden { label, visible_fraction }]
+                if label == "plan" && *visible_fraction < 0.1),
+            "{found:?}"
+        );
+        // The plan as a reference, a band under the robot: both show.
+        assert_eq!(figure(&[robot], &[plan]), vec![]);
+        // Apart, nothing hides.
+        let far: Vec<(f64, f64)> = lap.iter().map(|&(x, y)| (x + 3.0, y)).collect();
+        let apart = Series {
+            points: &far,
+            ..robot
+        };
+        assert_eq!(figure(&[plan, apart], &[]), vec![]);
+        // The check refuses to write a figure that hides its plan.
+        let dir = tempfile::tempdir().unwrap();
+        let err = WorldFigure {
+            title: "hidden",
+            walls: &[],
+            regions: &[],
+            paths: &[plan, robot],
+            references: &[],
+            markers: &[],
+            outlines: &[],
+        }
+        .write_checked(&dir.path().join("hidden"))
+        .unwrap_err();
+        assert!(err.to_string().contains("\"plan\" is hidden"), "{err}");
+        assert!(!dir.path().join("hidden.png").exists());
+    }
+
+    #[test]
+    fn a_legend_entry_with_nothing_in_the_axes_is_found() {
+        let (lap, _) = loop_and_follower();
+        // A block of zero size: a speck, not a block.
+        let corners = [(2.0, 2.0); 4];
+        let found = WorldFigure {
+            title: "empty region",
+            walls: &[],
+            regions: &[Region {
+                label: "learnt block",
+                corners: &corners,
+                color: palette::PURPLE,
+            }],
+            paths: &[Series {
+                label: "robot",
+                points: &lap,
+                color: palette::TRUTH,
+            }],
+            references: &[],
+            markers: &[],
+            outlines: &[],
+        }
+        .misleading()
+        .unwrap();
+        assert_eq!(
+            found,
+            vec![Misleading::NothingDrawn {
+                label: "learnt block".into()
+            }]
+        );
+    }
+
+    #[test]
+    fn a_strip_holds_what_has_no_value_outside_the_axis_numbers() {
+        let dir = tempfile::tempdir().unwrap();
+        let times = [(0.0, 57.0), (0.5, 126.0)];
+        let figure = TimeFigure {
+            title: "completion",
+            x_label: "latency",
+            y_label: "s",
+            series: &[Series {
+                label: "hold-last",
+                points: &times,
+                color: palette::BAD,
+            }],
+            markers: &[],
+            bands: &[],
+            strip: Some(Strip {
+                name: "not completed",
+                rows: &[StripRow {
+                    label: "hold-last: not completed",
+                    xs: &[2.0],
+                    color: palette::BAD,
+                }],
+            }),
+        };
+        let spec = figure.spec().unwrap();
+        let strip = spec.strip.as_ref().unwrap();
+        let (_, x1, _, top) = spec.range;
+        // The mark sits above every value, in the strip, inside the frame.
+        let mark = spec.dots[0].points[0];
+        assert_eq!(mark.0, 2.0);
+        assert!(strip.from_y > 126.0 && mark.1 > strip.from_y && mark.1 < top);
+        assert!(x1 > 2.0);
+        figure.write(&dir.path().join("completion")).unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("completion.svg")).unwrap();
+        assert!(
+            svg.contains("not completed") && svg.contains("hold-last: not completed"),
+            "{svg}"
+        );
+        // No number labels the strip: every tick label is within the data.
+        let ticks: Vec<f64> = svg.lines().filter_map(|l| l.trim().parse().ok()).collect();
+        assert!(
+            ticks.iter().all(|&v| v <= strip.from_y && v >= -1.0),
+            "{ticks:?}"
+        );
+        assert!(ticks.iter().any(|&v| v >= 100.0), "{ticks:?}");
+        assert_eq!(figure.misleading().unwrap(), vec![]);
     }
 
     #[test]

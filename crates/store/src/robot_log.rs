@@ -89,6 +89,8 @@ fn comparison_figures(
         .collect();
     WorldFigure {
         title: "predicted (the plan) against real (the robot)",
+        regions: &[],
+        references: &[],
         walls: &[],
         paths: &[
             Series {
@@ -113,6 +115,7 @@ fn comparison_figures(
     let thin = twindrive_plot::decimate(residuals, 0.0);
     TimeFigure {
         title: "range readings: measured minus the twin's prediction",
+        strip: None,
         x_label: "time since the plan started (s)",
         y_label: "residual (m)",
         series: &[Series {

@@ -33,6 +33,8 @@ pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::R
     let title = format!("{}: driven path (ground truth)", log.header.scenario);
     WorldFigure {
         title: &title,
+        regions: &[],
+        references: &[],
         walls: &walls(world),
         paths: &[Series {
             label: "path",
@@ -73,6 +75,7 @@ pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::R
         .collect();
     TimeFigure {
         title: "Wheel angular speeds",
+        strip: None,
         x_label: "t [s]",
         y_label: "wheel speed [rad/s]",
         series: &[
@@ -129,6 +132,7 @@ pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::R
             .collect();
         TimeFigure {
             title: "Side range sensor: distance to the wall along the beam",
+            strip: None,
             x_label: "t [s]",
             y_label: "range [m]",
             series: &series,
@@ -266,6 +270,8 @@ pub fn plan_figures(
     }
     WorldFigure {
         title: "Mission planner: executed path, kept and redundant parts, pinch points (Fig. 7)",
+        regions: &[],
+        references: &[],
         walls,
         paths: &paths,
         markers: &markers,
@@ -282,6 +288,8 @@ pub fn plan_figures(
         .collect();
     WorldFigure {
         title: "Redundancy removed: control spikes (Fig. 8a)",
+        regions: &[],
+        references: &[],
         walls,
         paths: &[Series {
             label: "cleaned path",
@@ -300,6 +308,8 @@ pub fn plan_figures(
     let filtered = xy(&stages.filtered.samples);
     WorldFigure {
         title: "Filtered path: the plan (Fig. 8b)",
+        regions: &[],
+        references: &[],
         walls,
         paths: &[
             Series {
@@ -337,6 +347,7 @@ pub fn plan_figures(
     );
     TimeFigure {
         title: "Wheel speeds before and after filtering (Fig. 9)",
+        strip: None,
         x_label: "t [s]",
         y_label: "wheel speed [rad/s]",
         series: &[

@@ -134,6 +134,8 @@ pub fn write_outputs(
     );
     WorldFigure {
         title: "Plan replayed on the twin (true parameters and noise)",
+        regions: &[],
+        references: &[],
         walls: &figures::walls(&scenario.world),
         paths: &[
             Series {

@@ -61,18 +61,21 @@ pub(super) fn case_study_report(c: &CaseStudy) -> Report {
             .collect(),
     );
     r.paragraph(
-        "The filter's estimate of each parameter over the drive with its ±3σ band, against the          reported value, and the innovations of the tracker's poses:",
+        "The filter's estimate of each parameter over the drive with the ±3σ band around it, the reported value and the hidden truth (the legend gives the fraction of the time each lies inside the band: the truth leaves it late in the first 30 s, which circle at one curvature and cannot separate the three parameters), and the innovations of the tracker's poses, in metres and in radians:",
     );
     for (file, caption) in [
         (
             "left_diameter",
-            "Left wheel diameter: estimate, ±3σ band, reported value",
+            "Left wheel diameter: estimate, ±3σ band around it, truth, reported value",
         ),
         (
             "right_diameter",
-            "Right wheel diameter: estimate, ±3σ band, reported value",
+            "Right wheel diameter: estimate, ±3σ band around it, truth, reported value",
         ),
-        ("wheelbase", "Wheelbase: estimate, ±3σ band, reported value"),
+        (
+            "wheelbase",
+            "Wheelbase: estimate, ±3σ band around it, truth, reported value",
+        ),
         ("innovations", "Innovations of the fused poses"),
     ] {
         r.figure(format!("calibration/calib_{file}"), caption);
@@ -260,7 +263,7 @@ pub(super) fn case_study_report(c: &CaseStudy) -> Report {
     );
     r.figure(
         "decoupled/twin",
-        "The twin's world after the mission: the blocks it learnt from the robot, the plans, and the robot's true path",
+        "The twin's world after the mission: the blocks it learnt from the robot (shaded), the plans (pale bands), and the robot's true path over them",
     );
     r.figure(
         "decoupled/timeline",
@@ -318,7 +321,7 @@ pub(super) fn case_study_report(c: &CaseStudy) -> Report {
     );
     r.figure(
         "experiment/completion_time",
-        "Mission completion time against one-way latency, one line per method",
+        "Mission completion time against one-way latency, one line per method; runs that did not complete are marked in the \"not completed\" strip above the time axis",
     );
     r.figure(
         "experiment/collisions",

@@ -13,7 +13,7 @@ use twindrive_files::Staging;
 use twindrive_link::emulator::LinkProfile;
 use twindrive_link::envelope::SigningKey;
 use twindrive_mission::plan::MissionPlan;
-use twindrive_plot::{Lane, LaneFigure, Markers, Outline, Series, WorldFigure, palette};
+use twindrive_plot::{Lane, LaneFigure, Markers, Outline, Region, Series, WorldFigure, palette};
 use twindrive_sim::Scenario;
 use twindrive_store::MasterArchive;
 use twindrive_workflow::figures::walls;
@@ -139,11 +139,31 @@ pub fn run_on_site(
     let journal = robot.store().journal();
     staging.write_with("robot_journal.jsonl", |w| Ok(w.write_all(&journal)?))?;
 
-    // The twin after the mission, with what it learnt, against the site.
-    let updated = op
+    // The twin after the mission: the walls it knew, the blocks it learnt,
+    // and against them the site's differences.
+    let learnt: Vec<[(f64, f64); 4]> = op
         .twin()
-        .map(|t| t.scenario.world.clone())
-        .unwrap_or_else(|| twin.world.clone());
+        .map(|t| t.learnt.clone())
+        .unwrap_or_default()
+        .iter()
+        .map(|&(min, max)| {
+            [
+                (min[0], min[1]),
+                (max[0], min[1]),
+                (max[0], max[1]),
+                (min[0], max[1]),
+            ]
+        })
+        .collect();
+    let learnt_label = "block the twin learnt";
+    let regions: Vec<Region> = learnt
+        .iter()
+        .map(|corners| Region {
+            label: learnt_label,
+            corners,
+            color: palette::PURPLE,
+        })
+        .collect();
     let labels: Vec<String> = (0..plans.len())
         .map(|k| {
             if k == 0 {
@@ -153,8 +173,9 @@ pub fn run_on_site(
             }
         })
         .collect();
-    // The plan orange, each continuation its own colour.
-    let mut series: Vec<Series> = plans
+    // The plan orange, each continuation its own colour; bands under the
+    // robot's path, which follows them closely.
+    let references: Vec<Series> = plans
         .iter()
         .zip(&labels)
         .enumerate()
@@ -164,16 +185,11 @@ pub fn run_on_site(
             color: if k == 0 {
                 palette::ALT
             } else {
-                palette::cycle(k - 1)
+                palette::cycle(k)
             },
         })
         .collect();
     let real: Vec<(f64, f64)> = real_paths.concat();
-    series.push(Series {
-        label: "robot (true path)",
-        points: &real,
-        color: palette::TRUTH,
-    });
     let handbacks: Vec<(f64, f64)> = op
         .report
         .handbacks
@@ -182,8 +198,14 @@ pub fn run_on_site(
         .collect();
     WorldFigure {
         title: "decoupled operation: the twin's world after the mission (walls and learnt blocks)",
-        walls: &walls(&updated),
-        paths: &series,
+        walls: &walls(&twin.world),
+        regions: &regions,
+        paths: &[Series {
+            label: "robot (true path)",
+            points: &real,
+            color: palette::TRUTH,
+        }],
+        references: &references,
         markers: &[Markers {
             label: "hand-back",
             points: &handbacks,
@@ -191,7 +213,7 @@ pub fn run_on_site(
         }],
         outlines: differences,
     }
-    .write(&dir.join("twin"))?;
+    .write_checked(&dir.join("twin"))?;
     timeline_figure(&op.report, &dir.join("timeline"))?;
     staging.commit()?;
     Ok(Decoupled {

@@ -116,13 +116,16 @@ pub fn table1(
     ];
     WorldFigure {
         title: "Table 1: one circle, tracker vs dead reckoning",
+        regions: &[],
+        // The tracker is what the others are measured against: a band
+        // under them, so the calibrated path cannot hide it.
+        references: &[Series {
+            label: "tracker",
+            points: &lap,
+            color: palette::TRUTH,
+        }],
         walls: &[],
         paths: &[
-            Series {
-                label: "tracker",
-                points: &lap,
-                color: palette::TRUTH,
-            },
             Series {
                 label: "dead reckoning, nominal",
                 points: &nom,
@@ -137,7 +140,7 @@ pub fn table1(
         markers: &[],
         outlines: &[],
     }
-    .write(&dir.join("table1_circle"))?;
+    .write_checked(&dir.join("table1_circle"))?;
     Ok(Table1 {
         t0_s: t0,
         t1_s: t1,
@@ -231,13 +234,16 @@ pub fn section6(log: &MissionLog, calibrated: [f64; 3], dir: &Path) -> anyhow::R
     );
     WorldFigure {
         title: "Section 6: dead reckoning with the wheelbase off by ±4 % (paper Fig. 10)",
+        regions: &[],
+        // The true path a band under the dead-reckoned ones: the
+        // calibrated one runs along it.
+        references: &[Series {
+            label: "true path",
+            points: &true_xy,
+            color: palette::TRUTH,
+        }],
         walls: &[],
         paths: &[
-            Series {
-                label: "true path",
-                points: &true_xy,
-                color: palette::TRUTH,
-            },
             Series {
                 label: "calibrated",
                 points: &cal,
@@ -257,7 +263,7 @@ pub fn section6(log: &MissionLog, calibrated: [f64; 3], dir: &Path) -> anyhow::R
         markers: &[],
         outlines: &[],
     }
-    .write(&dir.join("section6_wheelbase"))?;
+    .write_checked(&dir.join("section6_wheelbase"))?;
 
     let names = ["left diameter", "right diameter", "wheelbase"];
     let mut sweep = Vec::new();
@@ -272,6 +278,7 @@ pub fn section6(log: &MissionLog, calibrated: [f64; 3], dir: &Path) -> anyhow::R
     }
     TimeFigure {
         title: "Section 6: dead-reckoning drift against parameter error",
+        strip: None,
         x_label: "parameter error [%]",
         y_label: "RMS distance to the true path [m]",
         series: &[

@@ -276,6 +276,8 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     let path: Vec<(f64, f64)> = mapped.mapping.poses.iter().map(|p| (p[0], p[1])).collect();
     WorldFigure {
         title: "the site's map from the robot's scans (occupied cells) over the hidden true walls",
+        regions: &[],
+        references: &[],
         walls: &walls(&truth_site.world),
         paths: &[Series {
             label: "calibration drive (mapped poses)",

@@ -43,6 +43,7 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         .clone()
         .context("the calibration drive has a tracker")?;
     let nominal = cal_scenario.robot.nominal_params;
+    let true_params = cal_scenario.robot.true_params;
     let nominal = [
         nominal.left_diameter_m,
         nominal.right_diameter_m,
@@ -54,8 +55,14 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
 
     let job = calibration_job(&cal_log, &tracker, nominal, Method::Smoother);
     let bar = twindrive_progress::bar((job.wheels.len() + job.poses.len()) as u64, "calibrating");
-    let (report, artefacts) =
+    let (report, mut artefacts) =
         twindrive_calibrate::calibrate(job, |d, _| bar.set_position(d as u64))?;
+    // The drive was simulated: the figures show the truth against the band.
+    artefacts.truth = Some([
+        true_params.left_diameter_m,
+        true_params.right_diameter_m,
+        true_params.wheelbase_m,
+    ]);
     bar.finish_and_clear();
     let calib_path = out.join("calibration").join("calib.json");
     twindrive_calibrate::write_outputs(&report, &artefacts, &calib_path)?;

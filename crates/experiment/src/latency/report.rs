@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use twindrive_plot::{Markers, Series, TimeFigure, WorldFigure, palette};
+use twindrive_plot::{Series, Strip, StripRow, TimeFigure, WorldFigure, palette};
 use twindrive_workflow::figures::walls;
 
 use super::model::{Method, Settings};
@@ -201,8 +201,9 @@ pub fn csv(rows: &[RunRow]) -> String {
 
 /// Completion time and collisions against latency, one line per method,
 /// one panel per loss. A method's cells that did not complete are marked in
-/// a row of their own above the completion times (never drawn as if they
-/// completed); lines that coincide are told apart by the plot.
+/// a row of their own in a strip above the axis, named "not completed" and
+/// without numbers (never drawn as if they completed); lines that coincide
+/// are told apart by the plot.
 pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Result<()> {
     let methods = settings.methods();
     for (base, title, y_label, value) in [
@@ -243,25 +244,18 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
                     .collect()
             })
             .collect();
-        // Not completed: method k's row at the top of its panel.
-        let missing: Vec<Vec<Vec<(f64, f64)>>> = settings
+        // Not completed: method k's row in a strip above the axis, which
+        // has no numbers, so the marks cannot be read as times.
+        let missing: Vec<Vec<Vec<f64>>> = settings
             .losses
             .iter()
-            .zip(&lines)
-            .map(|(&loss, per_method)| {
-                let top = per_method
-                    .iter()
-                    .flatten()
-                    .map(|p| p.1)
-                    .fold(0.0f64, f64::max);
-                let step = 0.06 * top.max(1.0);
+            .map(|&loss| {
                 methods
                     .iter()
-                    .enumerate()
-                    .map(|(k, m)| {
+                    .map(|m| {
                         of(*m, loss)
                             .filter(|c| value(c).is_none())
-                            .map(|c| (c.latency_s, top + step * (k + 1) as f64))
+                            .map(|c| c.latency_s)
                             .collect()
                     })
                     .collect()
@@ -269,7 +263,7 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
             .collect();
         let missing_labels: Vec<String> = methods
             .iter()
-            .map(|m| format!("{}: not completed (top rows)", m.name()))
+            .map(|m| format!("{}: not completed (strip above the times)", m.name()))
             .collect();
         let series: Vec<Vec<Series>> = lines
             .iter()
@@ -285,17 +279,16 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
                     .collect()
             })
             .collect();
-        let markers: Vec<Vec<Markers>> = missing
+        let rows: Vec<Vec<StripRow>> = missing
             .iter()
             .map(|per_method| {
                 per_method
                     .iter()
                     .zip(&methods)
                     .zip(&missing_labels)
-                    .filter(|((points, _), _)| !points.is_empty())
-                    .map(|((points, m), label)| Markers {
+                    .map(|((xs, m), label)| StripRow {
                         label,
-                        points,
+                        xs,
                         color: m.color(),
                     })
                     .collect()
@@ -303,15 +296,19 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
             .collect();
         let panels: Vec<TimeFigure> = series
             .iter()
-            .zip(&markers)
+            .zip(&rows)
             .zip(&titles)
-            .map(|((s, m), t)| TimeFigure {
+            .map(|((s, rows), t)| TimeFigure {
                 title: t,
                 x_label: "one-way latency (s)",
                 y_label,
                 series: s,
-                markers: m,
+                markers: &[],
                 bands: &[],
+                strip: Some(Strip {
+                    name: "not completed",
+                    rows,
+                }),
             })
             .collect();
         twindrive_plot::Panels { panels: &panels }.write(&dir.join(base))?;
@@ -352,6 +349,8 @@ pub fn paths_figure(
     );
     WorldFigure {
         title: &title,
+        regions: &[],
+        references: &[],
         walls: &walls(&m.site.world),
         paths: &series,
         markers: &[],
@@ -433,13 +432,20 @@ mod tests {
         figures(&cells, &settings, dir.path()).unwrap();
         let svg = std::fs::read_to_string(dir.path().join("completion_time.svg")).unwrap();
         for text in [
-            "direct (a) hold-last: not completed (top rows)",
-            "direct (b) watchdog: not completed (top rows)",
+            "direct (a) hold-last: not completed (strip above the times)",
+            "direct (b) watchdog: not completed (strip above the times)",
             "direct (b) watchdog (dashed: same points as direct (a) hold-last)",
         ] {
             assert!(svg.contains(text), "no `{text}` in the figure");
         }
         assert!(!svg.contains("move-and-wait: not completed"));
+        // The strip is named, and no number on the time axis reaches above
+        // the slowest completion (the marks are not times).
+        let texts: Vec<&str> = svg.lines().map(str::trim).collect();
+        assert!(texts.contains(&"not completed"), "{svg}");
+        let ticks: Vec<f64> = texts.iter().filter_map(|t| t.parse().ok()).collect();
+        assert!(ticks.iter().any(|&v| v >= 400.0), "{ticks:?}");
+        assert!(ticks.iter().all(|&v| v <= 504.0 * 1.05), "{ticks:?}");
         assert!(dir.path().join("completion_time.png").is_file());
         assert!(dir.path().join("collisions.png").is_file());
     }
