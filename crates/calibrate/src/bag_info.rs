@@ -265,6 +265,8 @@ impl Seen {
 fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
     let mut refs: Vec<Reference> = Vec::new();
     let mut wheel_odometry: Vec<String> = Vec::new();
+    // Odometry a map can be drawn from: `(topic, is TF)`, Odometry first.
+    let mut map_odometry: Vec<(String, bool)> = Vec::new();
     let mut scans = Vec::new();
     let mut imus = Vec::new();
     let mut scan_topics: Vec<String> = Vec::new();
@@ -360,6 +362,7 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             wheel_odometry.push(format!(
                 "{topic} (nav_msgs/msg/Odometry, child frame `{child}`)"
             ));
+            map_odometry.push((topic.clone(), false));
         } else {
             refs.push(Reference {
                 topic: topic.clone(),
@@ -376,6 +379,9 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
         }
         if is_wheel_odometry(topic, Some((parent, child))) {
             wheel_odometry.push(format!("{topic}: {parent} -> {child}"));
+            if !map_odometry.iter().any(|(t, _)| t == topic) {
+                map_odometry.push((topic.clone(), true));
+            }
         } else {
             refs.push(Reference {
                 topic: topic.clone(),
@@ -490,6 +496,34 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
         }
         _ => None,
     };
+    // The map: from the robot's odometry, else from the wheels with a
+    // calibration.
+    if let Some(scan) = scan_topics.first() {
+        let bag = shell_quote(&path.display().to_string());
+        map_odometry.sort_by_key(|(_, tf)| *tf);
+        let map = match (map_odometry.first(), &wheel_flags) {
+            (Some((topic, _)), _) => Some(format!(
+                "twindrive map --bag {bag} --scan-topic {scan} --odom-topic {topic} --wheel-diameter-m D --wheelbase-m B --out site\n  \
+                 (D, B: the robot's wheel diameter and wheelbase in metres, for the twin's robot; or --calibration calib.json)"
+            )),
+            (None, Some(w)) => Some(format!(
+                "twindrive map --bag {bag}{w} --scan-topic {scan} --calibration calib.json --out site\n  \
+                 (calib.json: from the calibrate command line below)"
+            )),
+            (None, None) => None,
+        };
+        match map {
+            Some(m) => {
+                let _ = writeln!(o, "\nFor the site's map:\n  {m}");
+            }
+            None => {
+                let _ = writeln!(
+                    o,
+                    "\nNo map command line to suggest: the bag has scans but neither odometry nor wheel data."
+                );
+            }
+        }
+    }
     match (wheel_flags, reference) {
         (Some(w), Some(p)) => {
             let _ = writeln!(

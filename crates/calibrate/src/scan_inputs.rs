@@ -17,6 +17,9 @@ pub const MIN_SCAN_BEAMS: u32 = 30;
 #[derive(Debug, Clone)]
 pub struct ScanRecording {
     pub wheels: Vec<WheelSample>,
+    /// The robot's own odometry, when read (`(t_s, pose)`, time-ordered,
+    /// on the scans' clock).
+    pub odometry: Vec<(f64, twindrive_kinematics::Pose)>,
     pub scans: Vec<Scan>,
     pub gyro: Vec<(f64, f64)>,
     /// The lidar as the recording describes it (its mount is a guess).
@@ -101,6 +104,7 @@ impl ScanRecording {
         let n = log.header.nominal;
         Ok(Self {
             wheels: inputs::signed_wheels_from_log(log, signs),
+            odometry: Vec::new(),
             scans: scans_from_log(log, index),
             gyro: log.gyro_rates().collect(),
             lidar: lidar.clone(),
@@ -116,7 +120,12 @@ impl ScanRecording {
 pub struct BagScanSource {
     pub path: std::path::PathBuf,
     pub stamps: Stamps,
-    pub wheels: WheelSource,
+    /// The wheels (a self-calibration needs them; a map takes them or
+    /// the odometry).
+    pub wheels: Option<WheelSource>,
+    /// The robot's own odometry: `nav_msgs/msg/Odometry`, or a TF topic
+    /// (`frame`: the robot's frame; default the base frame).
+    pub odometry: Option<twindrive_ros::extract::PoseSource>,
     /// The `sensor_msgs/msg/LaserScan` topic.
     pub scan_topic: String,
     /// The `sensor_msgs/msg/Imu` topic, if the robot's gyro is to be used.
@@ -137,23 +146,43 @@ pub fn from_bag(
         tracing::warn!("{d}; calibrating from what was read");
     }
     let stamps = source.stamps;
-    let (wheels, scans, imu) = std::thread::scope(|scope| {
-        let w = scope.spawn(|| extract::wheel_track(&bag, &source.wheels, stamps));
-        let i = source
-            .imu_topic
-            .as_ref()
-            .map(|t| extract::imu_rate_track(&bag, t, stamps));
-        let s = extract::scan_track(&bag, &source.scan_topic, stamps);
-        (w.join(), s, i)
-    });
-    let wheels = wheels.map_err(|_| anyhow::anyhow!("reading the wheels panicked"))??;
-    let scans = scans.context("--scan-topic")?;
-    let imu = imu.transpose().context("--imu-topic")?;
     let base = source
         .base_frame
         .clone()
         .or_else(|| extract::base_frame_guess(&bag))
         .unwrap_or_else(|| "base_link".into());
+    let odometry_source = source.odometry.clone().map(|mut o| {
+        if o.frame.is_none()
+            && bag
+                .schema(&o.topic)
+                .is_ok_and(|s| s.root().name == "tf2_msgs/msg/TFMessage")
+        {
+            o.frame = Some(base.clone());
+        }
+        o
+    });
+    let (wheels, odometry, scans, imu) = std::thread::scope(|scope| {
+        let w = scope.spawn(|| {
+            source
+                .wheels
+                .as_ref()
+                .map(|w| extract::wheel_track(&bag, w, stamps))
+                .transpose()
+        });
+        let o = odometry_source
+            .as_ref()
+            .map(|o| extract::pose_track(&bag, o, stamps));
+        let i = source
+            .imu_topic
+            .as_ref()
+            .map(|t| extract::imu_rate_track(&bag, t, stamps));
+        let s = extract::scan_track(&bag, &source.scan_topic, stamps);
+        (w.join(), o, s, i)
+    });
+    let wheels = wheels.map_err(|_| anyhow::anyhow!("reading the wheels panicked"))??;
+    let odometry = odometry.transpose().context("--odom-topic")?;
+    let scans = scans.context("--scan-topic")?;
+    let imu = imu.transpose().context("--imu-topic")?;
     let mount = extract::static_transform(&bag, &base, &scans.frame_id)?;
     let mut flip_scans = false;
     let mount = mount.map(|m| {
@@ -176,7 +205,8 @@ pub fn from_bag(
         gyro_sign = -1.0;
     }
     tracing::info!(
-        wheel_samples = wheels.samples.len(),
+        wheel_samples = wheels.as_ref().map_or(0, |w| w.samples.len()),
+        odometry_samples = odometry.as_ref().map_or(0, |o| o.samples.len()),
         scans = scans.scans.len(),
         malformed_scans = scans.malformed,
         gyro_samples = imu.as_ref().map_or(0, |i| i.samples.len()),
@@ -194,7 +224,17 @@ pub fn from_bag(
         max_range_m: first.range_max_m,
     };
     let recording = ScanRecording {
-        wheels: inputs::bag_wheels(&wheels.samples, origin, signs),
+        wheels: wheels
+            .map(|w| inputs::bag_wheels(&w.samples, origin, signs))
+            .unwrap_or_default(),
+        odometry: odometry
+            .map(|o| {
+                o.samples
+                    .iter()
+                    .map(|&(t, x, y, h)| (t - origin, twindrive_kinematics::Pose::new(x, y, h)))
+                    .collect()
+            })
+            .unwrap_or_default(),
         scans: scans
             .scans
             .iter()

@@ -23,28 +23,94 @@ pub const MIN_SCANS: usize = 10;
 /// One map's checked inputs.
 #[derive(Debug, Clone)]
 pub struct MapJob {
-    pub wheels: Vec<WheelSample>,
+    /// How the robot moved between scans.
+    pub motion: Motion,
     /// The lidar's scans in its own frame, in time order.
     pub scans: Vec<Scan>,
     /// The lidar, with its calibrated mount.
     pub lidar: RangeSensorInfo,
-    /// The calibrated wheels.
+    /// The calibrated wheels (they dead-reckon [`Motion::Wheels`], and are
+    /// the site's robot's).
     pub params: DiffDriveParams,
-    /// The robot's pose at the first wheel sample: it fixes the map's
+    /// The robot's pose at the first motion sample: it fixes the map's
     /// frame (a log's start pose; the origin for a bag).
     pub start: Pose,
     pub settings: MappingSettings,
     /// A map already drawn of the same site, in the same frame, to extend.
     pub prior: Option<LogOddsGrid>,
+    /// Where the times of `motion` and `scans` count from on the
+    /// recording's own clock (a bag's: its scans' header stamps; 0 for a
+    /// log), in whole seconds: `poses.tum` is stamped on that clock.
+    pub time_origin_s: f64,
+}
+
+/// How the robot moved between its scans, as the recording tells it.
+#[derive(Debug, Clone)]
+pub enum Motion {
+    /// Wheel angles, dead-reckoned with the job's calibrated wheels.
+    Wheels(Vec<WheelSample>),
+    /// Poses the robot's own odometry reported (`nav_msgs/msg/Odometry`,
+    /// TF `odom -> base`): already in metres, no calibration needed.
+    /// `(t_s, pose)` in time order, in the odometry's own frame; the map's
+    /// frame puts the first at the job's start.
+    Odometry(Vec<(f64, Pose)>),
+}
+
+impl Motion {
+    /// What the motion is read from, for messages.
+    fn what(&self) -> &'static str {
+        match self {
+            Motion::Wheels(_) => "the encoders",
+            Motion::Odometry(_) => "the odometry",
+        }
+    }
+
+    /// The robot's track in the map's frame: starting at `start`, over
+    /// the motion's time span.
+    pub fn track(&self, start: Pose, params: &DiffDriveParams) -> Vec<(f64, Pose)> {
+        match self {
+            Motion::Wheels(wheels) => match (wheels.first(), wheels.last()) {
+                (Some(first), Some(last)) => {
+                    dead_reckon(wheels, start, first.t_s, last.t_s, params)
+                }
+                _ => Vec::new(),
+            },
+            Motion::Odometry(poses) => {
+                let Some(&(_, first)) = poses.first() else {
+                    return Vec::new();
+                };
+                // The rigid motion taking the first odometry pose to `start`.
+                let dh = start.heading_rad - first.heading_rad;
+                let (s, c) = dh.sin_cos();
+                poses
+                    .iter()
+                    .map(|&(t, p)| {
+                        let (dx, dy) = (p.x_m - first.x_m, p.y_m - first.y_m);
+                        (
+                            t,
+                            Pose::new(
+                                start.x_m + c * dx - s * dy,
+                                start.y_m + s * dx + c * dy,
+                                twindrive_kinematics::wrap_angle(p.heading_rad + dh),
+                            ),
+                        )
+                    })
+                    .collect()
+            }
+        }
+    }
 }
 
 /// A drive mapped.
 #[derive(Debug, Clone)]
 pub struct SiteMap {
     pub mapping: Mapping,
-    /// The time of each pose in `mapping.poses` (s).
+    /// The time of each pose in `mapping.poses` (s, from the job's
+    /// `time_origin_s`).
     pub times_s: Vec<f64>,
-    /// Scans outside the encoders' time span, left out.
+    /// The job's `time_origin_s`.
+    pub time_origin_s: f64,
+    /// Scans outside the motion's time span (encoders or odometry), left out.
     pub scans_outside: usize,
     /// The matches' median RMS residual: the lidar's range noise and the
     /// map's own, as the twin's lidar noise (m).
@@ -57,7 +123,8 @@ pub struct MapReport {
     pub scans: usize,
     pub scans_matched: usize,
     pub scans_unmatched: Vec<(String, usize)>,
-    pub scans_outside_encoders: usize,
+    /// Scans outside the motion's time span (encoders or odometry).
+    pub scans_outside_motion: usize,
     pub resolution_m: f64,
     pub width_cells: usize,
     pub height_cells: usize,
@@ -74,10 +141,13 @@ pub struct MapReport {
 
 /// Maps the drive. `progress(done, total)` as it goes.
 pub fn map_site(job: &MapJob, progress: impl FnMut(usize, usize)) -> anyhow::Result<SiteMap> {
-    let (Some(first), Some(last)) = (job.wheels.first(), job.wheels.last()) else {
-        bail!("no wheel samples: a map needs the encoders to place the scans");
-    };
-    let track = dead_reckon(&job.wheels, job.start, first.t_s, last.t_s, &job.params);
+    let track = job.motion.track(job.start, &job.params);
+    if track.is_empty() {
+        bail!(
+            "no samples from {}: a map needs the robot's motion to place the scans",
+            job.motion.what()
+        );
+    }
     let mut scans = Vec::with_capacity(job.scans.len());
     let mut times_s = Vec::with_capacity(job.scans.len());
     let mut outside = 0;
@@ -96,12 +166,13 @@ pub fn map_site(job: &MapJob, progress: impl FnMut(usize, usize)) -> anyhow::Res
         .count();
     if with_returns < MIN_SCANS {
         bail!(
-            "no usable scans: {} of {} scans from {} fall within the encoders' time span and \
+            "no usable scans: {} of {} scans from {} fall within the time span of {} and \
              {with_returns} of them have at least {min_points} returns; a map needs {MIN_SCANS} \
              (is the lidar in range of anything, and its topic the right one?)",
             scans.len(),
             job.scans.len(),
-            job.lidar.name
+            job.lidar.name,
+            job.motion.what()
         );
     }
     let m = job.lidar.mount;
@@ -118,6 +189,7 @@ pub fn map_site(job: &MapJob, progress: impl FnMut(usize, usize)) -> anyhow::Res
     Ok(SiteMap {
         mapping,
         times_s,
+        time_origin_s: job.time_origin_s,
         scans_outside: outside,
         range_noise_m,
     })
@@ -133,7 +205,7 @@ impl SiteMap {
             scans: self.mapping.poses.len(),
             scans_matched: self.mapping.matched,
             scans_unmatched: self.mapping.unmatched.clone(),
-            scans_outside_encoders: self.scans_outside,
+            scans_outside_motion: self.scans_outside,
             resolution_m: grid.resolution_m(),
             width_cells: grid.width(),
             height_cells: grid.height(),
@@ -207,22 +279,18 @@ fn pose_table(p: Pose) -> toml::Table {
     t
 }
 
-/// `site.toml`'s text, and a file it names that must be copied beside it
-/// (a manual mission's commands), if any.
+/// `site.toml`'s text with the robot at `start`, and a file it names that
+/// must be copied beside it (a manual mission's commands), if any.
 pub fn site_toml(
     name: &str,
     map: &SiteMap,
     job: &MapJob,
     scenario: &SiteScenario,
+    start: Pose,
 ) -> anyhow::Result<(String, Option<std::path::PathBuf>)> {
     let mut world = toml::Table::new();
     world.insert("map".into(), "map.yaml".into());
     let mount = job.lidar.mount;
-    let start = map
-        .mapping
-        .poses
-        .first()
-        .map_or(job.start, |p| Pose::new(p[0], p[1], p[2]));
     match scenario {
         SiteScenario::Hold(robot) => {
             let mut doc = toml::Table::new();
@@ -386,29 +454,51 @@ pub(crate) fn stage_copy(staging: &Staging, from: &Path) -> anyhow::Result<()> {
     staging.write_with(&name, |w| Ok(w.write_all(&bytes)?))
 }
 
+/// Where the site's robot may start: the drive's poses (the first, then
+/// one every quarter metre of it), at most 64.
+fn start_candidates(map: &SiteMap) -> Vec<Pose> {
+    let mut out: Vec<Pose> = Vec::new();
+    for p in &map.mapping.poses {
+        let p = Pose::new(p[0], p[1], p[2]);
+        let far = out
+            .last()
+            .is_none_or(|q| (p.x_m - q.x_m).hypot(p.y_m - q.y_m) >= 0.25);
+        if far {
+            out.push(p);
+        }
+        if out.len() == 64 {
+            break;
+        }
+    }
+    out
+}
+
 /// Writes `map.pgm`, `map.yaml`, `site.toml` (and a file it names),
-/// `poses.tum` (the drive's poses in the map) and `map_report.json` into
-/// `out`, whole or not at all: nothing is written unless `site.toml` loads
-/// as a scenario on the map.
+/// `poses.tum` (the drive's poses in the map, each stamped with its scan's
+/// time on the recording's clock) and `map_report.json` into `out`, as one
+/// directory. `site` makes `site.toml` with the robot at a start: the
+/// drive's first pose, else the first of the drive's later poses where the
+/// site loads (the robot's footprint clear of the map's walls). The map is
+/// never thrown away: when no start serves, everything but `site.toml` is
+/// written and the error says what to change.
 pub fn write_site(
     out: &Path,
     map: &SiteMap,
     report: &MapReport,
-    site: &(String, Option<std::path::PathBuf>),
+    site: impl Fn(Pose) -> anyhow::Result<(String, Option<std::path::PathBuf>)>,
 ) -> anyhow::Result<()> {
     let (pgm, yaml) = map_files(&map.grid());
     let staging = Staging::new(out, "map")?;
     staging.write_with("map.pgm", |w| Ok(w.write_all(&pgm)?))?;
     staging.write_with("map.yaml", |w| Ok(w.write_all(yaml.as_bytes())?))?;
-    staging.write_with("site.toml", |w| Ok(w.write_all(site.0.as_bytes())?))?;
-    if let Some(from) = &site.1 {
-        stage_copy(&staging, from)?;
-    }
     staging.write_with("poses.tum", |w| {
         twindrive_log::write_tum(
             map.times_s.iter().zip(&map.mapping.poses).map(|(t, p)| {
+                // Whole seconds of origin, then the scan's offset: no
+                // rounding of a Unix time's nanoseconds through an f64.
+                let origin_ns = (map.time_origin_s.max(0.0).round() as u64) * 1_000_000_000;
                 (
-                    (t.max(0.0) * 1e9).round() as u64,
+                    origin_ns + (t.max(0.0) * 1e9).round() as u64,
                     Pose::new(p[0], p[1], p[2]),
                 )
             }),
@@ -419,9 +509,49 @@ pub fn write_site(
     staging.write_with("map_report.json", |w| {
         serde_json::to_writer_pretty(w, report).map_err(Into::into)
     })?;
-    twindrive_sim::Scenario::load(&staging.path("site.toml"))
-        .context("the site.toml written does not load as a scenario on the map; nothing written")?;
-    staging.commit()
+    let candidates = start_candidates(map);
+    let mut first_error: Option<anyhow::Error> = None;
+    for (k, start) in candidates.iter().enumerate() {
+        let (text, beside) = site(*start)?;
+        staging.write_with("site.toml", |w| Ok(w.write_all(text.as_bytes())?))?;
+        if let Some(from) = &beside {
+            stage_copy(&staging, from)?;
+        }
+        match twindrive_sim::Scenario::load(&staging.path("site.toml")) {
+            Ok(_) => {
+                if k > 0 {
+                    tracing::warn!(
+                        "the drive's first pose leaves no room for the site's robot there ({:#}); \
+                         site.toml starts it at ({:.2}, {:.2}, {:.2}), the drive's pose {k} quarter-metre(s) on",
+                        first_error.as_ref().expect("set on the first pose"),
+                        start.x_m,
+                        start.y_m,
+                        start.heading_rad
+                    );
+                }
+                return staging.commit();
+            }
+            Err(e) => {
+                // Named as the file will be, not by the staging place.
+                let staged = staging.path("site.toml").display().to_string();
+                first_error.get_or_insert(anyhow::anyhow!(
+                    "{}",
+                    format!("{e:#}").replace(&staged, "site.toml")
+                ));
+            }
+        }
+    }
+    // The map stays; the site cannot be made from it as asked.
+    let _ = std::fs::remove_file(staging.path("site.toml"));
+    staging.commit()?;
+    let why = first_error.map_or_else(|| "the drive has no pose".to_string(), |e| format!("{e:#}"));
+    bail!(
+        "the map is written to {} (map.pgm, map.yaml, poses.tum, map_report.json), but no site.toml: \
+         at none of the drive's {} poses tried does the site load as a scenario on it (first: {why}); \
+         give the site's robot a smaller footprint (--footprint-radius-m) or a --mission whose robot fits",
+        out.display(),
+        candidates.len()
+    )
 }
 
 /// Where the beams of range sensor `sensor` truly met the walls over a
@@ -461,4 +591,66 @@ pub fn seen_wall_points(
         }
     }
     seen
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An odometry track in its own frame, moved to a start: the first
+    /// pose lands on the start, and every step keeps its length and turn.
+    #[test]
+    fn odometry_is_placed_at_the_start_with_its_shape_kept() {
+        let mut poses = Vec::new();
+        let mut p = Pose::new(3.0, -2.0, 2.5);
+        for k in 0..200 {
+            let t = 0.05 * f64::from(k);
+            poses.push((t, p));
+            let (v, w) = (0.3 + 0.1 * (t * 0.7).sin(), 0.4 * (t * 0.3).cos());
+            p = Pose::new(
+                p.x_m + 0.05 * v * p.heading_rad.cos(),
+                p.y_m + 0.05 * v * p.heading_rad.sin(),
+                twindrive_kinematics::wrap_angle(p.heading_rad + 0.05 * w),
+            );
+        }
+        let start = Pose::new(-1.0, 4.0, -0.7);
+        let params = DiffDriveParams {
+            left_diameter_m: 0.07,
+            right_diameter_m: 0.07,
+            wheelbase_m: 0.2,
+        };
+        let track = Motion::Odometry(poses.clone()).track(start, &params);
+        assert_eq!(track.len(), poses.len());
+        assert!((track[0].1.x_m - start.x_m).abs() < 1e-12);
+        assert!((track[0].1.y_m - start.y_m).abs() < 1e-12);
+        assert!((track[0].1.heading_rad - start.heading_rad).abs() < 1e-12);
+        for (a, b) in track.windows(2).zip(poses.windows(2)) {
+            let step = |w: &[(f64, Pose)]| {
+                (
+                    (w[1].1.x_m - w[0].1.x_m).hypot(w[1].1.y_m - w[0].1.y_m),
+                    twindrive_kinematics::wrap_angle(w[1].1.heading_rad - w[0].1.heading_rad),
+                )
+            };
+            let ((la, ta), (lb, tb)) = (step(a), step(b));
+            assert!((la - lb).abs() < 1e-9 && (ta - tb).abs() < 1e-9);
+            assert_eq!(a[1].0, b[1].0, "times kept");
+        }
+        // The end, seen from the start, is where the odometry's end is seen
+        // from its first pose.
+        let rel = |from: Pose, to: Pose| {
+            let (dx, dy) = (to.x_m - from.x_m, to.y_m - from.y_m);
+            let (s, c) = from.heading_rad.sin_cos();
+            (c * dx + s * dy, -s * dx + c * dy)
+        };
+        let (e, o) = (
+            rel(track[0].1, track.last().unwrap().1),
+            rel(poses[0].1, poses.last().unwrap().1),
+        );
+        assert!((e.0 - o.0).abs() < 1e-9 && (e.1 - o.1).abs() < 1e-9);
+        assert!(
+            Motion::Odometry(Vec::new())
+                .track(start, &params)
+                .is_empty()
+        );
+    }
 }

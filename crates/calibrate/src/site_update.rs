@@ -25,7 +25,7 @@ use twindrive_sim::Scenario;
 use twindrive_sim::map::{Cell, OccupancyGrid};
 
 use crate::scan_inputs::{MIN_SCAN_BEAMS, ScanRecording};
-use crate::site_map::{MapJob, commands_beside, map_files, map_site, stage_copy};
+use crate::site_map::{MapJob, Motion, commands_beside, map_files, map_site, stage_copy};
 
 /// How robot logs update a map.
 #[derive(Debug, Clone, Copy)]
@@ -269,13 +269,14 @@ pub fn update_site(
         let mut job_lidar = rec.lidar;
         job_lidar.mount = lidar.mount;
         let job = MapJob {
-            wheels: rec.wheels,
+            motion: Motion::Wheels(rec.wheels),
             scans: rec.scans,
             lidar: job_lidar,
             params: l.params,
             start: l.log.header.start,
             settings: mapping,
             prior: Some(grid.clone()),
+            time_origin_s: 0.0,
         };
         let mapped = map_site(&job, |k, n| {
             progress(done + k * scans / n.max(1), total);

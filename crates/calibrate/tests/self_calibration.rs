@@ -281,7 +281,7 @@ fn a_lidar_that_sees_nothing_gives_a_clear_error() {
 
 #[test]
 fn the_site_is_mapped_from_the_self_calibrated_drive_on_held_out_sites() {
-    use twindrive_calibrate::site_map::{MapJob, map_site, seen_wall_points};
+    use twindrive_calibrate::site_map::{MapJob, Motion, map_site, seen_wall_points};
     use twindrive_estimation::mapping::{MappingSettings, score};
     let sites: u64 = std::env::var("TWINDRIVE_HELD_OUT")
         .ok()
@@ -302,7 +302,7 @@ fn the_site_is_mapped_from_the_self_calibrated_drive_on_held_out_sites() {
         );
         let map = map_site(
             &MapJob {
-                wheels: rec.wheels,
+                motion: Motion::Wheels(rec.wheels),
                 scans: rec.scans,
                 lidar,
                 params: twindrive_kinematics::DiffDriveParams::new(
@@ -313,6 +313,7 @@ fn the_site_is_mapped_from_the_self_calibrated_drive_on_held_out_sites() {
                 start: log.header.start,
                 settings: MappingSettings::default(),
                 prior: None,
+                time_origin_s: 0.0,
             },
             |_, _| {},
         )
@@ -367,7 +368,7 @@ segments = [ { duration_s = 3.0, left_rad_s = 0.0, right_rad_s = 0.0 } ]
 #[test]
 fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
     use twindrive_calibrate::site_map::{
-        MapJob, SiteScenario, map_site, seen_wall_points, site_toml, write_site,
+        MapJob, Motion, SiteScenario, map_site, seen_wall_points, site_toml, write_site,
     };
     use twindrive_calibrate::site_update::{RobotLog, UpdateSettings, update_site};
     use twindrive_estimation::mapping::{CellState, MappingSettings, distance_to_segment, score};
@@ -407,30 +408,28 @@ fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
         let mut lidar = rec.lidar;
         lidar.mount = mount;
         let job = MapJob {
-            wheels: rec.wheels,
+            motion: Motion::Wheels(rec.wheels),
             scans: rec.scans,
             lidar,
             params,
             start: look.header.start,
             settings: MappingSettings::default(),
             prior: None,
+            time_origin_s: 0.0,
         };
         let first = map_site(&job, |_, _| {}).unwrap();
         let tmp = tempfile::tempdir().unwrap();
         let mission_path = tmp.path().join("mission.toml");
         std::fs::write(&mission_path, &site.toml).unwrap();
-        let twin_site = site_toml(
-            "look",
-            &first,
-            &job,
-            &SiteScenario::Mission {
-                text: site.toml.clone(),
-                path: mission_path,
-            },
-        )
-        .unwrap();
+        let scenario = SiteScenario::Mission {
+            text: site.toml.clone(),
+            path: mission_path,
+        };
         let dir = tmp.path().join("site");
-        write_site(&dir, &first, &first.report(&job), &twin_site).unwrap();
+        write_site(&dir, &first, &first.report(&job), |start| {
+            site_toml("look", &first, &job, &scenario, start)
+        })
+        .unwrap();
         let twin = twindrive_sim::Scenario::load(&dir.join("site.toml")).unwrap();
 
         // The mission, on the true site.

@@ -57,12 +57,15 @@ pub enum Command {
     /// of the innovations, and TUM trajectories of the reference and of dead
     /// reckoning with the initial and calibrated parameters.
     Calibrate(Box<CalibrateArgs>),
-    /// Draw the site's map from a drive's encoders and lidar scans.
+    /// Draw the site's map from a drive's lidar scans and its motion.
     ///
     /// Input: a simulator output directory with a lidar, or --bag BAG with
-    /// --scan-topic and the wheel joints. The calibrated odometry (from
-    /// --calibration: the wheels, and the lidar's mount when it is a
-    /// self-calibration) places each scan; each scan is matched against
+    /// --scan-topic and the robot's motion: its own odometry (--odom-topic:
+    /// a nav_msgs/msg/Odometry topic such as /odom, or TF odom -> base; no
+    /// calibration needed), or the wheel joints of a JointState topic with
+    /// --calibration (the wheels, and the lidar's mount when it is a
+    /// self-calibration). The lidar's mount is otherwise the recording's
+    /// (/tf_static in a bag). The motion places each scan; each scan is matched against
     /// the map drawn so far, so a drive that comes back to where it started
     /// does not draw the walls twice. Writes into --out a ROS map_server map
     /// (map.pgm, map.yaml: occupancy from log-odds, unknown where no beam
@@ -72,9 +75,10 @@ pub enum Command {
     /// log's (its start pose), or the robot's first pose in a bag.
     ///
     /// Not mapped (an error that says which): a recording without a
-    /// LaserScan topic, or without the wheel joints in a JointState topic
-    /// (a bag with only /odom for its motion), and a log without a range
-    /// sensor of at least 30 beams.
+    /// LaserScan topic, or with neither odometry nor wheel joints (wheel
+    /// speeds as std_msgs topics are not read yet), and a log without a
+    /// range sensor of at least 30 beams. `twindrive bag info` suggests the
+    /// command line for what a bag has.
     Map(Box<MapArgs>),
     /// Turn a mission run on the twin into a plan for the real robot.
     ///
@@ -1090,13 +1094,24 @@ pub struct MapArgs {
     /// Simulator output directory with a lidar's scans (instead of --bag).
     #[arg(required_unless_present = "bag")]
     pub log_dir: Option<PathBuf>,
-    /// A rosbag2 recording (MCAP or sqlite3): wheels from
-    /// --left-joint/--right-joint, scans from --scan-topic.
-    #[arg(long, value_name = "BAG", conflicts_with = "log_dir", requires_all = ["scan_topic", "left_joint", "right_joint"])]
+    /// A rosbag2 recording (MCAP or sqlite3): scans from --scan-topic, the
+    /// robot's motion from its odometry (--odom-topic) or its wheel joints
+    /// (--left-joint/--right-joint, with --calibration).
+    #[arg(
+        long,
+        value_name = "BAG",
+        conflicts_with = "log_dir",
+        requires = "scan_topic"
+    )]
     pub bag: Option<PathBuf>,
     /// sensor_msgs/msg/LaserScan topic.
     #[arg(long, requires = "bag")]
     pub scan_topic: Option<String>,
+    /// The robot's own odometry: a nav_msgs/msg/Odometry topic (`/odom`),
+    /// or a TF topic (`/tf`: odom -> the base frame). Already in metres: no
+    /// calibration needed to map.
+    #[arg(long, value_name = "TOPIC", requires = "bag", conflicts_with_all = ["left_joint", "right_joint"])]
+    pub odom_topic: Option<String>,
     /// sensor_msgs/msg/JointState topic with the wheel joints.
     #[arg(long, default_value = "/joint_states", requires = "bag")]
     pub joint_topic: String,
@@ -1127,9 +1142,18 @@ pub struct MapArgs {
     pub scan_sensor: Option<String>,
     /// calib.json from `twindrive calibrate`: its wheels, and its
     /// lidar_mount when it has one (a self-calibration; else the log's or
-    /// /tf_static's mount).
+    /// /tf_static's mount). Needed to map from wheels; with --odom-topic
+    /// it gives site.toml's robot its wheels.
     #[arg(long, value_name = "calib.json")]
-    pub calibration: PathBuf,
+    pub calibration: Option<PathBuf>,
+    /// Wheel diameter for site.toml's robot when neither --calibration nor
+    /// --mission gives the wheels (mapping from --odom-topic).
+    #[arg(long, value_parser = usage::positive)]
+    pub wheel_diameter_m: Option<f64>,
+    /// Wheelbase for site.toml's robot when neither --calibration nor
+    /// --mission gives the wheels (mapping from --odom-topic).
+    #[arg(long, value_parser = usage::positive)]
+    pub wheelbase_m: Option<f64>,
     /// A mission scenario whose robot, sensors and controller site.toml
     /// puts on the map (with the calibrated wheels and mount); without it
     /// the robot stands where the drive started and holds still.

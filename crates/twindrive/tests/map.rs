@@ -428,3 +428,145 @@ fn the_master_keeps_the_twins_map_of_the_site_across_missions() {
         serde_json::from_slice(&std::fs::read(d.join("second/report.json")).unwrap()).unwrap();
     assert_eq!(report["outcome"], "completed", "{report}");
 }
+
+/// The poses of a `poses.tum`: `(t_s, x_m, y_m)` per line.
+fn tum(path: &Path) -> Vec<(f64, f64, f64)> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: Vec<f64> = l
+                .split_whitespace()
+                .take(3)
+                .map(|x| x.parse().unwrap())
+                .collect();
+            (v[0], v[1], v[2])
+        })
+        .collect()
+}
+
+/// A real robot's recording with only `/odom`, `/tf` and `/scan` (a Neato
+/// on a building's first floor, `../shared/data/rosbag2_recordings/`): it
+/// is mapped from the robot's odometry with no calibration, from its
+/// Odometry topic and from TF alike. Nearly every scan matches the map, the
+/// matches' residual is the lidar's centimetre, and the two mappings put
+/// the robot at the same places. Without a motion source, or without
+/// wheels for the site's robot, it is a usage error that writes nothing.
+#[test]
+fn a_real_recording_with_odometry_and_no_wheel_joints_is_mapped() {
+    let bag =
+        repo().join("../shared/data/rosbag2_recordings/comprobo22_neato_macfirst_floor_take_2");
+    let bag = bag.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // The bag mapped from `topic`'s odometry into `out`, with `more` flags.
+    let map_from = |topic: &str, more: &[&str], out: &Path| {
+        let mut args = vec![
+            "map",
+            "--bag",
+            bag,
+            "--scan-topic",
+            "/scan",
+            "--odom-topic",
+            topic,
+            "--wheel-diameter-m",
+            "0.07",
+            "--wheelbase-m",
+            "0.24",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(more);
+        run(&args)
+    };
+    let mut tracks = Vec::new();
+    for topic in ["/odom", "/tf"] {
+        let out = dir.path().join(topic.trim_start_matches('/'));
+        let o = map_from(topic, &[], &out);
+        assert!(o.status.success(), "{topic}: {}", text(&o.stderr));
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("map_report.json")).unwrap()).unwrap();
+        let scans = report["scans"].as_f64().unwrap();
+        assert!(scans > 300.0, "{report}");
+        assert!(
+            report["scans_matched"].as_f64().unwrap() >= 0.95 * scans,
+            "{report}"
+        );
+        let noise = report["range_noise_m"].as_f64().unwrap();
+        assert!(noise < 0.03, "{topic}: residual {noise} m");
+        let occupied = report["occupied_cells"].as_f64().unwrap();
+        assert!(occupied > 500.0, "{report}");
+        tracks.push(tum(&out.join("poses.tum")));
+    }
+    // The same drive through two topics: at every time both mapped, within
+    // a few centimetres of each other. Each pose is stamped with its scan's
+    // header time, on the bag's clock (its recording ran 1663967375.5 to
+    // 1663967421.8, Unix time).
+    let (a, b) = (&tracks[0], &tracks[1]);
+    for track in [a, b] {
+        assert!(
+            track
+                .iter()
+                .all(|p| (1_663_967_375.5..1_663_967_421.8).contains(&p.0))
+        );
+    }
+    let mut compared = 0;
+    for &(t, x, y) in a {
+        if let Some(&(_, u, v)) = b.iter().find(|p| (p.0 - t).abs() < 1e-6) {
+            assert!(
+                (x - u).hypot(y - v) < 0.15,
+                "at {t} s: ({x}, {y}) and ({u}, {v})"
+            );
+            compared += 1;
+        }
+    }
+    assert!(compared > 300, "{compared} poses at common times");
+    // A robot too wide to stand where the drive started starts further on;
+    // one too wide for anywhere still gets its map, and is told what to
+    // change.
+    for (radius, fits) in [("0.8", true), ("3", false)] {
+        let out = dir.path().join(format!("wide{radius}"));
+        let o = map_from("/odom", &["--footprint-radius-m", radius], &out);
+        let err = text(&o.stderr);
+        for kept in ["map.pgm", "map.yaml", "poses.tum", "map_report.json"] {
+            assert!(out.join(kept).exists(), "{radius}: {kept}: {err}");
+        }
+        assert!(!err.contains(".twindrive-staging"), "{err}");
+        if fits {
+            assert!(o.status.success(), "{err}");
+            let site = twindrive_sim::Scenario::load(&out.join("site.toml")).unwrap();
+            let s = site.robot.start;
+            assert!(s.x_m.hypot(s.y_m) > 0.2, "{s:?}");
+            assert!(err.contains("starts it at"), "{err}");
+        } else {
+            assert_eq!(o.status.code(), Some(1), "{err}");
+            assert!(!out.join("site.toml").exists());
+            assert!(
+                err.contains("--footprint-radius-m") && err.contains("map is written"),
+                "{err}"
+            );
+        }
+    }
+    // No motion named (with or without a calibration); wheels the site's
+    // robot needs not given.
+    let calib = calibration(dir.path());
+    for (args, says) in [
+        (
+            vec!["--wheel-diameter-m", "0.07", "--wheelbase-m", "0.24"],
+            "--odom-topic",
+        ),
+        (
+            vec!["--calibration", calib.to_str().unwrap()],
+            "--odom-topic",
+        ),
+        (vec!["--odom-topic", "/odom"], "--wheel-diameter-m"),
+    ] {
+        let out = dir.path().join("refused");
+        let mut all = vec!["map", "--bag", bag, "--scan-topic", "/scan"];
+        all.extend(args);
+        all.extend(["--out", out.to_str().unwrap()]);
+        let o = run(&all);
+        assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+        assert!(text(&o.stderr).contains(says), "{}", text(&o.stderr));
+        assert!(!out.exists());
+    }
+}

@@ -11,7 +11,7 @@ use std::path::Path;
 
 use anyhow::Context;
 use twindrive_calibrate::scan_inputs::ScanRecording;
-use twindrive_calibrate::site_map::{self, MapJob, SiteScenario};
+use twindrive_calibrate::site_map::{self, MapJob, Motion, SiteScenario};
 use twindrive_calibrate::{ScanJob, self_calibrate, write_scan_outputs};
 use twindrive_estimation::mapping::{MapScore, MappingSettings, score};
 use twindrive_estimation::selfcal::LaserOdometrySettings;
@@ -219,7 +219,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     let mut lidar = rec.lidar.clone();
     lidar.mount = mount;
     let map_job = MapJob {
-        wheels: rec.wheels,
+        motion: Motion::Wheels(rec.wheels),
         scans: rec.scans,
         lidar,
         params,
@@ -233,6 +233,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
             ..MappingSettings::default()
         },
         prior: None,
+        time_origin_s: 0.0,
     };
     let mapped = site_map::map_site(&map_job, |_, _| {})?;
     let mission_start = Pose::new(3.0, 0.4, 0.0);
@@ -245,18 +246,15 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         MISSION,
     );
     let mission_path = out.join("hidden_site_wall_following.toml");
-    let site_text = site_map::site_toml(
-        "mapped_site",
-        &mapped,
-        &map_job,
-        &SiteScenario::Mission {
-            text: mission_text.clone(),
-            path: mission_path,
-        },
-    )?;
+    let scenario = SiteScenario::Mission {
+        text: mission_text.clone(),
+        path: mission_path,
+    };
     let site_dir = out.join("site");
     let report = mapped.report(&map_job);
-    site_map::write_site(&site_dir, &mapped, &report, &site_text)?;
+    site_map::write_site(&site_dir, &mapped, &report, |start| {
+        site_map::site_toml("mapped_site", &mapped, &map_job, &scenario, start)
+    })?;
     let twin = Scenario::load(&site_dir.join("site.toml"))?;
     // The robot is at the same site the twin mapped: one name.
     let mut true_site = parse(&mission_text, "hidden_site_wall_following.toml")?;

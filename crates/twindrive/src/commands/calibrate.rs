@@ -23,9 +23,10 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         let source = BagScanSource {
             path: path.clone(),
             stamps: stamps(args.stamps),
-            wheels: wheel_source(args)?.ok_or_else(|| {
+            wheels: Some(wheel_source(args)?.ok_or_else(|| {
                 usage("--scan-topic: name the wheels with --left-joint and --right-joint, or --ticks-topic")
-            })?,
+            })?),
+            odometry: None,
             scan_topic: scan_topic.clone(),
             imu_topic: args.imu_topic.clone(),
             base_frame: args.base_frame.clone(),

@@ -1,24 +1,34 @@
-//! `twindrive map`: the site's map from a drive's encoders and scans and a
-//! calibration (the work is `twindrive_calibrate::site_map`'s).
+//! `twindrive map`: the site's map from a drive's scans and its motion (the
+//! encoders and a calibration, or the robot's own odometry; the work is
+//! `twindrive_calibrate::site_map`'s).
 
 use std::time::Instant;
 
 use anyhow::Context;
 use twindrive_calibrate::inputs;
 use twindrive_calibrate::scan_inputs::{self, BagScanSource, ScanRecording};
-use twindrive_calibrate::site_map::{self, MapJob, SiteRobot, SiteScenario};
+use twindrive_calibrate::site_map::{self, MapJob, Motion, SiteRobot, SiteScenario};
 use twindrive_estimation::mapping::MappingSettings;
 use twindrive_kinematics::Pose;
-use twindrive_ros::extract::WheelSource;
+use twindrive_ros::extract::{PoseSource, WheelSource};
 
 use crate::cli::MapArgs;
 use crate::flags::{joint_signal, read_calibration, read_lidar_mount, stamps};
+use crate::usage::usage;
 
 pub fn run(args: &MapArgs) -> anyhow::Result<()> {
     let started = Instant::now();
-    let params = read_calibration(&args.calibration)?;
-    let calibrated_mount = read_lidar_mount(&args.calibration)?;
+    let calibration = match &args.calibration {
+        Some(path) => Some((read_calibration(path)?, read_lidar_mount(path)?)),
+        None => None,
+    };
     let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
+    if calibration.is_none() && args.odom_topic.is_none() {
+        return Err(usage(
+            "--calibration: mapping from wheel angles needs the calibrated wheels (calib.json from \
+             `twindrive calibrate`); a bag with the robot's odometry maps without one (--odom-topic)",
+        ));
+    }
     let (rec, start, robot) = match (&args.log_dir, &args.bag) {
         (Some(dir), None) => {
             let log = inputs::read_log_dir(dir)?;
@@ -35,15 +45,40 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
             (rec, h.start, robot)
         }
         (None, Some(path)) => {
+            let wheels = match (&args.left_joint, &args.right_joint) {
+                (Some(left), Some(right)) => Some(WheelSource::Joints {
+                    topic: args.joint_topic.clone(),
+                    left: left.clone(),
+                    right: right.clone(),
+                    signal: joint_signal(args.joint_signal),
+                }),
+                (None, None) => None,
+                _ => {
+                    return Err(usage(
+                        "--left-joint and --right-joint name the two wheels together",
+                    ));
+                }
+            };
+            if wheels.is_some() && calibration.is_none() {
+                return Err(usage(
+                    "--left-joint/--right-joint: wheel angles need --calibration (its wheels turn them into metres); or map from --odom-topic",
+                ));
+            }
+            if wheels.is_none() && args.odom_topic.is_none() {
+                return Err(usage(
+                    "--bag: name how the robot moved: --odom-topic (nav_msgs/msg/Odometry, or a TF topic with odom -> base), \
+                     or --left-joint and --right-joint with --calibration (`twindrive bag info` lists the bag's topics)",
+                ));
+            }
             let source = BagScanSource {
                 path: path.clone(),
                 stamps: stamps(args.stamps),
-                wheels: WheelSource::Joints {
-                    topic: args.joint_topic.clone(),
-                    left: args.left_joint.clone().context("--left-joint")?,
-                    right: args.right_joint.clone().context("--right-joint")?,
-                    signal: joint_signal(args.joint_signal),
-                },
+                wheels,
+                odometry: args.odom_topic.clone().map(|topic| PoseSource {
+                    topic,
+                    frame: None,
+                    parent: None,
+                }),
                 scan_topic: args.scan_topic.clone().context("--scan-topic")?,
                 imu_topic: None,
                 base_frame: args.base_frame.clone(),
@@ -61,9 +96,41 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         }
         _ => unreachable!("clap requires LOG_DIR or --bag, not both"),
     };
+    let scenario = match &args.mission {
+        Some(path) => SiteScenario::Mission {
+            text: std::fs::read_to_string(path)
+                .with_context(|| format!("--mission: reading {}", path.display()))?,
+            path: path.clone(),
+        },
+        None => SiteScenario::Hold(robot),
+    };
+    // The site's robot's wheels: the calibration's, else the mission's,
+    // else as given.
+    let params = match (&calibration, &scenario) {
+        (Some((params, _)), _) => *params,
+        (None, SiteScenario::Mission { text, path }) => {
+            twindrive_sim::Scenario::from_toml(text, path)
+                .map_err(|e| anyhow::anyhow!("--mission: {e}"))?
+                .robot
+                .true_params
+        }
+        (None, SiteScenario::Hold(_)) => match (args.wheel_diameter_m, args.wheelbase_m) {
+            (Some(d), Some(b)) => twindrive_kinematics::DiffDriveParams {
+                left_diameter_m: d,
+                right_diameter_m: d,
+                wheelbase_m: b,
+            },
+            _ => {
+                return Err(usage(
+                    "--odom-topic without --calibration: give site.toml's robot its wheels with \
+                     --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them",
+                ));
+            }
+        },
+    };
     let mut lidar = rec.lidar.clone();
-    match &calibrated_mount {
-        Some((name, mount)) => {
+    match calibration.as_ref().map(|(_, mount)| mount) {
+        Some(Some((name, mount))) => {
             if let Some(name) = name
                 && *name != lidar.name
             {
@@ -75,14 +142,23 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
             }
             lidar.mount = *mount;
         }
-        None => tracing::warn!(
+        Some(None) => tracing::warn!(
             "{} has no lidar_mount (not a self-calibration): the recording's mount of {} is used",
-            args.calibration.display(),
+            args.calibration
+                .as_deref()
+                .unwrap_or(std::path::Path::new(""))
+                .display(),
             lidar.name
         ),
+        None => tracing::info!(lidar = %lidar.name, "the lidar's mount is the recording's"),
     }
+    let motion = if args.odom_topic.is_some() {
+        Motion::Odometry(rec.odometry)
+    } else {
+        Motion::Wheels(rec.wheels)
+    };
     let job = MapJob {
-        wheels: rec.wheels,
+        motion,
         scans: rec.scans,
         lidar,
         params,
@@ -92,26 +168,20 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
             ..MappingSettings::default()
         },
         prior: None,
+        time_origin_s: rec.time_origin_s,
     };
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "read inputs");
     let bar = twindrive_progress::bar(2 * job.scans.len() as u64, "mapping");
     let map = site_map::map_site(&job, |done, _| bar.set_position(done as u64))?;
     bar.finish_and_clear();
-    let scenario = match &args.mission {
-        Some(path) => SiteScenario::Mission {
-            text: std::fs::read_to_string(path)
-                .with_context(|| format!("--mission: reading {}", path.display()))?,
-            path: path.clone(),
-        },
-        None => SiteScenario::Hold(robot),
-    };
     let name = args
         .out
         .file_name()
         .map_or("site".into(), |n| n.to_string_lossy().into_owned());
-    let site = site_map::site_toml(&name, &map, &job, &scenario)?;
     let report = map.report(&job);
-    site_map::write_site(&args.out, &map, &report, &site)?;
+    site_map::write_site(&args.out, &map, &report, |start| {
+        site_map::site_toml(&name, &map, &job, &scenario, start)
+    })?;
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "mapped");
     println!(
         "map: {} scans ({} matched to the map{}), {:.1} m driven; {} x {} cells of {} m: {} free, {} occupied, {} unknown -> {}/map.yaml, {}/site.toml",
