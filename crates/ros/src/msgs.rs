@@ -64,6 +64,7 @@ const DEFINITIONS: &[(&str, &str, &[&str])] = &[
     ),
     ("std_msgs/msg/String", "string data\n", &[]),
     ("std_msgs/msg/Bool", "bool data\n", &[]),
+    ("std_msgs/msg/Float64", "float64 data\n", &[]),
     (
         "std_msgs/msg/MultiArrayDimension",
         "string label\nuint32 size\nuint32 stride\n",
