@@ -200,31 +200,20 @@ fn link_and_agent_touch_no_file_system_socket_clock_or_randomness() {
     let mut found = Vec::new();
     for krate in ["link", "agent"] {
         let dir = repo().join("crates").join(krate);
-        let mut files = Vec::new();
-        for sub in ["src", "tests", "benches", "examples"] {
-            rust_files(&dir.join(sub), &mut files);
-        }
+        let lines = code_lines(&dir);
+        let files: std::collections::BTreeSet<&str> = lines
+            .iter()
+            .filter_map(|(at, _)| at.rsplit_once(':').map(|(file, _)| file))
+            .collect();
         assert!(files.len() > 5, "{krate}: {files:?}");
-        for file in files {
-            let text = std::fs::read_to_string(&file).unwrap();
-            for (k, line) in text.lines().enumerate() {
-                let code = line.trim_start();
-                if code.starts_with("//") {
-                    continue;
-                }
-                for word in FORBIDDEN.iter().filter(|w| code.contains(*w)) {
-                    found.push(format!("{}:{}: `{word}`", file.display(), k + 1));
-                }
+        for (at, code) in &lines {
+            for word in FORBIDDEN.iter().filter(|w| code.contains(*w)) {
+                found.push(format!("{at}: `{word}`"));
             }
         }
-        let manifest: toml::Table =
-            toml::from_str(&std::fs::read_to_string(dir.join("Cargo.toml")).unwrap()).unwrap();
-        for table in ["dependencies", "dev-dependencies"] {
-            let deps = manifest.get(table).and_then(|d| d.as_table());
-            for dep in deps.into_iter().flat_map(|d| d.keys()) {
-                if IO_CRATES.contains(&dep.as_str()) {
-                    found.push(format!("crates/{krate}/Cargo.toml [{table}]: `{dep}`"));
-                }
+        for (table, dep) in dependencies(&dir) {
+            if IO_CRATES.contains(&dep.as_str()) {
+                found.push(format!("crates/{krate}/Cargo.toml [{table}]: `{dep}`"));
             }
         }
     }
@@ -233,6 +222,42 @@ fn link_and_agent_touch_no_file_system_socket_clock_or_randomness() {
         "I/O in link or agent:\n{}",
         found.join("\n")
     );
+}
+
+/// Every line of code (not a `//` comment) in crate `dir`'s sources, tests,
+/// benches and examples: `(file:line, the line trimmed)`.
+fn code_lines(dir: &Path) -> Vec<(String, String)> {
+    let mut files = Vec::new();
+    for sub in ["src", "tests", "benches", "examples"] {
+        rust_files(&dir.join(sub), &mut files);
+    }
+    let mut out = Vec::new();
+    for file in files {
+        let text = std::fs::read_to_string(&file).unwrap();
+        for (k, line) in text.lines().enumerate() {
+            let code = line.trim_start();
+            if !code.starts_with("//") {
+                out.push((format!("{}:{}", file.display(), k + 1), code.to_string()));
+            }
+        }
+    }
+    out
+}
+
+/// Crate `dir`'s dependencies and dev-dependencies: `(table, name)`.
+fn dependencies(dir: &Path) -> Vec<(&'static str, String)> {
+    let manifest: toml::Table =
+        toml::from_str(&std::fs::read_to_string(dir.join("Cargo.toml")).unwrap()).unwrap();
+    let mut out = Vec::new();
+    for table in ["dependencies", "dev-dependencies"] {
+        let deps = manifest.get(table).and_then(|d| d.as_table());
+        out.extend(
+            deps.into_iter()
+                .flat_map(|d| d.keys())
+                .map(|k| (table, k.clone())),
+        );
+    }
+    out
 }
 
 /// The transport seam: only `twindrive-net` knows zenoh; every other crate
@@ -249,34 +274,20 @@ fn only_the_net_crate_names_zenoh() {
             continue;
         }
         checked += 1;
-        let mut files = Vec::new();
-        for sub in ["src", "tests", "benches", "examples"] {
-            rust_files(&dir.join(sub), &mut files);
-        }
-        for file in files {
-            let text = std::fs::read_to_string(&file).unwrap();
-            for (k, line) in text.lines().enumerate() {
-                let code = line.trim_start();
-                if code.starts_with("//") {
-                    continue;
-                }
-                // `zenoh::` as a path of its own (not `rmw_zenoh::`).
-                let named = code.match_indices(concat!("zenoh", "::")).any(|(at, _)| {
-                    !code[..at]
-                        .chars()
-                        .next_back()
-                        .is_some_and(|c| c.is_alphanumeric() || c == '_')
-                });
-                if named {
-                    found.push(format!("{}:{}", file.display(), k + 1));
-                }
+        for (at, code) in code_lines(&dir) {
+            // `zenoh::` as a path of its own (not `rmw_zenoh::`).
+            let named = code.match_indices(concat!("zenoh", "::")).any(|(k, _)| {
+                !code[..k]
+                    .chars()
+                    .next_back()
+                    .is_some_and(|c| c.is_alphanumeric() || c == '_')
+            });
+            if named {
+                found.push(at);
             }
         }
-        let manifest: toml::Table =
-            toml::from_str(&std::fs::read_to_string(dir.join("Cargo.toml")).unwrap()).unwrap();
-        for table in ["dependencies", "dev-dependencies"] {
-            let deps = manifest.get(table).and_then(|d| d.as_table());
-            if deps.is_some_and(|d| d.contains_key("zenoh")) {
+        for (table, dep) in dependencies(&dir) {
+            if dep == "zenoh" {
                 found.push(format!("{}/Cargo.toml [{table}]", dir.display()));
             }
         }

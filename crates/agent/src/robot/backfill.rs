@@ -116,11 +116,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     }
 
     pub(super) fn queue_backfill(&mut self, plan_sha256: &str) {
-        if self
-            .backfills
-            .iter()
-            .any(|b| b.plan_sha256 == plan_sha256 && !b.full_rate)
-        {
+        if self.queued(plan_sha256, false) {
             return;
         }
         // A log kept before digests existed: its digest from its MCAP.
@@ -134,21 +130,7 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             Ok(twindrive_log::digest::encode(&log, self.config.log_budget_bytes_s).0)
         });
         match digest {
-            Ok(file) => {
-                let sender = Sender::resume(
-                    &self.config.robot_id,
-                    file,
-                    SenderConfig {
-                        pace_bit_s: self.backfill_pace_bit_s(),
-                        ..SenderConfig::default()
-                    },
-                );
-                self.backfills.push_back(Backfill {
-                    plan_sha256: plan_sha256.into(),
-                    full_rate: false,
-                    sender,
-                });
-            }
+            Ok(file) => self.push_backfill(plan_sha256, false, file),
             Err(e) => {
                 tracing::error!(plan_sha256, error = %e, "a robot log to back-fill")
             }
@@ -161,29 +143,13 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
     /// master hears that none is kept here.
     pub(super) fn queue_full_log(&mut self, plan: &[u8; 32], now_ns: u64) {
         let plan_sha256 = hex(plan);
-        if self
-            .backfills
-            .iter()
-            .any(|b| b.plan_sha256 == plan_sha256 && b.full_rate)
-        {
+        if self.queued(&plan_sha256, true) {
             return;
         }
         match self.store.log_mcap(&plan_sha256) {
             Ok(file) => {
                 let bytes = file.len();
-                let sender = Sender::resume(
-                    &self.config.robot_id,
-                    file,
-                    SenderConfig {
-                        pace_bit_s: self.backfill_pace_bit_s(),
-                        ..SenderConfig::default()
-                    },
-                );
-                self.backfills.push_back(Backfill {
-                    plan_sha256: plan_sha256.clone(),
-                    full_rate: true,
-                    sender,
-                });
+                self.push_backfill(&plan_sha256, true, file);
                 self.record(
                     now_ns,
                     "log_requested",
@@ -203,5 +169,29 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 });
             }
         }
+    }
+
+    /// Whether `plan_sha256`'s log (full-rate or digest) is on its way.
+    fn queued(&self, plan_sha256: &str, full_rate: bool) -> bool {
+        self.backfills
+            .iter()
+            .any(|b| b.plan_sha256 == plan_sha256 && b.full_rate == full_rate)
+    }
+
+    /// Puts `file`, `plan_sha256`'s log, last among the logs on their way.
+    fn push_backfill(&mut self, plan_sha256: &str, full_rate: bool, file: Vec<u8>) {
+        let sender = Sender::resume(
+            &self.config.robot_id,
+            file,
+            SenderConfig {
+                pace_bit_s: self.backfill_pace_bit_s(),
+                ..SenderConfig::default()
+            },
+        );
+        self.backfills.push_back(Backfill {
+            plan_sha256: plan_sha256.into(),
+            full_rate,
+            sender,
+        });
     }
 }
