@@ -10,6 +10,8 @@
 //! - [`clock`]: the offset between an encoder clock and a pose clock;
 //! - [`selfcal`]: self-calibration of the wheels and a lidar's mount (and a
 //!   gyro) from relative laser motions, without an external pose reference;
+//! - [`slam`]: the site's map from a long real drive: submaps, loop
+//!   closure by branch-and-bound, a sparse pose graph;
 //! - [`ellipse_fit`], [`dead_reckoning`]: for the paper's evidence.
 //!
 //! REP-103 throughout; the paper's eq. (3) has the opposite heading sign.
@@ -26,7 +28,9 @@ pub mod mapping;
 mod odometry_chain;
 mod offline;
 mod online;
+pub mod se2;
 pub mod selfcal;
+pub mod slam;
 mod smoother;
 
 pub use covariance::{PackedCovariance, PackedEstimate, chain};

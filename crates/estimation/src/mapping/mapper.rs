@@ -15,6 +15,7 @@
 use crate::localize::{MatchSettings, PointMap, Refusal, Scan, ScanMatch, register};
 
 use super::grid::{Beam, LogOdds, LogOddsGrid};
+use crate::se2::{apply, between, compose, inverse, wrap};
 
 /// A return that lies on no line is drawn only where the surface point
 /// near it averages at least this many returns.
@@ -48,6 +49,8 @@ pub struct MappingSettings {
     pub matching: MatchSettings,
     /// A return within this of the map's local line is drawn on it (m).
     pub snap_m: f64,
+    /// A drive mapped without a prior map is located by the SLAM.
+    pub slam: crate::slam::SlamSettings,
     /// Returns farther than this are left out of the grid (m): their
     /// angular error spreads them over several cells.
     pub max_range_m: f64,
@@ -75,6 +78,7 @@ impl Default for MappingSettings {
                 ..MatchSettings::scan_to_scan()
             },
             snap_m: 0.1,
+            slam: crate::slam::SlamSettings::default(),
             max_range_m: 10.0,
             log_odds: LogOdds::default(),
         }
@@ -413,10 +417,23 @@ pub fn map_drive(
 ) -> Mapping {
     let passes = if prior.is_some() { 3 } else { 2 };
     let total = passes * scans.len();
-    let own = locate_all(Mapper::new(mount, settings), scans, |k| progress(k, total));
     let located = match prior {
-        None => own,
+        None => {
+            let slam =
+                crate::slam::locate_drive(scans, mount, settings.slam, |k, _| progress(k, total));
+            DriveLocated {
+                matched: slam.matched_each.iter().filter(|m| **m).count(),
+                unmatched: match slam.matched_each.iter().skip(1).filter(|m| !**m).count() {
+                    0 => Vec::new(),
+                    n => vec![("not matched to its submap".to_string(), n)],
+                },
+                poses: slam.poses,
+                matched_each: slam.matched_each,
+                rms_m: slam.rms_m,
+            }
+        }
         Some(g) => {
+            let own = locate_all(Mapper::new(mount, settings), scans, |k| progress(k, total));
             let against = locate_all(
                 Mapper::with_map(mount, settings, &g.occupied_centres()),
                 scans,
@@ -528,35 +545,4 @@ fn rigid_fit(from: &[[f64; 3]], to: &[[f64; 3]], use_: &[bool]) -> [f64; 3] {
         y += b[1] - (sn * a[0] + cs * a[1]);
     }
     [x / n as f64, y / n as f64, turn]
-}
-
-fn wrap(a: f64) -> f64 {
-    twindrive_kinematics::wrap_angle(a)
-}
-
-/// `a ⊕ b` in SE(2).
-pub(crate) fn compose(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a[2].sin_cos();
-    [
-        a[0] + c * b[0] - s * b[1],
-        a[1] + s * b[0] + c * b[1],
-        wrap(a[2] + b[2]),
-    ]
-}
-
-/// `a⁻¹`.
-fn inverse(a: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a[2].sin_cos();
-    [-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]]
-}
-
-/// `a⁻¹ ⊕ b`: `b` seen from `a`.
-pub(crate) fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    compose(inverse(a), b)
-}
-
-/// The point `p` of frame `a` in `a`'s parent frame.
-fn apply(a: [f64; 3], p: [f64; 2]) -> [f64; 2] {
-    let (s, c) = a[2].sin_cos();
-    [a[0] + c * p[0] - s * p[1], a[1] + s * p[0] + c * p[1]]
 }

@@ -11,10 +11,10 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal as Gauss};
 use twindrive_sim::{Vector, World};
 
-use super::mapper::between;
 use super::*;
 use crate::localize::Scan;
 use crate::localize::testkit::{compose, rng};
+use crate::se2::between;
 
 struct Site {
     walls: Vec<[f64; 4]>,

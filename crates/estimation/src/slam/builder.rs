@@ -1,0 +1,380 @@
+//! The SLAM itself, one scan at a time.
+//!
+//! Local: each scan is matched (PL-ICP, [`register`]) against the older of
+//! two active submaps, from the pose the odometry predicts since the last
+//! scan. A scan that moved far enough since the last node becomes a node:
+//! a pose of the graph, joined to the previous node and to its submap's
+//! first node by what the local matching measured, and its points are
+//! inserted into both active submaps. A submap is finished after
+//! `submap_nodes` insertions, and a new one starts every half of that.
+//!
+//! Global: every `loop_every`-th node is searched for, by branch and bound
+//! ([`LikelihoodGrid::search`]), in every finished submap that the
+//! trajectory estimate puts near it and that local matching does not
+//! already join it to; a match scoring at least `min_score` and confirmed by
+//! PL-ICP is a loop closure, an edge with a Huber loss. The graph is solved
+//! every `optimize_every` nodes once there is a new closure, and closures
+//! whose residual stays far beyond their noise after a solve are switched
+//! off and the graph solved again (false loops, such as a corridor's
+//! repeating doors).
+
+use crate::localize::{PointMap, register};
+
+use super::SlamSettings;
+use super::correlative::{LikelihoodGrid, SearchWindow};
+use super::pose_graph::{Edge, PoseGraph};
+use super::se2::{apply, between, compose, inverse, wrap};
+
+/// One node: a scan that became a pose of the graph.
+#[derive(Debug)]
+struct Node {
+    /// The robot's pose in the local frame.
+    local: [f64; 3],
+    /// The scan's points (sensor frame), thinned for the loop search.
+    points: Vec<[f64; 2]>,
+}
+
+/// A submap: the points of the nodes inserted into it, in the frame of
+/// its first node's robot pose (the anchor).
+#[derive(Debug)]
+struct Submap {
+    /// The node whose robot pose is the submap's frame.
+    anchor: usize,
+    points: PointMap,
+    /// The nodes inserted.
+    nodes: Vec<usize>,
+    /// Built when the submap is finished.
+    grid: Option<LikelihoodGrid>,
+    /// For local matching while it is active: dropped at each insertion,
+    /// built again when next needed.
+    local_grid: Option<LikelihoodGrid>,
+}
+
+/// What happened to one scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanOutcome {
+    /// Whether local matching placed it (else the odometry's prediction).
+    pub matched: bool,
+    /// The match's RMS residual (m), when matched.
+    pub rms_m: Option<f64>,
+}
+
+/// Counts for the report.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SlamStats {
+    pub nodes: usize,
+    pub submaps: usize,
+    pub loop_searches: usize,
+    pub loop_closures: usize,
+    /// Closures switched off after a solve (false loops).
+    pub loops_rejected: usize,
+    pub solves: usize,
+}
+
+/// The SLAM state: feed scans in time order with [`Slam::add`], then
+/// [`Slam::finish`].
+#[derive(Debug)]
+pub struct Slam {
+    settings: SlamSettings,
+    /// The lidar's pose on the robot.
+    mount: [f64; 3],
+    graph: PoseGraph,
+    nodes: Vec<Node>,
+    submaps: Vec<Submap>,
+    /// Indices of the active submaps (at most two, oldest first).
+    active: Vec<usize>,
+    /// The last scan's odometry and local poses.
+    last: Option<([f64; 3], [f64; 3])>,
+    /// The last node's local pose and time.
+    last_node: Option<([f64; 3], f64)>,
+    /// Each scan: the node it is, or the node before it and its pose seen
+    /// from that node.
+    scans: Vec<(usize, [f64; 3])>,
+    /// Loop edges since the last solve.
+    fresh_loops: usize,
+    nodes_since_solve: usize,
+    stats: SlamStats,
+}
+
+impl Slam {
+    pub fn new(mount: [f64; 3], settings: SlamSettings) -> Self {
+        Self {
+            settings,
+            mount,
+            graph: PoseGraph::default(),
+            nodes: Vec::new(),
+            submaps: Vec::new(),
+            active: Vec::new(),
+            last: None,
+            last_node: None,
+            scans: Vec::new(),
+            fresh_loops: 0,
+            nodes_since_solve: 0,
+            stats: SlamStats::default(),
+        }
+    }
+
+    /// The next scan (sensor-frame points, already thinned and cut to
+    /// range) taken at `t_s`, with the robot's odometry pose then.
+    pub fn add(&mut self, t_s: f64, odometry: [f64; 3], points: &[[f64; 2]]) -> ScanOutcome {
+        let s = self.settings;
+        let predicted = match self.last {
+            None => odometry,
+            Some((o, l)) => compose(l, between(o, odometry)),
+        };
+        // Local matching against the older active submap.
+        let mut outcome = ScanOutcome {
+            matched: false,
+            rms_m: None,
+        };
+        let mut local = predicted;
+        if let Some(&m) = self.active.first() {
+            let frame = self.nodes[self.submaps[m].anchor].local;
+            let prior = between(frame, compose(predicted, self.mount));
+            let submap = &mut self.submaps[m];
+            if submap.local_grid.is_none() {
+                submap.local_grid = Some(LikelihoodGrid::new(
+                    submap.points.points(),
+                    s.grid_resolution_m,
+                    s.grid_sigma_m,
+                    s.local_levels,
+                ));
+            }
+            // A correlative search around the odometry's prediction first
+            // (the odometry's heading can be tens of degrees off in a fast
+            // turn, where PL-ICP alone settles in the wrong valley), then
+            // PL-ICP from the best of it.
+            // Odometry that froze and then jumps (a dropped message, a
+            // late one) predicts a step it may have half taken already:
+            // the search widens by the step the odometry claims.
+            let (step_m, step_rad) = match self.last {
+                None => (0.0, 0.0),
+                Some((o, _)) => {
+                    let d = between(o, odometry);
+                    (d[0].hypot(d[1]), d[2].abs())
+                }
+            };
+            let window = SearchWindow {
+                linear_m: s.local_window.linear_m + step_m,
+                angular_rad: s.local_window.angular_rad + step_rad,
+                ..s.local_window
+            };
+            let start = submap
+                .local_grid
+                .as_ref()
+                .and_then(|g| g.search(points, prior, window))
+                .map_or(prior, |f| f.pose);
+            if let Ok(found) = register(&submap.points, points, start, &s.matching) {
+                let moved = (found.pose[0] - prior[0]).hypot(found.pose[1] - prior[1]);
+                let turned = wrap(found.pose[2] - prior[2]).abs();
+                if moved <= s.max_correction_m + step_m && turned <= s.max_correction_rad + step_rad
+                {
+                    local = compose(compose(frame, found.pose), inverse(self.mount));
+                    outcome = ScanOutcome {
+                        matched: true,
+                        rms_m: Some(found.rms_m),
+                    };
+                }
+            }
+        }
+        self.last = Some((odometry, local));
+        let node = match self.last_node {
+            None => true,
+            Some((n, t)) => {
+                (local[0] - n[0]).hypot(local[1] - n[1]) >= s.node_m
+                    || wrap(local[2] - n[2]).abs() >= s.node_rad
+                    || t_s - t >= s.node_s
+            }
+        };
+        if node {
+            let k = self.add_node(local, points, outcome.matched);
+            self.last_node = Some((local, t_s));
+            self.scans.push((k, [0.0; 3]));
+        } else {
+            let k = self.nodes.len() - 1;
+            self.scans.push((k, between(self.nodes[k].local, local)));
+        }
+        outcome
+    }
+
+    fn add_node(&mut self, local: [f64; 3], points: &[[f64; 2]], matched: bool) -> usize {
+        let s = self.settings;
+        let k = self.nodes.len();
+        let global = match k {
+            0 => local,
+            _ => compose(
+                self.graph.poses[k - 1],
+                between(self.nodes[k - 1].local, local),
+            ),
+        };
+        self.graph.add_pose(global);
+        let thinned: Vec<[f64; 2]> = {
+            let stride = points.len().div_ceil(s.loop_points.max(1)).max(1);
+            points
+                .iter()
+                .filter(|p| p[0].hypot(p[1]) <= s.loop_range_m)
+                .step_by(stride)
+                .copied()
+                .collect()
+        };
+        self.nodes.push(Node {
+            local,
+            points: thinned,
+        });
+        if k > 0 {
+            let std = if matched { s.local_std } else { s.odometry_std };
+            self.graph.add_edge(Edge {
+                from: k - 1,
+                to: k,
+                measured: between(self.nodes[k - 1].local, local),
+                std,
+                huber: None,
+                active: true,
+            });
+        }
+        // A new submap every half submap.
+        let start_new = match self.active.last() {
+            None => true,
+            Some(&m) => self.submaps[m].nodes.len() >= s.submap_nodes / 2,
+        };
+        if start_new {
+            self.submaps.push(Submap {
+                anchor: k,
+                points: PointMap::new(s.voxel_m, s.matching.outlier_m),
+                nodes: Vec::new(),
+                grid: None,
+                local_grid: None,
+            });
+            self.active.push(self.submaps.len() - 1);
+            self.stats.submaps += 1;
+        }
+        let sensor = compose(local, self.mount);
+        for &m in &self.active {
+            let frame = self.nodes[self.submaps[m].anchor].local;
+            let in_submap = between(frame, sensor);
+            let submap = &mut self.submaps[m];
+            submap
+                .points
+                .extend(points.iter().map(|p| apply(in_submap, *p)));
+            submap.nodes.push(k);
+            submap.local_grid = None;
+        }
+        // The oldest is finished once full.
+        if let Some(&m) = self.active.first()
+            && self.submaps[m].nodes.len() >= s.submap_nodes
+        {
+            self.active.remove(0);
+            let submap = &mut self.submaps[m];
+            submap.local_grid = None;
+            submap.grid = Some(LikelihoodGrid::new(
+                submap.points.points(),
+                s.grid_resolution_m,
+                s.grid_sigma_m,
+                s.grid_levels,
+            ));
+        }
+        self.stats.nodes += 1;
+        self.nodes_since_solve += 1;
+        if k.is_multiple_of(s.loop_every.max(1)) {
+            self.close_loops(k);
+        }
+        if self.fresh_loops > 0 && self.nodes_since_solve >= s.optimize_every {
+            self.solve(s.solve_iterations);
+        }
+        k
+    }
+
+    /// Searches node `k` in every finished submap near it that local
+    /// matching does not already join it to.
+    fn close_loops(&mut self, k: usize) {
+        let s = self.settings;
+        let global = self.graph.poses[k];
+        let window = s.loop_window;
+        for m in 0..self.submaps.len() {
+            let submap = &self.submaps[m];
+            let Some(grid) = &submap.grid else { continue };
+            // Recent submaps are joined to the node by local matching.
+            if submap.anchor + s.loop_min_separation > k {
+                continue;
+            }
+            let near = submap.nodes.iter().any(|&n| {
+                let p = self.graph.poses[n];
+                (p[0] - global[0]).hypot(p[1] - global[1]) <= window.linear_m
+            });
+            if !near {
+                continue;
+            }
+            let frame = self.graph.poses[submap.anchor];
+            let guess = between(frame, compose(global, self.mount));
+            self.stats.loop_searches += 1;
+            let points = &self.nodes[k].points;
+            let Some(found) = grid.search(points, guess, window) else {
+                continue;
+            };
+            let Ok(refined) = register(&submap.points, points, found.pose, &s.loop_matching) else {
+                continue;
+            };
+            if (refined.pose[0] - found.pose[0]).hypot(refined.pose[1] - found.pose[1])
+                > 2.0 * s.grid_resolution_m
+            {
+                continue;
+            }
+            let measured = compose(refined.pose, inverse(self.mount));
+            self.graph.add_edge(Edge {
+                from: submap.anchor,
+                to: k,
+                measured,
+                std: s.loop_std,
+                huber: Some(s.loop_huber),
+                active: true,
+            });
+            self.stats.loop_closures += 1;
+            self.fresh_loops += 1;
+        }
+    }
+
+    /// Solves the graph: first with the closures' losses nearly quadratic
+    /// (a closure found after metres of drift is far from the estimate
+    /// until the graph bends to it), then with their Huber losses; then
+    /// switches off the closures still far from the rest (false loops) and
+    /// solves again.
+    fn solve(&mut self, iterations: usize) {
+        let s = self.settings;
+        self.stats.solves += 1;
+        self.fresh_loops = 0;
+        self.nodes_since_solve = 0;
+        for huber in [s.loop_huber * 10.0, s.loop_huber] {
+            for e in self.graph.edges.iter_mut().filter(|e| e.huber.is_some()) {
+                e.huber = Some(huber);
+            }
+            if self.graph.optimize(iterations).is_err() {
+                return;
+            }
+        }
+        let mut rejected = 0;
+        for e in self.graph.edges.iter_mut() {
+            if e.active && e.huber.is_some() && e.chi(&self.graph.poses) > s.loop_reject_chi {
+                e.active = false;
+                rejected += 1;
+            }
+        }
+        if rejected > 0 {
+            self.stats.loops_rejected += rejected;
+            let _ = self.graph.optimize(iterations);
+        }
+    }
+
+    /// Solves the whole graph once more and gives the robot's pose at
+    /// every scan added, in the frame of the first.
+    pub fn finish(mut self) -> (Vec<[f64; 3]>, SlamStats) {
+        if self.stats.loop_closures > 0 {
+            self.solve(self.settings.final_iterations);
+        }
+        let poses = self
+            .scans
+            .iter()
+            .map(|&(k, rel)| compose(self.graph.poses[k], rel))
+            .collect();
+        (poses, self.stats)
+    }
+}
