@@ -159,10 +159,17 @@ impl Slam {
                 angular_rad: s.local_window.angular_rad + step_rad,
                 ..s.local_window
             };
+            // The search's angular step is set by its farthest point: the
+            // near ones give the prior, PL-ICP refines on all.
+            let near: Vec<[f64; 2]> = points
+                .iter()
+                .filter(|p| p[0].hypot(p[1]) <= s.local_search_range_m)
+                .copied()
+                .collect();
             let start = submap
                 .local_grid
                 .as_ref()
-                .and_then(|g| g.search(points, prior, window))
+                .and_then(|g| g.search(&near, prior, window))
                 .map_or(prior, |f| f.pose);
             if let Ok(found) = register(&submap.points, points, start, &s.matching) {
                 let moved = (found.pose[0] - prior[0]).hypot(found.pose[1] - prior[1]);
@@ -290,20 +297,30 @@ impl Slam {
         let s = self.settings;
         let global = self.graph.poses[k];
         let window = s.loop_window;
-        for m in 0..self.submaps.len() {
+        // The finished submaps near the node, nearest first (by their
+        // nearest node), at most `loop_max_submaps` of them.
+        let mut near: Vec<(f64, usize)> = self
+            .submaps
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.grid.is_some() && m.anchor + s.loop_min_separation <= k)
+            .filter_map(|(i, m)| {
+                let d = m
+                    .nodes
+                    .iter()
+                    .map(|&n| {
+                        let p = self.graph.poses[n];
+                        (p[0] - global[0]).hypot(p[1] - global[1])
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                (d <= window.linear_m).then_some((d, i))
+            })
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        near.truncate(s.loop_max_submaps);
+        for (_, m) in near {
             let submap = &self.submaps[m];
             let Some(grid) = &submap.grid else { continue };
-            // Recent submaps are joined to the node by local matching.
-            if submap.anchor + s.loop_min_separation > k {
-                continue;
-            }
-            let near = submap.nodes.iter().any(|&n| {
-                let p = self.graph.poses[n];
-                (p[0] - global[0]).hypot(p[1] - global[1]) <= window.linear_m
-            });
-            if !near {
-                continue;
-            }
             let frame = self.graph.poses[submap.anchor];
             let guess = between(frame, compose(global, self.mount));
             self.stats.loop_searches += 1;

@@ -42,6 +42,9 @@ pub struct SlamSettings {
     /// `local_levels` levels.
     pub local_window: SearchWindow,
     pub local_levels: usize,
+    /// The returns within this range (m) are searched for (the farther,
+    /// the finer the headings searched must be).
+    pub local_search_range_m: f64,
     /// A local match that moves the odometry's prediction further than
     /// this (m, rad) is not believed.
     pub max_correction_m: f64,
@@ -68,6 +71,8 @@ pub struct SlamSettings {
     /// of their nodes within the window's reach.
     pub loop_every: usize,
     pub loop_min_separation: usize,
+    /// At most this many submaps searched for a node, the nearest.
+    pub loop_max_submaps: usize,
     pub loop_window: SearchWindow,
     /// A node's points for the loop search: at most this many, within this
     /// range (m).
@@ -106,6 +111,7 @@ impl Default for SlamSettings {
                 min_score: 0.0,
             },
             local_levels: 3,
+            local_search_range_m: 30.0,
             max_correction_m: 0.3,
             max_correction_rad: 0.4,
             max_range_m: 30.0,
@@ -119,6 +125,7 @@ impl Default for SlamSettings {
             odometry_std: [0.1, 0.1, 0.05],
             loop_every: 3,
             loop_min_separation: 90,
+            loop_max_submaps: 3,
             loop_window: SearchWindow {
                 linear_m: 4.0,
                 angular_rad: 0.35,
