@@ -26,6 +26,7 @@ pub mod mapping;
 mod odometry_chain;
 mod offline;
 mod online;
+pub mod relations;
 pub mod selfcal;
 mod smoother;
 
