@@ -270,3 +270,129 @@ pub fn from_bag(
     };
     Ok((recording, mount))
 }
+
+/// How far a laser line's mount may stray from the first line's before a
+/// warning (m, rad): the mount is one rigid transform.
+const MOUNT_TOLERANCE: f64 = 0.01;
+
+/// A map's inputs from a CARMEN log (`.clf`, `.clf.gz`; the 2D SLAM
+/// benchmark's logs, read as they are): the laser lines' scans in the
+/// laser's frame, the robot's own odometry (its `ODOM` lines, else the
+/// robot pose in each laser line) and the laser's mount, robot⁻¹ ⊕ laser
+/// from the laser lines. Times are the lines' `ipc_timestamp`, counted
+/// from the first scan's whole second. Readings at or above
+/// [`CarmenLog::no_return_from_m`] are no return.
+pub fn from_carmen(path: &std::path::Path) -> anyhow::Result<ScanRecording> {
+    use twindrive_log::carmen::CarmenLog;
+    let log = CarmenLog::read(path)?;
+    let Some(first) = log.lasers.first() else {
+        bail!(
+            "{}: no FLASER or ROBOTLASER1 line: a map needs the laser's scans",
+            path.display()
+        );
+    };
+    let no_return_m = log.no_return_from_m();
+    let mount = first.mount();
+    let strays = log
+        .lasers
+        .iter()
+        .filter(|l| {
+            let m = l.mount();
+            (m.x_m - mount.x_m).hypot(m.y_m - mount.y_m) > MOUNT_TOLERANCE
+                || twindrive_kinematics::wrap_angle(m.heading_rad - mount.heading_rad).abs()
+                    > MOUNT_TOLERANCE
+        })
+        .count();
+    if strays > 0 {
+        tracing::warn!(
+            strays,
+            lines = log.lasers.len(),
+            "laser lines whose laser pose is not the first line's mount on the robot; \
+             mapping with the first's ({:.3} m, {:.3} m, {:.3} rad)",
+            mount.x_m,
+            mount.y_m,
+            mount.heading_rad
+        );
+    }
+    let origin = first.t_s.floor();
+    let odometry: Vec<(f64, twindrive_kinematics::Pose)> = log
+        .robot_odometry()
+        .into_iter()
+        .map(|(t, p)| (t - origin, p))
+        .collect();
+    tracing::info!(
+        scans = log.lasers.len(),
+        odom_lines = log.odometry.len(),
+        odometry = if log.odometry.is_empty() {
+            "the laser lines' robot pose"
+        } else {
+            "ODOM lines"
+        },
+        no_return_from_m = no_return_m,
+        mount_x_m = mount.x_m,
+        mount_y_m = mount.y_m,
+        mount_heading_rad = mount.heading_rad,
+        skipped = ?log.skipped,
+        "read the CARMEN log"
+    );
+    let beams = first.ranges_m.len() as u32;
+    let lidar = RangeSensorInfo {
+        name: match first.line_kind {
+            twindrive_log::carmen::LaserLine::Flaser => "FLASER".into(),
+            twindrive_log::carmen::LaserLine::RobotLaser1 => "ROBOTLASER1".into(),
+        },
+        mount,
+        beams,
+        fov_rad: first.increment_rad * f64::from(beams),
+        min_range_m: 0.0,
+        max_range_m: no_return_m,
+    };
+    let scans = log
+        .lasers
+        .iter()
+        .map(|l| Scan {
+            t_s: l.t_s - origin,
+            angle_min_rad: l.angle_min_rad,
+            increment_rad: l.increment_rad,
+            range_min_m: 0.0,
+            range_max_m: no_return_m,
+            ranges_m: l.ranges_m.clone(),
+        })
+        .collect();
+    Ok(ScanRecording {
+        wheels: Vec::new(),
+        odometry,
+        scans,
+        gyro: Vec::new(),
+        lidar,
+        nominal: None,
+        ticks_per_rev: None,
+        time_origin_s: origin,
+    })
+}
+
+impl ScanRecording {
+    /// Keeps the scans of the first `duration_s` seconds from the first
+    /// scan (and the motion samples up to the last of them).
+    pub fn truncate_to(&mut self, duration_s: f64) {
+        let Some(first) = self.scans.first() else {
+            return;
+        };
+        let end_s = first.t_s + duration_s;
+        self.scans.retain(|s| s.t_s <= end_s);
+        let last_s = self.scans.last().map_or(end_s, |s| s.t_s);
+        // One motion sample past the last scan still places it.
+        let keep = |times: &[f64]| {
+            times
+                .iter()
+                .position(|t| *t > last_s)
+                .map_or(usize::MAX, |k| k + 1)
+        };
+        let k = keep(&self.odometry.iter().map(|o| o.0).collect::<Vec<_>>());
+        self.odometry.truncate(k);
+        let k = keep(&self.wheels.iter().map(|w| w.t_s).collect::<Vec<_>>());
+        self.wheels.truncate(k);
+        let k = keep(&self.gyro.iter().map(|g| g.0).collect::<Vec<_>>());
+        self.gyro.truncate(k);
+    }
+}

@@ -28,6 +28,7 @@ pub mod mapping;
 mod odometry_chain;
 mod offline;
 mod online;
+pub mod relations;
 pub mod se2;
 pub mod selfcal;
 pub mod slam;

@@ -6,6 +6,7 @@
 //! (`None`, or NaN for range readings) on the steps they did not sample.
 
 pub mod calib_csv;
+pub mod carmen;
 mod csv_io;
 pub mod digest;
 mod error;

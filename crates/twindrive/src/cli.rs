@@ -64,15 +64,21 @@ pub enum Command {
     /// a nav_msgs/msg/Odometry topic such as /odom, or TF odom -> base; no
     /// calibration needed), or the wheel joints of a JointState topic with
     /// --calibration (the wheels, and the lidar's mount when it is a
-    /// self-calibration). The lidar's mount is otherwise the recording's
-    /// (/tf_static in a bag). The motion places each scan; each scan is matched against
+    /// self-calibration), or --carmen LOG: a CARMEN log (.clf, .clf.gz, as
+    /// the 2D SLAM benchmark publishes them), read directly, with the
+    /// robot's odometry it carries. The lidar's mount is otherwise the
+    /// recording's (/tf_static in a bag, the laser lines' laser pose on the
+    /// robot in a CARMEN log). --until-s T maps only the first T seconds.
+    /// The motion places each scan; each scan is matched against
     /// the map drawn so far, so a drive that comes back to where it started
     /// does not draw the walls twice. Writes into --out a ROS map_server map
     /// (map.pgm, map.yaml: occupancy from log-odds, unknown where no beam
     /// reached), site.toml (a scenario on that map that simulate, plan,
     /// verify-plan, console and robot take as the twin's site), poses.tum
-    /// (the drive in the map) and map_report.json. The map's frame is the
-    /// log's (its start pose), or the robot's first pose in a bag.
+    /// (the drive in the map, each pose stamped with its scan's own time on
+    /// the recording's clock: `twindrive relations` scores it) and
+    /// map_report.json. The map's frame is the log's (its start pose), or
+    /// the robot's first pose in a bag or a CARMEN log.
     ///
     /// Not mapped (an error that says which): a recording without a
     /// LaserScan topic, or with neither odometry nor wheel joints (wheel
@@ -124,6 +130,20 @@ pub enum Command {
     /// --details FILE writes, each cut made and refused. --out is a CSV in
     /// the same columns.
     Prune(PruneArgs),
+    /// Score a trajectory on the 2D SLAM benchmark's relations (Kümmerle et
+    /// al., "On measuring the accuracy of SLAM algorithms", 2009).
+    ///
+    /// TRAJECTORY is a TUM file (`t x y z qx qy qz qw`, such as `map`'s
+    /// poses.tum) stamped with the scans' own times; --relations FILE holds
+    /// `t1 t2 x y z roll pitch yaw` per line (the benchmark's `.relations`).
+    /// Each relation's error is the trajectory's relative pose
+    /// T(t1)⁻¹ T(t2) minus the relation, per component. Prints the mean ±
+    /// standard deviation (the sample's, n - 1) of the absolute and squared
+    /// translational error (m, m²) and rotational error (deg, deg²), and how
+    /// many relations matched: a relation counts only when the trajectory
+    /// has a pose within 1 ms of both its stamps. Exit status 1 when none
+    /// matched.
+    Relations(RelationsArgs),
     /// Run the paper's case study end to end into ./twindrive-out/.
     ///
     /// The built-in calibration drive on the twin (calibration_drive/), its
@@ -800,6 +820,18 @@ impl RedundancyFlags {
 }
 
 #[derive(Debug, clap::Args)]
+pub struct RelationsArgs {
+    /// The trajectory: a TUM file stamped with the scans' own times.
+    pub trajectory: PathBuf,
+    /// The relations file (`t1 t2 x y z roll pitch yaw` per line).
+    #[arg(long, value_name = "FILE")]
+    pub relations: PathBuf,
+    /// Print the score as JSON (mean, std and max of each error).
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, clap::Args)]
 pub struct PruneArgs {
     /// The path file (CSV `t,x,y,theta` or TUM).
     pub path: PathBuf,
@@ -1091,9 +1123,22 @@ pub struct CalibrateArgs {
 
 #[derive(Debug, clap::Args)]
 pub struct MapArgs {
-    /// Simulator output directory with a lidar's scans (instead of --bag).
-    #[arg(required_unless_present = "bag")]
+    /// Simulator output directory with a lidar's scans (instead of --bag
+    /// or --carmen).
+    #[arg(required_unless_present_any = ["bag", "carmen"])]
     pub log_dir: Option<PathBuf>,
+    /// A CARMEN log (`.clf`, or gzip-compressed `.clf.gz`), read directly:
+    /// the scans of its FLASER or ROBOTLASER1 lines and the robot's own
+    /// odometry (its ODOM lines, else the robot pose in the laser lines),
+    /// stamped with their ipc_timestamp; the laser's mount from the laser
+    /// lines. As the 2D SLAM benchmark (Kümmerle et al. 2009) publishes
+    /// its logs; no calibration needed.
+    #[arg(long, value_name = "LOG", conflicts_with_all = ["log_dir", "bag"])]
+    pub carmen: Option<PathBuf>,
+    /// Map only the first T seconds of the recording, counted from its
+    /// first scan.
+    #[arg(long, value_name = "T", value_parser = usage::positive)]
+    pub until_s: Option<f64>,
     /// A rosbag2 recording (MCAP or sqlite3): scans from --scan-topic, the
     /// robot's motion from its odometry (--odom-topic) or its wheel joints
     /// (--left-joint/--right-joint, with --calibration).
@@ -1147,11 +1192,11 @@ pub struct MapArgs {
     #[arg(long, value_name = "calib.json")]
     pub calibration: Option<PathBuf>,
     /// Wheel diameter for site.toml's robot when neither --calibration nor
-    /// --mission gives the wheels (mapping from --odom-topic).
+    /// --mission gives the wheels (mapping from --odom-topic or --carmen).
     #[arg(long, value_parser = usage::positive)]
     pub wheel_diameter_m: Option<f64>,
     /// Wheelbase for site.toml's robot when neither --calibration nor
-    /// --mission gives the wheels (mapping from --odom-topic).
+    /// --mission gives the wheels (mapping from --odom-topic or --carmen).
     #[arg(long, value_parser = usage::positive)]
     pub wheelbase_m: Option<f64>,
     /// A mission scenario whose robot, sensors and controller site.toml

@@ -348,7 +348,21 @@ fn every_commands_help_names_each_input_it_takes() {
                 "LaserScan",
                 "JointState",
                 "/odom",
+                "--carmen",
+                "CARMEN log",
+                "read directly",
+                "--until-s",
                 "Not mapped",
+            ],
+        ),
+        (
+            &["relations", "--help"],
+            &[
+                "TUM",
+                "--relations",
+                "T(t1)⁻¹ T(t2)",
+                "within 1 ms",
+                "Exit status 1",
             ],
         ),
         (

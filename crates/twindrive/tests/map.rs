@@ -570,3 +570,180 @@ fn a_real_recording_with_odometry_and_no_wheel_joints_is_mapped() {
         assert!(!out.exists());
     }
 }
+
+/// `(t_s, [x_m, y_m, heading_rad])` of a TUM file, through the library.
+fn tum_track(path: &Path) -> Vec<(f64, [f64; 3])> {
+    twindrive_log::read_tum(path)
+        .unwrap()
+        .into_iter()
+        .map(|(t, p)| {
+            (
+                twindrive_log::seconds_from_ns(t),
+                [p.x_m, p.y_m, p.heading_rad],
+            )
+        })
+        .collect()
+}
+
+/// A CARMEN log of the public 2D SLAM benchmark (Freiburg building 079,
+/// `../shared/data/slam2d_benchmark/`, Kümmerle et al. 2009) is mapped as
+/// it is: its first two minutes, from the robot's ODOM lines. (Not MIT
+/// CSAIL: nearly half its relations reproduce the logged odometry's
+/// translation, see its SOURCE.md.) Every relation inside that window finds its two
+/// poses in poses.tum (stamped with the scans' ipc_timestamp), and the
+/// map's poses are closer to the relations than the raw odometry, in
+/// translation and in rotation. `twindrive relations` scores poses.tum as
+/// the library does. A broken log line is an error naming its file, line
+/// and field, and writes nothing.
+#[test]
+fn a_carmen_log_is_mapped_and_scored_on_the_benchmarks_relations() {
+    use twindrive_estimation::relations;
+    let dir = repo().join("../shared/data/slam2d_benchmark/fr079");
+    if !dir.is_dir() {
+        eprintln!("SKIPPED: ../shared/data/slam2d_benchmark is absent");
+        return;
+    }
+    let log_path = dir.join("fr079.rebuilt.clf.gz");
+    let relations_path = dir.join("fr079.relations");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("site");
+    let window_s = 120.0;
+    let o = run(&[
+        "map",
+        "--carmen",
+        log_path.to_str().unwrap(),
+        "--until-s",
+        &window_s.to_string(),
+        "--wheel-diameter-m",
+        "0.2",
+        "--wheelbase-m",
+        "0.4",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let log = twindrive_log::carmen::CarmenLog::read(&log_path).unwrap();
+    let (start_s, end_s) = (log.lasers[0].t_s, log.lasers[0].t_s + window_s);
+    let all =
+        relations::parse_relations(&std::fs::read_to_string(&relations_path).unwrap()).unwrap();
+    let inside: Vec<_> = all
+        .iter()
+        .copied()
+        .filter(|r| {
+            [r.t1_s, r.t2_s]
+                .iter()
+                .all(|t| (start_s..=end_s).contains(t))
+        })
+        .collect();
+    assert!(
+        inside.len() > 100,
+        "{} relations in the window",
+        inside.len()
+    );
+    let mapped = tum_track(&out.join("poses.tum"));
+    assert!(
+        mapped
+            .iter()
+            .all(|(t, _)| (start_s - 1e-3..=end_s + 1e-3).contains(t)),
+        "poses.tum runs past the window"
+    );
+    let ours = relations::score(&inside, &mapped);
+    assert_eq!(
+        ours.matched,
+        inside.len(),
+        "relations matched in the window"
+    );
+    let odometry: Vec<(f64, [f64; 3])> = log
+        .odometry_at_lasers()
+        .into_iter()
+        .map(|(t, p)| (t, [p.x_m, p.y_m, p.heading_rad]))
+        .collect();
+    let raw = relations::score(&inside, &odometry);
+    let (ours, raw) = (ours.errors.unwrap(), raw.errors.unwrap());
+    assert!(
+        ours.abs_trans_m.mean < raw.abs_trans_m.mean,
+        "mapped translational error {:.4} m is not below the raw odometry's {:.4} m on the {} relations",
+        ours.abs_trans_m.mean,
+        raw.abs_trans_m.mean,
+        inside.len()
+    );
+    assert!(
+        ours.abs_rot_deg.mean < raw.abs_rot_deg.mean,
+        "mapped rotational error {:.3} deg is not below the raw odometry's {:.3} deg on the {} relations",
+        ours.abs_rot_deg.mean,
+        raw.abs_rot_deg.mean,
+        inside.len()
+    );
+    // The command scores all the set's relations: those of the window
+    // match, and their errors are the library's.
+    let o = run(&[
+        "relations",
+        "--relations",
+        relations_path.to_str().unwrap(),
+        out.join("poses.tum").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let whole = relations::score(&all, &mapped);
+    assert_eq!(json["relations"].as_u64(), Some(all.len() as u64), "{json}");
+    assert_eq!(
+        json["matched"].as_u64(),
+        Some(whole.matched as u64),
+        "{json}"
+    );
+    assert!(whole.matched >= inside.len());
+    let mean = json["errors"]["abs_trans_m"]["mean"].as_f64().unwrap();
+    assert!((mean - whole.errors.unwrap().abs_trans_m.mean).abs() < 1e-12);
+    let o = run(&[
+        "relations",
+        "--relations",
+        relations_path.to_str().unwrap(),
+        out.join("poses.tum").to_str().unwrap(),
+    ]);
+    let stdout = text(&o.stdout);
+    assert!(
+        stdout.contains(&format!(
+            "relations matched: {} of {}",
+            whole.matched,
+            all.len()
+        )) && stdout.contains("absolute translational error: "),
+        "{stdout}"
+    );
+    // Bad input: a log line cut short, a relations line with a word.
+    let bad = tmp.path().join("bad.clf");
+    std::fs::write(&bad, "# c\nODOM 0 0 0 0 0 0 1 h 1\nFLASER 3 1 2\n").unwrap();
+    let bad_out = tmp.path().join("bad_site");
+    let o = run(&[
+        "map",
+        "--carmen",
+        bad.to_str().unwrap(),
+        "--wheel-diameter-m",
+        "0.2",
+        "--wheelbase-m",
+        "0.4",
+        "--out",
+        bad_out.to_str().unwrap(),
+    ]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("bad.clf, line 3, column `range 3`: the line ends"),
+        "{err}"
+    );
+    assert!(!bad_out.exists());
+    let bad_rel = tmp.path().join("bad.relations");
+    std::fs::write(&bad_rel, "1 2 0 0 0 0 0 0\n1 2 0 0 0 0 zero 0\n").unwrap();
+    let o = run(&[
+        "relations",
+        "--relations",
+        bad_rel.to_str().unwrap(),
+        out.join("poses.tum").to_str().unwrap(),
+    ]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("bad.relations") && err.contains("line 2: `pitch`: `zero`"),
+        "{err}"
+    );
+}

@@ -1,6 +1,6 @@
 //! `twindrive map`: the site's map from a drive's scans and its motion (the
-//! encoders and a calibration, or the robot's own odometry; the work is
-//! `twindrive_calibrate::site_map`'s).
+//! encoders and a calibration, or the robot's own odometry: a bag's, or a
+//! CARMEN log's; the work is `twindrive_calibrate::site_map`'s).
 
 use std::time::Instant;
 
@@ -23,13 +23,28 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         None => None,
     };
     let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
-    if calibration.is_none() && args.odom_topic.is_none() {
+    // The robot's own odometry places the scans (no calibration needed).
+    let from_odometry = args.odom_topic.is_some() || args.carmen.is_some();
+    if calibration.is_none() && !from_odometry {
         return Err(usage(
             "--calibration: mapping from wheel angles needs the calibrated wheels (calib.json from \
              `twindrive calibrate`); a bag with the robot's odometry maps without one (--odom-topic)",
         ));
     }
-    let (rec, start, robot) = match (&args.log_dir, &args.bag) {
+    let (mut rec, start, robot) = match (&args.log_dir, &args.bag) {
+        _ if args.carmen.is_some() => {
+            let path = args.carmen.as_deref().expect("matched on is_some");
+            let rec = scan_inputs::from_carmen(path)?;
+            let robot = SiteRobot {
+                footprint_radius_m: args.footprint_radius_m,
+                max_wheel_speed_rad_s: args.max_wheel_speed_rad_s,
+                max_wheel_accel_rad_s2: args.max_wheel_accel_rad_s2,
+                ticks_per_rev: 4096,
+                scan_rate_hz: scan_rate_hz(&rec),
+                gyro: None,
+            };
+            (rec, Pose::new(0.0, 0.0, 0.0), robot)
+        }
         (Some(dir), None) => {
             let log = inputs::read_log_dir(dir)?;
             let rec = ScanRecording::from_log(&log, args.scan_sensor.as_deref(), signs)?;
@@ -94,8 +109,17 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
             };
             (rec, Pose::new(0.0, 0.0, 0.0), robot)
         }
-        _ => unreachable!("clap requires LOG_DIR or --bag, not both"),
+        _ => unreachable!("clap requires one of LOG_DIR, --bag and --carmen"),
     };
+    if let Some(duration_s) = args.until_s {
+        let before = rec.scans.len();
+        rec.truncate_to(duration_s);
+        tracing::info!(
+            scans = rec.scans.len(),
+            of = before,
+            "--until-s {duration_s}: the first {duration_s} s"
+        );
+    }
     let scenario = match &args.mission {
         Some(path) => SiteScenario::Mission {
             text: std::fs::read_to_string(path)
@@ -121,10 +145,13 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
                 wheelbase_m: b,
             },
             _ => {
-                return Err(usage(
+                return Err(usage(if args.carmen.is_some() {
+                    "--carmen without --calibration: give site.toml's robot its wheels with \
+                     --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them"
+                } else {
                     "--odom-topic without --calibration: give site.toml's robot its wheels with \
-                     --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them",
-                ));
+                     --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them"
+                }));
             }
         },
     };
@@ -152,7 +179,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         ),
         None => tracing::info!(lidar = %lidar.name, "the lidar's mount is the recording's"),
     }
-    let motion = if args.odom_topic.is_some() {
+    let motion = if from_odometry {
         Motion::Odometry(rec.odometry)
     } else {
         Motion::Wheels(rec.wheels)

@@ -11,6 +11,7 @@ mod map;
 mod ops;
 mod plan;
 mod prune;
+mod relations;
 mod rosbag;
 mod simulate;
 mod site_sim;
@@ -35,6 +36,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             out,
         } => verify_plan::run(&plan, scenario.as_deref(), &out),
         Command::Prune(a) => prune::run(&a),
+        Command::Relations(a) => relations::run(&a),
         Command::Demo { out } => demo::run(&out),
         Command::DrawMap { dir } => draw_map::run(&dir),
         Command::Keygen { out, robot } => keys::keygen(&out, robot.as_deref()),
