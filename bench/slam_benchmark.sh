@@ -12,6 +12,8 @@
 #        aces intel fr079 mit-csail fr-hospital; default all five)
 #   SMOKE=1   the dev build and the first 120 s of ACES only (a few seconds)
 #   DATA=DIR  the benchmark's folder (default ../shared/data/slam2d_benchmark)
+#   PICTURES=DIR  also writes each map as DIR/SET.png (map.pgm, shrunk to at
+#             most 900 pixels a side, a block's darkest cell kept)
 set -euo pipefail
 SMOKE=${SMOKE:-0}
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -87,17 +89,49 @@ for spec in "${SETS[@]}"; do
     note=""
     [[ $status == 0 ]] || note=" (map exit $status: $(tail -1 "$WORK/$set.stderr"))"
     "$bin" relations --relations "$DATA/$folder/$relations" "$out/poses.tum" --json > "$WORK/$set.score.json"
-    scans=$(jq .scans "$out/map_report.json")
+    scans=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["scans"])' "$out/map_report.json")
     wall=$(cat "$WORK/$set.wall")
-    rss_mb=$(awk '{ printf "%.0f", $1 / 1024 }' "$WORK/$set.rss")
-    read -r matched total trans_m trans_sd rot_deg rot_sd < <(jq -r \
-        '[.matched, .relations, .errors.abs_trans_m.mean, .errors.abs_trans_m.std, .errors.abs_rot_deg.mean, .errors.abs_rot_deg.std] | @tsv' \
+    rss_mb=$(tail -1 "$WORK/$set.rss" | awk '{ printf "%.0f", $1 / 1024 }')
+    read -r matched total trans_m trans_sd rot_deg rot_sd < <(python3 -c 'import json, sys
+s = json.load(open(sys.argv[1])); e = s["errors"]
+print(s["matched"], s["relations"], e["abs_trans_m"]["mean"], e["abs_trans_m"]["std"], e["abs_rot_deg"]["mean"], e["abs_rot_deg"]["std"])' \
         "$WORK/$set.score.json")
     ours_t=$(awk -v m="$trans_m" -v s="$trans_sd" 'BEGIN { printf "%.4f±%.4f", m, s }')
     ours_r=$(awk -v m="$rot_deg" -v s="$rot_sd" 'BEGIN { printf "%.3f±%.3f", m, s }')
     printf '%s\t%s\t%s\t%s\t%s/%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' \
         "$set" "$scans" "$ours_t" "$ours_r" "$matched" "$total" "$carto_t" "$carto_r" "$gm_t" "$gm_r" \
         "$wall" "$carto_s" "$rss_mb" >> "$rows"
+    if [[ -n ${PICTURES:-} ]]; then
+        mkdir -p "$PICTURES"
+        python3 - "$out/map.pgm" "$PICTURES/$set.png" <<'PY'
+import struct, sys, zlib
+data = open(sys.argv[1], "rb").read()
+fields, i = [], 0
+while len(fields) < 4:
+    while data[i:i + 1].isspace():
+        i += 1
+    if data[i:i + 1] == b"#":
+        i = data.index(b"\n", i)
+        continue
+    j = i
+    while not data[j:j + 1].isspace():
+        j += 1
+    fields.append(data[i:j])
+    i = j
+w, h, px = int(fields[1]), int(fields[2]), data[i + 1:]
+k = max(1, -(-max(w, h) // 900))
+ow, oh = -(-w // k), -(-h // k)
+rows = []
+for oy in range(oh):
+    row = bytearray(ow)
+    for ox in range(ow):
+        row[ox] = min(px[y * w + x] for y in range(oy * k, min(h, oy * k + k)) for x in range(ox * k, min(w, ox * k + k)))
+    rows.append(b"\x00" + bytes(row))
+def chunk(kind, body):
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+open(sys.argv[2], "wb").write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", ow, oh, 8, 0, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(b"".join(rows), 9)) + chunk(b"IEND", b""))
+PY
+    fi
     echo "slam_benchmark: $set: $scans scans mapped in $wall s, peak ${rss_mb} MB; $ours_t m, $ours_r deg on $matched/$total relations$note" >&2
 done
 

@@ -674,6 +674,14 @@ fn a_carmen_log_is_mapped_and_scored_on_the_benchmarks_relations() {
         raw.abs_rot_deg.mean,
         inside.len()
     );
+    // Cartographer's published means on the whole of fr079 (Hess et al.
+    // 2016, Table II; ../shared/data/slam2d_benchmark/PUBLISHED.md).
+    assert!(
+        ours.abs_trans_m.mean <= 0.0452 && ours.abs_rot_deg.mean <= 0.538,
+        "mapped {:.4} m, {:.3} deg: above Cartographer's 0.0452 m, 0.538 deg",
+        ours.abs_trans_m.mean,
+        ours.abs_rot_deg.mean
+    );
     // The command scores all the set's relations: those of the window
     // match, and their errors are the library's.
     let o = run(&[

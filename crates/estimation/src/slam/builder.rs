@@ -271,10 +271,28 @@ impl Slam {
             && self.submaps[m].nodes.len() >= s.submap_nodes
         {
             self.active.remove(0);
+            // The loop search's grid covers what a node's points (within
+            // `loop_range_m`) can reach from where the submap's nodes were.
+            let frame = self.nodes[self.submaps[m].anchor].local;
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for &n in &self.submaps[m].nodes {
+                let p = between(frame, self.nodes[n].local);
+                for c in 0..2 {
+                    lo[c] = lo[c].min(p[c] - s.loop_range_m);
+                    hi[c] = hi[c].max(p[c] + s.loop_range_m);
+                }
+            }
             let submap = &mut self.submaps[m];
+            let reachable: Vec<[f64; 2]> = submap
+                .points
+                .points()
+                .iter()
+                .filter(|p| (0..2).all(|c| p[c] >= lo[c] && p[c] <= hi[c]))
+                .copied()
+                .collect();
             submap.local_grid = None;
             submap.grid = Some(LikelihoodGrid::new(
-                submap.points.points(),
+                &reachable,
                 s.grid_resolution_m,
                 s.grid_sigma_m,
                 s.grid_levels,

@@ -23,8 +23,9 @@ pub struct LikelihoodGrid {
     width: usize,
     height: usize,
     /// `levels[h][y * width + x]`: the most of level 0 over
-    /// `[x, x + 2^h) × [y, y + 2^h)`.
-    levels: Vec<Vec<f32>>,
+    /// `[x, x + 2^h) × [y, y + 2^h)`, in 255ths (a byte a cell: a
+    /// building's submaps hold tens of millions of cells).
+    levels: Vec<Vec<u8>>,
 }
 
 /// How a scan is searched for.
@@ -69,7 +70,7 @@ impl LikelihoodGrid {
         let origin = [lo[0] - margin, lo[1] - margin];
         let width = ((hi[0] - lo[0] + 2.0 * margin) / resolution_m).ceil() as usize + 1;
         let height = ((hi[1] - lo[1] + 2.0 * margin) / resolution_m).ceil() as usize + 1;
-        let mut base = vec![0.0f32; width * height];
+        let mut base = vec![0u8; width * height];
         let inv_two_var = 1.0 / (2.0 * sigma_m * sigma_m);
         for p in points {
             let cx = ((p[0] - origin[0]) / resolution_m).round() as i64;
@@ -78,7 +79,7 @@ impl LikelihoodGrid {
                 let dy = origin[1] + y as f64 * resolution_m - p[1];
                 for x in (cx - reach).max(0)..=(cx + reach).min(width as i64 - 1) {
                     let dx = origin[0] + x as f64 * resolution_m - p[0];
-                    let v = (-(dx * dx + dy * dy) * inv_two_var).exp() as f32;
+                    let v = ((-(dx * dx + dy * dy) * inv_two_var).exp() * 255.0).round() as u8;
                     let cell = &mut base[y as usize * width + x as usize];
                     if v > *cell {
                         *cell = v;
@@ -94,10 +95,10 @@ impl LikelihoodGrid {
                 if x < width && y < height {
                     prev[y * width + x]
                 } else {
-                    0.0
+                    0
                 }
             };
-            let mut next = vec![0.0f32; width * height];
+            let mut next = vec![0u8; width * height];
             for y in 0..height {
                 for x in 0..width {
                     next[y * width + x] = at(x, y)
@@ -125,7 +126,7 @@ impl LikelihoodGrid {
         if x < 0.0 || y < 0.0 || x >= self.width as f64 || y >= self.height as f64 {
             return 0.0;
         }
-        f64::from(self.levels[0][y as usize * self.width + x as usize])
+        f64::from(self.levels[0][y as usize * self.width + x as usize]) / 255.0
     }
 
     /// Mean of the field at `points` (sensor frame) seen from `pose`.
@@ -186,7 +187,7 @@ impl LikelihoodGrid {
             // A cell of level h bounds the 2^h cells from it: one left of
             // (below) the grid by less than that bounds the grid's first.
             let span = 1i64 << level;
-            let mut sum = 0.0f32;
+            let mut sum = 0u32;
             for &(x, y) in &rotated[angle].1 {
                 let (x, y) = (x + dx, y + dy);
                 if x + span <= 0 || y + span <= 0 {
@@ -194,10 +195,10 @@ impl LikelihoodGrid {
                 }
                 let (x, y) = (x.max(0) as usize, y.max(0) as usize);
                 if x < self.width && y < self.height {
-                    sum += grid[y * self.width + x];
+                    sum += u32::from(grid[y * self.width + x]);
                 }
             }
-            f64::from(sum) / n
+            f64::from(sum) / (255.0 * n)
         };
         // The top level's candidates, best first.
         let mut candidates: Vec<Candidate> = Vec::new();
