@@ -69,9 +69,11 @@ pub enum Command {
     /// robot's odometry it carries. The lidar's mount is otherwise the
     /// recording's (/tf_static in a bag, the laser lines' laser pose on the
     /// robot in a CARMEN log). --until-s T maps only the first T seconds.
-    /// The motion places each scan; each scan is matched against
-    /// the map drawn so far, so a drive that comes back to where it started
-    /// does not draw the walls twice. Writes into --out a ROS map_server map
+    /// The motion predicts each scan's pose; the SLAM matches it against
+    /// a submap of the last few metres, and searches for it in the submaps
+    /// drawn earlier (loop closure, tolerating metres of drift), so a drive
+    /// that comes back to where it started does not draw the walls twice:
+    /// the map is drawn from the optimized poses. Writes into --out a ROS map_server map
     /// (map.pgm, map.yaml: occupancy from log-odds, unknown where no beam
     /// reached), site.toml (a scenario on that map that simulate, plan,
     /// verify-plan, console and robot take as the twin's site), poses.tum
