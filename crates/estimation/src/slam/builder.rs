@@ -45,6 +45,8 @@ struct Submap {
     nodes: Vec<usize>,
     /// Built when the submap is finished.
     grid: Option<LikelihoodGrid>,
+    /// The last node a loop closure joined to it.
+    closed_at: Option<usize>,
     /// For local matching while it is active: dropped at each insertion,
     /// built again when next needed.
     local_grid: Option<LikelihoodGrid>,
@@ -250,6 +252,7 @@ impl Slam {
                 points: PointMap::new(s.voxel_m, s.matching.outlier_m),
                 nodes: Vec::new(),
                 grid: None,
+                closed_at: None,
                 local_grid: None,
             });
             self.active.push(self.submaps.len() - 1);
@@ -322,6 +325,10 @@ impl Slam {
             .iter()
             .enumerate()
             .filter(|(_, m)| m.grid.is_some() && m.anchor + s.loop_min_separation <= k)
+            // A submap closed to a node a few nodes back is tied to this
+            // stretch of the drive already (a drive that circles one room
+            // would otherwise search every submap at every chance).
+            .filter(|(_, m)| m.closed_at.is_none_or(|c| c + s.loop_rest_nodes <= k))
             .filter_map(|(i, m)| {
                 let d = m
                     .nodes
@@ -363,6 +370,7 @@ impl Slam {
                 huber: Some(s.loop_huber),
                 active: true,
             });
+            self.submaps[m].closed_at = Some(k);
             self.stats.loop_closures += 1;
             self.fresh_loops += 1;
         }

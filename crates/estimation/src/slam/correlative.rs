@@ -38,6 +38,10 @@ pub struct SearchWindow {
     /// Candidates scoring below this (mean likelihood, 0 to 1) are not
     /// matches.
     pub min_score: f64,
+    /// The headings are stepped so the farthest point moves a cell, but
+    /// never finer than this (rad; 0 for no bound): a search whose best
+    /// pose is refined after needs no finer one.
+    pub min_step_rad: f64,
 }
 
 /// The best pose found and its score.
@@ -327,6 +331,7 @@ mod tests {
                 linear_m: 2.0,
                 angular_rad: 0.4,
                 min_score: 0.1,
+                min_step_rad: 0.0,
             };
             let found = grid.search(&scan, guess, window).expect("a match");
             let off = between(truth, found.pose);
@@ -388,6 +393,7 @@ mod tests {
             linear_m: 1.0,
             angular_rad: 0.3,
             min_score: 0.3,
+            min_step_rad: 0.0,
         };
         let found = grid
             .search(&scan, [0.2, -0.3, 0.1], window)

@@ -71,8 +71,10 @@ pub struct SlamSettings {
     /// of their nodes within the window's reach.
     pub loop_every: usize,
     pub loop_min_separation: usize,
-    /// At most this many submaps searched for a node, the nearest.
+    /// At most this many submaps searched for a node, the nearest; a
+    /// submap closed to a node is not searched again for this many nodes.
     pub loop_max_submaps: usize,
+    pub loop_rest_nodes: usize,
     pub loop_window: SearchWindow,
     /// A node's points for the loop search: at most this many, within this
     /// range (m).
@@ -109,6 +111,7 @@ impl Default for SlamSettings {
                 linear_m: 0.2,
                 angular_rad: 0.35,
                 min_score: 0.0,
+                min_step_rad: 0.01,
             },
             local_levels: 3,
             local_search_range_m: 30.0,
@@ -126,10 +129,12 @@ impl Default for SlamSettings {
             loop_every: 3,
             loop_min_separation: 90,
             loop_max_submaps: 3,
+            loop_rest_nodes: 10,
             loop_window: SearchWindow {
                 linear_m: 4.0,
                 angular_rad: 0.35,
                 min_score: 0.55,
+                min_step_rad: 0.0,
             },
             loop_points: 250,
             loop_range_m: 15.0,
@@ -169,12 +174,17 @@ pub fn locate_drive(
     settings: SlamSettings,
     mut progress: impl FnMut(usize, usize),
 ) -> DriveLocated {
+    // The SLAM runs in the frame of the first odometry pose: its grids are
+    // aligned with that frame, so the same drive recorded in another frame
+    // (a bag's odometry starting at zero, a log's at the start pose) is
+    // located the same way, then moved back.
+    let origin = scans.first().map_or([0.0; 3], |(_, o)| *o);
     let mut slam = Slam::new(mount, settings);
     let mut matched_each = Vec::with_capacity(scans.len());
     let mut rms_m = Vec::new();
     for (k, (scan, odometry)) in scans.iter().enumerate() {
         let points = thin(scan, settings.max_range_m, settings.scan_voxel_m);
-        let outcome = slam.add(scan.t_s, *odometry, &points);
+        let outcome = slam.add(scan.t_s, se2::between(origin, *odometry), &points);
         matched_each.push(outcome.matched);
         rms_m.extend(outcome.rms_m);
         if k % 64 == 0 {
@@ -182,6 +192,7 @@ pub fn locate_drive(
         }
     }
     let (poses, stats) = slam.finish();
+    let poses = poses.into_iter().map(|p| se2::compose(origin, p)).collect();
     progress(scans.len(), scans.len());
     DriveLocated {
         poses,
