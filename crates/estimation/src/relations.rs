@@ -17,6 +17,8 @@
 use serde::Serialize;
 use twindrive_kinematics::wrap_angle;
 
+use crate::se2::between;
+
 /// How far a trajectory's stamp may be from a relation's and still be the
 /// pose at that stamp (s). The benchmark's stamps are the scans' own, to
 /// the microsecond.
@@ -136,13 +138,6 @@ fn pose_at(trajectory: &[(f64, [f64; 3])], t_s: f64) -> Option<[f64; 3]> {
         .map(|(_, p)| p)
 }
 
-/// `a⁻¹ b`: pose `b` in the frame of pose `a`.
-pub fn between(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a[2].sin_cos();
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    [c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2])]
-}
-
 /// The error of one relation against the trajectory, `[dx, dy, dθ]`
 /// (m, m, rad, dθ wrapped), when both its stamps have a pose.
 pub fn relation_error(trajectory: &[(f64, [f64; 3])], r: &Relation) -> Option<[f64; 3]> {
@@ -179,17 +174,9 @@ pub fn score(relations: &[Relation], trajectory: &[(f64, [f64; 3])]) -> Relation
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::se2::compose;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-
-    fn compose(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-        let (s, c) = a[2].sin_cos();
-        [
-            a[0] + c * b[0] - s * b[1],
-            a[1] + s * b[0] + c * b[1],
-            wrap_angle(a[2] + b[2]),
-        ]
-    }
 
     /// A random walk of `n` poses 0.1 s apart, and relations between
     /// random pairs of them, exact.

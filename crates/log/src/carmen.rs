@@ -310,7 +310,8 @@ impl<'a> Fields<'a> {
         })
     }
 
-    fn flaser(&mut self) -> Result<CarmenLaser, LogError> {
+    /// A laser line's `num_readings`: at least 2.
+    fn beams(&mut self) -> Result<usize, LogError> {
         let n = self.count("num_readings")?;
         if n < 2 {
             return Err(self.error(
@@ -318,6 +319,11 @@ impl<'a> Fields<'a> {
                 format!("{n} beams: a scan needs at least 2"),
             ));
         }
+        Ok(n)
+    }
+
+    fn flaser(&mut self) -> Result<CarmenLaser, LogError> {
+        let n = self.beams()?;
         let ranges_m = self.ranges(n)?;
         let laser_pose = self.pose(["x", "y", "theta"])?;
         let robot_pose = self.pose(["odom_x", "odom_y", "odom_theta"])?;
@@ -353,13 +359,7 @@ impl<'a> Fields<'a> {
         }
         self.number("accuracy")?;
         self.number("remission_mode")?;
-        let n = self.count("num_readings")?;
-        if n < 2 {
-            return Err(self.error(
-                "num_readings",
-                format!("{n} beams: a scan needs at least 2"),
-            ));
-        }
+        let n = self.beams()?;
         let ranges_m = self.ranges(n)?;
         let remissions = self.count("num_remissions")?;
         for i in 0..remissions {

@@ -28,14 +28,21 @@ pub fn room(rng: &mut ChaCha8Rng) -> Vec<[f64; 4]> {
             rng.random_range(0.5..h - 1.0),
         );
         let s = rng.random_range(0.2..0.5);
-        walls.extend([
-            [x, y, x + s, y],
-            [x + s, y, x + s, y + s],
-            [x + s, y + s, x, y + s],
-            [x, y + s, x, y],
-        ]);
+        walls.extend(square(x, y, s));
     }
     walls
+}
+
+/// The four walls of a `side_m` square box with its lower-left corner at
+/// (x, y).
+pub fn square(x: f64, y: f64, side_m: f64) -> [[f64; 4]; 4] {
+    let s = side_m;
+    [
+        [x, y, x + s, y],
+        [x + s, y, x + s, y + s],
+        [x + s, y + s, x, y + s],
+        [x, y + s, x, y],
+    ]
 }
 
 /// How a simulated scanner reads.
@@ -79,15 +86,7 @@ pub fn scan(walls: &[[f64; 4]], pose: [f64; 3], lidar: Lidar, rng: &mut ChaCha8R
     }
 }
 
-/// `a ⊕ b` in SE(2).
-pub fn compose(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a[2].sin_cos();
-    [
-        a[0] + c * b[0] - s * b[1],
-        a[1] + s * b[0] + c * b[1],
-        twindrive_kinematics::wrap_angle(a[2] + b[2]),
-    ]
-}
+pub use crate::se2::compose;
 
 /// A pose in the room at least `clearance_m` from every wall.
 pub fn free_pose(walls: &[[f64; 4]], clearance_m: f64, rng: &mut ChaCha8Rng) -> [f64; 3] {

@@ -163,15 +163,23 @@ impl Slam {
             };
             // The search's angular step is set by its farthest point: the
             // near ones give the prior, PL-ICP refines on all.
-            let near: Vec<[f64; 2]> = points
-                .iter()
-                .filter(|p| p[0].hypot(p[1]) <= s.local_search_range_m)
-                .copied()
-                .collect();
+            // (The points are already cut at `max_range_m`: no copy when
+            // the search reaches that far.)
+            let near: Vec<[f64; 2]>;
+            let searched = if s.local_search_range_m >= s.max_range_m {
+                points
+            } else {
+                near = points
+                    .iter()
+                    .filter(|p| p[0].hypot(p[1]) <= s.local_search_range_m)
+                    .copied()
+                    .collect();
+                &near
+            };
             let start = submap
                 .local_grid
                 .as_ref()
-                .and_then(|g| g.search(&near, prior, window))
+                .and_then(|g| g.search(searched, prior, window))
                 .map_or(prior, |f| f.pose);
             if let Ok(found) = register(&submap.points, points, start, &s.matching) {
                 let moved = (found.pose[0] - prior[0]).hypot(found.pose[1] - prior[1]);

@@ -44,12 +44,7 @@ fn ring(w: f64, h: f64, width: f64, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<[f
             2 => (t * w, h + o - s),
             _ => (-o, t * h),
         };
-        walls.extend([
-            [x, y, x + s, y],
-            [x + s, y, x + s, y + s],
-            [x + s, y + s, x, y + s],
-            [x, y + s, x, y],
-        ]);
+        walls.extend(testkit::square(x, y, s));
     }
     walls
 }

@@ -35,14 +35,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         _ if args.carmen.is_some() => {
             let path = args.carmen.as_deref().expect("matched on is_some");
             let rec = scan_inputs::from_carmen(path)?;
-            let robot = SiteRobot {
-                footprint_radius_m: args.footprint_radius_m,
-                max_wheel_speed_rad_s: args.max_wheel_speed_rad_s,
-                max_wheel_accel_rad_s2: args.max_wheel_accel_rad_s2,
-                ticks_per_rev: 4096,
-                scan_rate_hz: scan_rate_hz(&rec),
-                gyro: None,
-            };
+            let robot = described_robot(args, &rec);
             (rec, Pose::new(0.0, 0.0, 0.0), robot)
         }
         (Some(dir), None) => {
@@ -99,14 +92,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
                 base_frame: args.base_frame.clone(),
             };
             let (rec, _) = scan_inputs::from_bag(&source, signs)?;
-            let robot = SiteRobot {
-                footprint_radius_m: args.footprint_radius_m,
-                max_wheel_speed_rad_s: args.max_wheel_speed_rad_s,
-                max_wheel_accel_rad_s2: args.max_wheel_accel_rad_s2,
-                ticks_per_rev: 4096,
-                scan_rate_hz: scan_rate_hz(&rec),
-                gyro: None,
-            };
+            let robot = described_robot(args, &rec);
             (rec, Pose::new(0.0, 0.0, 0.0), robot)
         }
         _ => unreachable!("clap requires one of LOG_DIR, --bag and --carmen"),
@@ -232,6 +218,18 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The site's robot of a recording that does not describe one (a bag, a
+/// CARMEN log): what the flags say, the scans' own rate.
+fn described_robot(args: &MapArgs, rec: &ScanRecording) -> SiteRobot {
+    SiteRobot {
+        footprint_radius_m: args.footprint_radius_m,
+        max_wheel_speed_rad_s: args.max_wheel_speed_rad_s,
+        max_wheel_accel_rad_s2: args.max_wheel_accel_rad_s2,
+        ticks_per_rev: 4096,
+        scan_rate_hz: scan_rate_hz(rec),
+        gyro: None,
+    }
+}
 /// The lidar's rate from its scans' times (10 Hz if they do not say).
 fn scan_rate_hz(rec: &ScanRecording) -> f64 {
     let (Some(a), Some(b)) = (rec.scans.first(), rec.scans.last()) else {
