@@ -272,6 +272,10 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
     let mut scan_topics: Vec<String> = Vec::new();
     let mut imu_topics: Vec<String> = Vec::new();
     let mut ticks: Vec<(String, String, Vec<String>)> = Vec::new();
+    // Plain-number topics that may carry wheel speeds: one number per
+    // topic, or an array.
+    let mut speed_topics: Vec<String> = Vec::new();
+    let mut speed_arrays: Vec<String> = Vec::new();
     let mut unreadable: Vec<String> = Vec::new();
     let mut decode: Vec<&str> = Vec::new();
     for t in bag.topics() {
@@ -299,6 +303,14 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
                 if t.message_count > 0 {
                     imu_topics.push(t.name.clone());
                 }
+            }
+            "std_msgs/msg/Float64" | "std_msgs/msg/Float32" if t.message_count > 1 => {
+                speed_topics.push(t.name.clone())
+            }
+            "std_msgs/msg/Float64MultiArray" | "std_msgs/msg/Float32MultiArray"
+                if t.message_count > 1 =>
+            {
+                speed_arrays.push(t.name.clone())
             }
             _ if t.message_count > 0 && !standard_non_tick(ty) => {
                 if let Ok(schema) = bag.schema(&t.name) {
@@ -425,6 +437,28 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
     for (topic, ty, fields) in &ticks {
         let _ = writeln!(o, "    {topic} ({ty}): {}", fields.join(", "));
     }
+    let speeds = wheel_speeds(bag, &speed_topics, &speed_arrays);
+    let _ = writeln!(o, "  wheels (speeds as plain numbers, integrated):");
+    match &speeds {
+        Some(s) => {
+            let _ = writeln!(o, "    {}", s.describe());
+        }
+        None if speed_topics.is_empty() && speed_arrays.is_empty() => {
+            let _ = writeln!(o, "    none");
+        }
+        None => {
+            let _ = writeln!(
+                o,
+                "    cannot tell the two wheels among {}",
+                speed_topics
+                    .iter()
+                    .chain(&speed_arrays)
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+    }
     refs.sort_by(|a, b| b.hinted.cmp(&a.hinted).then(b.count.cmp(&a.count)));
     let _ = writeln!(o, "  pose references (best first):");
     if refs.is_empty() {
@@ -467,12 +501,15 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             let _ = write!(f, " --left-joint {l} --right-joint {r}");
             Some(f)
         }
-        None => ticks.first().map(|(topic, _, fields)| {
-            format!(
-                " --ticks-topic {topic} --left-field {} --right-field {} --ticks-per-rev TICKS",
-                fields[0], fields[1]
-            )
-        }),
+        None => ticks
+            .first()
+            .map(|(topic, _, fields)| {
+                format!(
+                    " --ticks-topic {topic} --left-field {} --right-field {} --ticks-per-rev TICKS",
+                    fields[0], fields[1]
+                )
+            })
+            .or_else(|| speeds.as_ref().map(WheelSpeeds::flags)),
     };
     let reference = refs.first().map(|r| match &r.frame {
         Some((parent, child)) => format!(
@@ -489,8 +526,15 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
                 .first()
                 .map(|t| format!(" --imu-topic {t}"))
                 .unwrap_or_default();
+            // Self-calibration needs 30 matched intervals: a short drive
+            // gets shorter ones.
+            let interval = if duration_s < 60.0 {
+                " --interval-s 0.5"
+            } else {
+                ""
+            };
             Some(format!(
-                "twindrive calibrate --bag {}{w} --scan-topic {scan}{imu} --initial DL,DR,B --out calib.json",
+                "twindrive calibrate --bag {}{w} --scan-topic {scan}{imu}{interval} --initial DL,DR,B --out calib.json",
                 shell_quote(&path.display().to_string())
             ))
         }
@@ -508,7 +552,8 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             )),
             (None, Some(w)) => Some(format!(
                 "twindrive map --bag {bag}{w} --scan-topic {scan} --calibration calib.json --out site\n  \
-                 (calib.json: from the calibrate command line below)"
+                 (calib.json: from the calibrate command line below; or, with the nominal wheels, \
+                 --wheel-diameter-m D --wheelbase-m B instead of --calibration)"
             )),
             (None, None) => None,
         };
@@ -553,7 +598,7 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
                 match (w, p) {
                     (None, None) => "the bag has neither wheel data nor a pose reference",
                     (None, _) =>
-                        "the bag has no wheel data (two wheel joints, or two integer tick fields)",
+                        "the bag has no wheel data (two wheel joints, two integer tick fields, or two wheel speeds)",
                     _ => "the bag has no pose reference besides wheel odometry",
                 }
             );
@@ -593,6 +638,116 @@ fn list_or_none(v: &[String]) -> String {
     } else {
         v.join(", ")
     }
+}
+
+/// Two wheel speeds as plain numbers: two topics, or two elements of one
+/// array topic; with the sign a wheel's numbers need.
+#[derive(Debug, Clone, PartialEq)]
+struct WheelSpeeds {
+    /// `(topic, field)` of the left and the right wheel.
+    left: (String, String),
+    right: (String, String),
+    /// Which wheel's numbers run backwards when the robot drives (the one
+    /// whose mean is negative while the other's is positive: a motor
+    /// mounted mirrored), if one does.
+    backwards: Option<&'static str>,
+}
+
+impl WheelSpeeds {
+    fn describe(&self) -> String {
+        let side = |(t, f): &(String, String)| {
+            if f == "data" {
+                t.clone()
+            } else {
+                format!("{t} {f}")
+            }
+        };
+        format!(
+            "left {}, right {}{}; taken as rad/s (--speed-unit rev-per-s if they are turns)",
+            side(&self.left),
+            side(&self.right),
+            match self.backwards {
+                Some(w) => format!(
+                    "; the {w} one's mean is negative while the other's is positive (a mirrored motor): --{w}-sign -1"
+                ),
+                None => String::new(),
+            }
+        )
+    }
+
+    fn flags(&self) -> String {
+        let mut f = format!(" --left-speed-topic {}", self.left.0);
+        if self.left.1 != "data" {
+            let _ = write!(f, " --left-speed-field '{}'", self.left.1);
+        }
+        let _ = write!(f, " --right-speed-topic {}", self.right.0);
+        if self.right.1 != "data" {
+            let _ = write!(f, " --right-speed-field '{}'", self.right.1);
+        }
+        if let Some(w) = self.backwards {
+            let _ = write!(f, " --{w}-sign -1");
+        }
+        f
+    }
+}
+
+/// The wheel speeds among the plain-number topics, if two can be told
+/// apart: by `left`/`right` in their names, else the only two (in name
+/// order: `axis0` is the left); else an array topic's first two elements.
+fn wheel_speeds(bag: &Bag, topics: &[String], arrays: &[String]) -> Option<WheelSpeeds> {
+    let field = |t: &String, f: &str| (t.clone(), f.to_string());
+    let by_side = |side: &str| {
+        let mut m = topics
+            .iter()
+            .filter(|t| t.to_ascii_lowercase().contains(side));
+        let first = m.next()?;
+        m.next().is_none().then_some(first)
+    };
+    let (left, right) = match (by_side("left"), by_side("right")) {
+        (Some(l), Some(r)) => (field(l, "data"), field(r, "data")),
+        _ if topics.len() == 2 => {
+            let mut two = [&topics[0], &topics[1]];
+            two.sort();
+            (field(two[0], "data"), field(two[1], "data"))
+        }
+        _ if arrays.len() == 1 => (field(&arrays[0], "data[0]"), field(&arrays[0], "data[1]")),
+        _ => return None,
+    };
+    let backwards = match (mean_of(bag, &left), mean_of(bag, &right)) {
+        (Some(l), Some(r)) if l < 0.0 && r > 0.0 => Some("left"),
+        (Some(l), Some(r)) if r < 0.0 && l > 0.0 => Some("right"),
+        _ => None,
+    };
+    Some(WheelSpeeds {
+        left,
+        right,
+        backwards,
+    })
+}
+
+/// The mean of a number field over a topic's messages (`data` or
+/// `data[i]`), if every message has it.
+fn mean_of(bag: &Bag, (topic, field): &(String, String)) -> Option<f64> {
+    let schema = bag.schema(topic).ok()?;
+    let data = schema.path("data").ok()?;
+    let index: Option<usize> = field
+        .strip_prefix("data[")
+        .and_then(|i| i.strip_suffix(']'))
+        .and_then(|i| i.parse().ok());
+    let (mut sum, mut n) = (0.0, 0u64);
+    bag.for_each(topic, |m| {
+        let v = m.value.at(&data).ok_or("no data")?;
+        let x = match (v, index) {
+            (Value::Array(a), Some(i)) => a.get(i).and_then(Value::as_f64),
+            (v, None) => v.as_f64(),
+            _ => None,
+        };
+        sum += x.ok_or("not a number")?;
+        n += 1;
+        Ok(())
+    })
+    .ok()?;
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// The left and right wheel joints among `names`, if they can be told.
@@ -710,6 +865,72 @@ mod tests {
             assert!(!text.contains(not_a_reference), "{not_a_reference}: {text}");
         }
         assert!(text.contains("/tf: odom -> base_link"), "{text}");
+    }
+
+    /// Wheel speeds in one array topic (a ros2_control forward
+    /// controller's), the left motor mirrored; two named topics beside it
+    /// are told apart by name.
+    #[test]
+    fn wheel_speed_topics_are_suggested_with_the_mirrored_wheel() {
+        use twindrive_ros::msgs::{Distro, Float64, Float64MultiArray};
+        use twindrive_ros::{BagWriter, Qos};
+        let write = |dir: &Path, two_topics: bool| {
+            let path = dir.join("b_0.db3");
+            let mut w = BagWriter::sqlite3(&path, "b_0.db3", Distro::Humble).unwrap();
+            let array = w
+                .topic::<Float64MultiArray>("/wheel_speeds", Qos::DEFAULT)
+                .unwrap();
+            let sides = two_topics.then(|| {
+                (
+                    w.topic::<Float64>("/right_wheel/speed", Qos::DEFAULT)
+                        .unwrap(),
+                    w.topic::<Float64>("/left_wheel/speed", Qos::DEFAULT)
+                        .unwrap(),
+                )
+            });
+            for k in 0..50u64 {
+                let t = 1_000_000_000 + k * 20_000_000;
+                let msg = Float64MultiArray {
+                    data: vec![-3.0, 2.5],
+                    ..Default::default()
+                };
+                w.write(array, t, &msg).unwrap();
+                if let Some((r, l)) = sides {
+                    w.write(r, t, &Float64 { data: 2.5 }).unwrap();
+                    w.write(l, t, &Float64 { data: -3.0 }).unwrap();
+                }
+            }
+            std::fs::write(dir.join("metadata.yaml"), w.finish().unwrap()).unwrap();
+            let bag = Bag::open(dir).unwrap();
+            let arrays = ["/wheel_speeds".to_string()];
+            let topics: Vec<String> = if two_topics {
+                vec!["/right_wheel/speed".into(), "/left_wheel/speed".into()]
+            } else {
+                vec![]
+            };
+            (describe(dir).unwrap(), wheel_speeds(&bag, &topics, &arrays))
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let (text, found) = write(dir.path(), false);
+        assert!(
+            text.contains("left /wheel_speeds data[0], right /wheel_speeds data[1]; the left one's mean is negative"),
+            "{text}"
+        );
+        assert_eq!(
+            found.unwrap().flags(),
+            " --left-speed-topic /wheel_speeds --left-speed-field 'data[0]' \
+             --right-speed-topic /wheel_speeds --right-speed-field 'data[1]' --left-sign -1"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let (text, found) = write(dir.path(), true);
+        assert!(
+            text.contains("left /left_wheel/speed, right /right_wheel/speed"),
+            "{text}"
+        );
+        assert_eq!(
+            found.unwrap().flags(),
+            " --left-speed-topic /left_wheel/speed --right-speed-topic /right_wheel/speed --left-sign -1"
+        );
     }
 
     #[test]

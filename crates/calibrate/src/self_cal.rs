@@ -194,14 +194,22 @@ pub fn self_calibrate(
     if odo.motions.len() < MIN_INTERVALS {
         bail!(
             "calibration refused, nothing written: only {} intervals of {:.1} s were matched (at least {MIN_INTERVALS} \
-             are needed). {} scans; consecutive scans matched {}, refused: {}; intervals refused: {}; standstills {}",
+             are needed). {} scans; consecutive scans matched {}, refused: {}; intervals refused: {}; standstills {}{}",
             odo.motions.len(),
             job.settings.interval_s,
             odo.scans,
             odo.consecutive_matched,
             counts(&odo.consecutive_refused),
             odo.refusals(),
-            odo.standstills
+            odo.standstills,
+            if odo.motions.len() * 2 >= MIN_INTERVALS && job.settings.interval_s > 0.2 {
+                format!(
+                    ". A short drive gives more intervals with a shorter --interval-s (e.g. {:.1})",
+                    job.settings.interval_s / 2.0
+                )
+            } else {
+                String::new()
+            }
         );
     }
     let cf = closed_form(&odo.motions);

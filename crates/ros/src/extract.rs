@@ -9,8 +9,10 @@
 //! every track.
 //!
 //! Wheels come from `sensor_msgs/msg/JointState` (two named joints; the
-//! position in radians, or the velocity integrated) or from any message
-//! with two integer tick fields. Poses come from
+//! position in radians, or the velocity integrated), from any message
+//! with two integer tick fields, or from wheel speeds published as plain
+//! numbers (a `std_msgs/msg/Float64` per wheel, or two elements of an
+//! array), integrated. Poses come from
 //! `geometry_msgs/msg/PoseStamped`, `geometry_msgs/msg/PoseWithCovarianceStamped`,
 //! `nav_msgs/msg/Odometry` or a `tf2_msgs/msg/TFMessage` child frame. Fields
 //! are found by name in the definition stored in the file, so a message only
@@ -20,10 +22,12 @@ mod imu;
 mod scan;
 #[cfg(test)]
 mod sensor_tests;
+mod speeds;
 mod tf;
 
 pub use imu::{IMU, ImuRateTrack, imu_rate_track};
 pub use scan::{LASER_SCAN, ScanData, ScanTrack, scan_track};
+pub use speeds::NumberField;
 pub use tf::{PlanarMount, TF_MESSAGE, base_frame_guess, static_transform, tf_frames};
 
 use crate::bag::{Bag, BagError};
@@ -63,6 +67,16 @@ pub enum WheelSource {
         left_field: String,
         right_field: String,
         ticks_per_rev: u32,
+    },
+    /// Wheel speeds as plain numbers, integrated: a `std_msgs/msg/Float64`
+    /// topic per wheel (field `data`), or two elements of one array topic
+    /// (`std_msgs/msg/Float64MultiArray`'s `data[0]` and `data[1]`).
+    Speeds {
+        left: NumberField,
+        right: NumberField,
+        /// Radians per unit of the published number (1 for rad/s, 2π for
+        /// revolutions per second).
+        rad_per_unit: f64,
     },
 }
 
@@ -178,6 +192,11 @@ pub fn wheel_track(
             right_field,
             ticks_per_rev,
         } => ticks(bag, topic, left_field, right_field, *ticks_per_rev, stamps),
+        WheelSource::Speeds {
+            left,
+            right,
+            rad_per_unit,
+        } => speeds::speeds(bag, left, right, *rad_per_unit, stamps),
     }
 }
 
@@ -385,6 +404,30 @@ fn element_path(schema: &Schema, text: &str) -> Result<(FieldPath, Option<usize>
     Ok((fp, index))
 }
 
+/// The finite number at `path` (an [`element_path`]) of `value`; `name`
+/// is the field as the user wrote it.
+fn number_at(
+    value: &Value,
+    (path, index): &(FieldPath, Option<usize>),
+    name: &str,
+) -> Result<f64, String> {
+    let v = value.at(path).ok_or_else(|| format!("no field `{name}`"))?;
+    let v = match (v, index) {
+        (Value::Array(a), Some(i)) => a.get(*i),
+        (Value::Bytes(b), Some(i)) => {
+            return b
+                .get(*i)
+                .map(|b| f64::from(*b))
+                .ok_or_else(|| format!("`{name}`: the array is shorter"));
+        }
+        (v, None) => Some(v),
+        _ => None,
+    };
+    v.and_then(Value::as_f64)
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| format!("`{name}` is missing or not a finite number"))
+}
+
 fn ticks(
     bag: &Bag,
     topic: &str,
@@ -409,25 +452,14 @@ fn ticks(
     let k = std::f64::consts::TAU / f64::from(ticks_per_rev);
     let mut raw = Vec::new();
     bag.for_each(topic, |m| {
-        let read = |(p, i): &(FieldPath, Option<usize>), name: &str| -> Result<f64, String> {
-            let v = m.value.at(p).ok_or_else(|| format!("no field `{name}`"))?;
-            let v = match (v, i) {
-                (Value::Array(a), Some(i)) => a.get(*i),
-                (Value::Bytes(b), Some(i)) => {
-                    return b
-                        .get(*i)
-                        .map(|b| f64::from(*b))
-                        .ok_or_else(|| format!("`{name}`: the array is shorter"));
-                }
-                (v, None) => Some(v),
-                _ => None,
-            };
-            v.and_then(Value::as_f64)
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| format!("`{name}` is missing or not a finite number"))
-        };
         let t = message_time(m.value, m.log_time_ns, stamps, header.as_ref())?;
-        raw.push((t, (read(&l, left_field)? * k, read(&r, right_field)? * k)));
+        raw.push((
+            t,
+            (
+                number_at(m.value, &l, left_field)? * k,
+                number_at(m.value, &r, right_field)? * k,
+            ),
+        ));
         Ok(())
     })?;
     Ok(Extracted {

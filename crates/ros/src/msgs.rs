@@ -363,6 +363,13 @@ pub struct MultiArrayLayout {
     pub data_offset: u32,
 }
 
+/// One number, as a motor controller publishes a wheel's speed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Float64 {
+    pub data: f64,
+}
+message!(Float64, "std_msgs/msg/Float64");
+
 /// What a ros2_control `JointGroupVelocityController` takes: one velocity
 /// per joint, in the controller's joint order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]

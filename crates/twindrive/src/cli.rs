@@ -955,6 +955,47 @@ pub enum JointSignalArg {
     Velocity,
 }
 
+/// The unit a robot publishes its wheel speeds in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SpeedUnitArg {
+    /// Radians per second (ROS's unit for a joint's velocity).
+    RadPerS,
+    /// Revolutions (turns) per second, as ODrive's controllers report.
+    RevPerS,
+}
+
+/// Wheel speeds published as plain numbers (a bag's motion source).
+#[derive(Debug, Clone, clap::Args)]
+pub struct WheelSpeedArgs {
+    /// The left wheel's speed topic: std_msgs/msg/Float64 (field `data`),
+    /// or an array topic with --left-speed-field `data[0]`; integrated
+    /// into the wheel's angle.
+    #[arg(long, value_name = "TOPIC", requires_all = ["bag", "right_speed_topic"], conflicts_with_all = ["left_joint", "right_joint"])]
+    pub left_speed_topic: Option<String>,
+    /// The right wheel's speed topic (may be the left's, with another field).
+    #[arg(long, value_name = "TOPIC", requires_all = ["bag", "left_speed_topic"])]
+    pub right_speed_topic: Option<String>,
+    /// The number field of the left speed topic (`data`, or `data[0]` in an array).
+    #[arg(
+        long,
+        value_name = "FIELD",
+        default_value = "data",
+        requires = "left_speed_topic"
+    )]
+    pub left_speed_field: String,
+    /// The number field of the right speed topic (`data`, or `data[1]` in an array).
+    #[arg(
+        long,
+        value_name = "FIELD",
+        default_value = "data",
+        requires = "right_speed_topic"
+    )]
+    pub right_speed_field: String,
+    /// The speed topics' unit.
+    #[arg(long, value_enum, default_value_t = SpeedUnitArg::RadPerS, requires = "left_speed_topic")]
+    pub speed_unit: SpeedUnitArg,
+}
+
 /// Where message times come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum StampsArg {
@@ -996,7 +1037,8 @@ pub struct CalibrateArgs {
     pub log_dir: Option<PathBuf>,
     /// A rosbag2 recording (a bag directory or one .mcap/.db3 file; MCAP or
     /// sqlite3, split, zstd-compressed or cut short): wheels from
-    /// --left-joint/--right-joint (or --ticks-topic), reference from
+    /// --left-joint/--right-joint (or --ticks-topic, or
+    /// --left-speed-topic/--right-speed-topic), reference from
     /// --pose-topic (`twindrive bag info` suggests them). Times count from
     /// the first reference pose's whole second (`data.time_origin_s` in the
     /// output).
@@ -1014,9 +1056,11 @@ pub struct CalibrateArgs {
     /// Joint position (rad) or velocity (rad/s, integrated).
     #[arg(long, value_enum, default_value_t = JointSignalArg::Auto)]
     pub joint_signal: JointSignalArg,
+    #[command(flatten)]
+    pub speeds: WheelSpeedArgs,
     /// A topic with cumulative tick counts instead of joints (needs
     /// --left-field, --right-field and --ticks-per-rev).
-    #[arg(long, requires_all = ["bag", "left_field", "right_field", "ticks_per_rev"], conflicts_with = "left_joint")]
+    #[arg(long, requires_all = ["bag", "left_field", "right_field", "ticks_per_rev"], conflicts_with_all = ["left_joint", "left_speed_topic"])]
     pub ticks_topic: Option<String>,
     /// Field of the left count, e.g. `left_ticks` or `data[0]`.
     #[arg(long, requires = "ticks_topic")]
@@ -1142,8 +1186,10 @@ pub struct MapArgs {
     #[arg(long, value_name = "T", value_parser = usage::positive)]
     pub until_s: Option<f64>,
     /// A rosbag2 recording (MCAP or sqlite3): scans from --scan-topic, the
-    /// robot's motion from its odometry (--odom-topic) or its wheel joints
-    /// (--left-joint/--right-joint, with --calibration).
+    /// robot's motion from its odometry (--odom-topic), its wheel joints
+    /// (--left-joint/--right-joint) or its wheel speeds
+    /// (--left-speed-topic/--right-speed-topic); wheels need --calibration,
+    /// or the nominal --wheel-diameter-m and --wheelbase-m.
     #[arg(
         long,
         value_name = "BAG",
@@ -1157,7 +1203,7 @@ pub struct MapArgs {
     /// The robot's own odometry: a nav_msgs/msg/Odometry topic (`/odom`),
     /// or a TF topic (`/tf`: odom -> the base frame). Already in metres: no
     /// calibration needed to map.
-    #[arg(long, value_name = "TOPIC", requires = "bag", conflicts_with_all = ["left_joint", "right_joint"])]
+    #[arg(long, value_name = "TOPIC", requires = "bag", conflicts_with_all = ["left_joint", "right_joint", "left_speed_topic"])]
     pub odom_topic: Option<String>,
     /// sensor_msgs/msg/JointState topic with the wheel joints.
     #[arg(long, default_value = "/joint_states", requires = "bag")]
@@ -1171,6 +1217,8 @@ pub struct MapArgs {
     /// Joint position (rad) or velocity (rad/s, integrated).
     #[arg(long, value_enum, default_value_t = JointSignalArg::Auto)]
     pub joint_signal: JointSignalArg,
+    #[command(flatten)]
+    pub speeds: WheelSpeedArgs,
     /// The robot's frame in the TF tree (default base_link, else base_footprint).
     #[arg(long, requires = "bag")]
     pub base_frame: Option<String>,
@@ -1189,16 +1237,18 @@ pub struct MapArgs {
     pub scan_sensor: Option<String>,
     /// calib.json from `twindrive calibrate`: its wheels, and its
     /// lidar_mount when it has one (a self-calibration; else the log's or
-    /// /tf_static's mount). Needed to map from wheels; with --odom-topic
-    /// it gives site.toml's robot its wheels.
+    /// /tf_static's mount). Maps from wheels (without it, the nominal
+    /// --wheel-diameter-m and --wheelbase-m do); with --odom-topic it gives
+    /// site.toml's robot its wheels.
     #[arg(long, value_name = "calib.json")]
     pub calibration: Option<PathBuf>,
-    /// Wheel diameter for site.toml's robot when neither --calibration nor
-    /// --mission gives the wheels (mapping from --odom-topic or --carmen).
+    /// The nominal wheel diameter when neither --calibration nor --mission
+    /// gives the wheels: site.toml's robot's, and the dead reckoning's when
+    /// mapping from wheel joints or speeds.
     #[arg(long, value_parser = usage::positive)]
     pub wheel_diameter_m: Option<f64>,
-    /// Wheelbase for site.toml's robot when neither --calibration nor
-    /// --mission gives the wheels (mapping from --odom-topic or --carmen).
+    /// The nominal wheelbase when neither --calibration nor --mission gives
+    /// the wheels (as --wheel-diameter-m).
     #[arg(long, value_parser = usage::positive)]
     pub wheelbase_m: Option<f64>,
     /// A mission scenario whose robot, sensors and controller site.toml

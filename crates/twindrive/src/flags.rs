@@ -206,6 +206,26 @@ pub fn joint_signal(s: crate::cli::JointSignalArg) -> twindrive_ros::extract::Jo
     }
 }
 
+/// The wheel speed topics the command line names, if it names them.
+pub fn speed_source(a: &crate::cli::WheelSpeedArgs) -> Option<twindrive_ros::extract::WheelSource> {
+    use twindrive_ros::extract::{NumberField, WheelSource};
+    let (left, right) = (a.left_speed_topic.as_ref()?, a.right_speed_topic.as_ref()?);
+    Some(WheelSource::Speeds {
+        left: NumberField {
+            topic: left.clone(),
+            field: a.left_speed_field.clone(),
+        },
+        right: NumberField {
+            topic: right.clone(),
+            field: a.right_speed_field.clone(),
+        },
+        rad_per_unit: match a.speed_unit {
+            crate::cli::SpeedUnitArg::RadPerS => 1.0,
+            crate::cli::SpeedUnitArg::RevPerS => std::f64::consts::TAU,
+        },
+    })
+}
+
 /// The lidar's mount in a self-calibration's `calib.json`, if it has one.
 #[derive(Debug, Deserialize)]
 struct MountFile {

@@ -571,6 +571,98 @@ fn a_real_recording_with_odometry_and_no_wheel_joints_is_mapped() {
     }
 }
 
+/// A real robot that publishes its wheels' speeds as two
+/// `std_msgs/msg/Float64` topics and has a 360° lidar and no odometry
+/// (`challenge_handin_esc_wheel_vel_db3` in
+/// `../shared/data/rosbag2_recordings/`, 23.7 s, one motor mounted
+/// mirrored). `bag info` names the two topics and the mirrored one; its
+/// suggested self-calibration finds a wheelbase within 3 % of the 0.67 m
+/// the robot's own controller configuration publishes (nothing here knew
+/// it), and the bag maps from the calibration and from the nominal wheels
+/// alike. Wheels with no size to turn angles into metres are a usage
+/// error that writes nothing.
+#[test]
+fn a_real_robot_that_publishes_its_wheel_speeds_is_calibrated_and_mapped() {
+    let bag = repo().join("../shared/data/rosbag2_recordings/challenge_handin_esc_wheel_vel_db3");
+    let bag = bag.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let info = run(&["bag", "info", bag]);
+    let out = text(&info.stdout);
+    assert!(info.status.success(), "{}", text(&info.stderr));
+    let wheels = "--left-speed-topic /actuators/esc/wheel_velocity_axis0 \
+                  --right-speed-topic /actuators/esc/wheel_velocity_axis1 --right-sign -1";
+    assert!(out.contains(wheels), "{out}");
+    // The suggested self-calibration, with the nominal wheels as the guess.
+    let line = out
+        .lines()
+        .map(str::trim)
+        .find(|l| l.starts_with("twindrive calibrate"))
+        .unwrap_or_else(|| panic!("no calibrate line: {out}"));
+    let calib = dir.path().join("calib.json");
+    let args: Vec<String> = line
+        .split_whitespace()
+        .skip(1)
+        .map(|w| match w {
+            "DL,DR,B" => "0.27,0.27,0.67".to_string(),
+            "calib.json" => calib.to_str().unwrap().to_string(),
+            w => w.to_string(),
+        })
+        .collect();
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = run(&args);
+    assert!(o.status.success(), "{line}: {}", text(&o.stderr));
+    let c: serde_json::Value = serde_json::from_slice(&std::fs::read(&calib).unwrap()).unwrap();
+    let get = |k: &str| c[k].as_f64().unwrap();
+    let b = get("wheelbase_m");
+    assert!((b - 0.67).abs() < 0.03 * 0.67, "wheelbase {b} m");
+    let (dl, dr) = (get("left_diameter_m"), get("right_diameter_m"));
+    assert!((dl - dr).abs() < 0.03 * dl, "diameters {dl} {dr}");
+    let wheel_flags: Vec<&str> = wheels.split_whitespace().collect();
+    let map = |size: &[&str], out: &Path| {
+        let mut args = vec!["map", "--bag", bag, "--scan-topic", "/sensors/scan"];
+        args.extend(&wheel_flags);
+        args.extend(size);
+        args.extend(["--out", out.to_str().unwrap()]);
+        run(&args)
+    };
+    let nominal = ["--wheel-diameter-m", "0.27", "--wheelbase-m", "0.67"];
+    for (size, name) in [
+        (vec!["--calibration", calib.to_str().unwrap()], "calibrated"),
+        (nominal.to_vec(), "nominal"),
+    ] {
+        let out = dir.path().join(name);
+        let o = map(&size, &out);
+        assert!(o.status.success(), "{name}: {}", text(&o.stderr));
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("map_report.json")).unwrap()).unwrap();
+        let scans = report["scans"].as_f64().unwrap();
+        assert!(scans > 200.0, "{report}");
+        assert!(
+            report["scans_matched"].as_f64().unwrap() >= 0.95 * scans,
+            "{name}: {report}"
+        );
+        let noise = report["range_noise_m"].as_f64().unwrap();
+        assert!(noise < 0.03, "{name}: residual {noise} m");
+        // Stamped on the bag's clock (recorded 1650902101.4 to 1650902125.1).
+        let poses = tum(&out.join("poses.tum"));
+        assert!(poses.len() as f64 == scans, "{}", poses.len());
+        assert!(
+            poses
+                .iter()
+                .all(|p| (1_650_902_101.3..1_650_902_125.2).contains(&p.0))
+        );
+    }
+    let refused = dir.path().join("refused");
+    let o = map(&[], &refused);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("--wheel-diameter-m"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(!refused.exists());
+}
+
 /// `(t_s, [x_m, y_m, heading_rad])` of a TUM file, through the library.
 fn tum_track(path: &Path) -> Vec<(f64, [f64; 3])> {
     twindrive_log::read_tum(path)

@@ -14,7 +14,7 @@ use twindrive_kinematics::Pose;
 use twindrive_ros::extract::{PoseSource, WheelSource};
 
 use crate::cli::{CalibrateArgs, MethodArg, ReferenceArg};
-use crate::flags::{joint_signal, stamps};
+use crate::flags::{joint_signal, speed_source, stamps};
 use crate::usage::{OrUsage, usage};
 
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
@@ -103,7 +103,7 @@ fn wheel_source(args: &CalibrateArgs) -> anyhow::Result<Option<WheelSource>> {
                 right: r.clone(),
                 signal: joint_signal(args.joint_signal),
             }),
-            _ => None,
+            _ => speed_source(&args.speeds),
         },
     )
 }

@@ -13,7 +13,7 @@ use twindrive_kinematics::Pose;
 use twindrive_ros::extract::{PoseSource, WheelSource};
 
 use crate::cli::MapArgs;
-use crate::flags::{joint_signal, read_calibration, read_lidar_mount, stamps};
+use crate::flags::{joint_signal, read_calibration, read_lidar_mount, speed_source, stamps};
 use crate::usage::usage;
 
 pub fn run(args: &MapArgs) -> anyhow::Result<()> {
@@ -25,10 +25,10 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
     let signs = [f64::from(args.left_sign), f64::from(args.right_sign)];
     // The robot's own odometry places the scans (no calibration needed).
     let from_odometry = args.odom_topic.is_some() || args.carmen.is_some();
-    if calibration.is_none() && !from_odometry {
+    if calibration.is_none() && !from_odometry && args.bag.is_none() {
         return Err(usage(
-            "--calibration: mapping from wheel angles needs the calibrated wheels (calib.json from \
-             `twindrive calibrate`); a bag with the robot's odometry maps without one (--odom-topic)",
+            "--calibration: mapping a log from its wheel angles needs the calibrated wheels (calib.json from \
+             `twindrive calibrate`)",
         ));
     }
     let (mut rec, start, robot) = match (&args.log_dir, &args.bag) {
@@ -60,22 +60,29 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
                     right: right.clone(),
                     signal: joint_signal(args.joint_signal),
                 }),
-                (None, None) => None,
+                (None, None) => speed_source(&args.speeds),
                 _ => {
                     return Err(usage(
                         "--left-joint and --right-joint name the two wheels together",
                     ));
                 }
             };
-            if wheels.is_some() && calibration.is_none() {
+            if wheels.is_some()
+                && calibration.is_none()
+                && args.mission.is_none()
+                && (args.wheel_diameter_m.is_none() || args.wheelbase_m.is_none())
+            {
                 return Err(usage(
-                    "--left-joint/--right-joint: wheel angles need --calibration (its wheels turn them into metres); or map from --odom-topic",
+                    "mapping from the wheels needs their size to turn angles into metres: --calibration \
+                     (calib.json from `twindrive calibrate`), or the nominal --wheel-diameter-m and --wheelbase-m; \
+                     or map from --odom-topic",
                 ));
             }
             if wheels.is_none() && args.odom_topic.is_none() {
                 return Err(usage(
                     "--bag: name how the robot moved: --odom-topic (nav_msgs/msg/Odometry, or a TF topic with odom -> base), \
-                     or --left-joint and --right-joint with --calibration (`twindrive bag info` lists the bag's topics)",
+                     --left-joint and --right-joint, or --left-speed-topic and --right-speed-topic \
+                     (`twindrive bag info` lists the bag's topics and suggests the command line)",
                 ));
             }
             let source = BagScanSource {
