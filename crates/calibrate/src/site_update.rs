@@ -4,13 +4,16 @@
 //!
 //! The twin's map (the map_server image its world was loaded from) is the
 //! prior: its occupied and free cells enter as confident as the grid can
-//! be, unknown stays unknown. Each log's scans are placed by the
-//! calibrated odometry from the log's start, located against the map by
-//! the one scan matcher ([`twindrive_estimation::mapping::map_drive`]),
-//! and drawn into it; the next log extends the result. A log whose scans
-//! mostly fail to match the map (another site, a start far from where it
-//! says, a broken lidar) is not drawn, and the update says why: a map is
-//! only ever changed by scans that agree with it.
+//! be, unknown stays unknown. Each log's drive is located by the SLAM from
+//! its calibrated odometry, placed on the map (near the start the log
+//! says, else anywhere on it at any heading: a robot moved by hand, a
+//! mistyped start), its scans matched against the map
+//! ([`twindrive_estimation::mapping::map_drive`]), and drawn into it; the
+//! next log extends the result. A log that matches nowhere on the map, or
+//! whose located scans contradict it (ending in space the map has seen
+//! free, or crossing its walls: another site, a broken lidar), is not
+//! drawn, and the update says why: a map is only ever changed by scans
+//! that agree with it.
 
 use std::io::Write;
 use std::path::Path;
@@ -30,14 +33,17 @@ use crate::site_map::{MapJob, Motion, commands_beside, map_files, map_site, stag
 /// How robot logs update a map.
 #[derive(Debug, Clone, Copy)]
 pub struct UpdateSettings {
-    /// A log is drawn only when at least this fraction of its scans
-    /// matched the map,
+    /// A log is drawn only when it was placed on the map
+    /// ([`MappingSettings::placement`]), at least this fraction of its
+    /// scans matched the map,
     pub min_matched_fraction: f64,
-    /// and as many of its first `start_scans` did: the log starts where it
-    /// says (the matcher's corrections, each small, could otherwise walk a
-    /// log that starts elsewhere onto the map while its first scans are
-    /// drawn in the wrong place).
+    /// as many of its first `start_scans` did (it starts where it was
+    /// placed),
     pub start_scans: usize,
+    /// and at least this share of the map's walls its beams reached were
+    /// confirmed by a return rather than passed through
+    /// ([`twindrive_estimation::mapping::drive_agreement`]).
+    pub min_agreement: f64,
     /// The mapper's settings; the cell size is the twin's map's.
     pub mapping: MappingSettings,
 }
@@ -47,6 +53,11 @@ impl Default for UpdateSettings {
         Self {
             min_matched_fraction: 0.5,
             start_scans: 10,
+            // A site changes between missions (see `drive_agreement`):
+            // logs seeing half a room through a partition since taken away
+            // agreed 70-74 %, other sites' logs placed where their first
+            // metres fit 39-51 % (the tests' sites).
+            min_agreement: 0.6,
             mapping: MappingSettings {
                 // A log's scans join the matcher's map only where they
                 // matched it, never from the odometry alone: a log that
@@ -71,6 +82,8 @@ pub struct LogUpdate {
     pub drawn: bool,
     /// Why not, when not.
     pub refused: Option<String>,
+    /// Where it was placed, when not where the log says it started.
+    pub placed: Option<String>,
 }
 
 impl LogUpdate {
@@ -81,6 +94,7 @@ impl LogUpdate {
             scans_matched,
             drawn: false,
             refused: Some(why),
+            placed: None,
         }
     }
 }
@@ -295,7 +309,13 @@ pub fn update_site(
         let first = &each[..each.len().min(settings.start_scans)];
         let first_matched = first.iter().filter(|m| **m).count();
         let min = settings.min_matched_fraction;
-        let refused = if fraction < min {
+        let agreement = mapped.mapping.prior_agreement.unwrap_or(0.0);
+        let refused = if mapped.mapping.placement.is_none() {
+            Some(format!(
+                "its first {:.0} m of scans match nowhere on the map (near where the log says it started, or anywhere else at any heading)",
+                mapping.placement.span_m
+            ))
+        } else if fraction < min {
             Some(format!(
                 "{matched} of {} scans matched the map ({:.0} %, {:.0} % needed)",
                 each.len(),
@@ -304,16 +324,35 @@ pub fn update_site(
             ))
         } else if (first_matched as f64) < min * first.len() as f64 {
             Some(format!(
-                "{first_matched} of its first {} scans matched the map ({:.0} % needed): it did not start where it says",
+                "{first_matched} of its first {} scans matched the map ({:.0} % needed) where it was placed",
                 first.len(),
                 100.0 * min
+            ))
+        } else if agreement < settings.min_agreement {
+            Some(format!(
+                "its returns confirm {:.0} % of the map's wall cells its beams reached ({:.0} % needed): its beams pass through the rest",
+                100.0 * agreement,
+                100.0 * settings.min_agreement
             ))
         } else {
             None
         }
         .map(|why| {
             format!(
-                "{why}; the log does not agree with this site's map (another site, a start far from where the log says, a broken lidar), so it is not drawn"
+                "{why}; the log does not agree with this site's map (another site, a broken lidar), so it is not drawn"
+            )
+        });
+        let placed = mapped.mapping.placement.filter(|p| p.moved).map(|p| {
+            let s = l.log.header.start;
+            format!(
+                "placed on the map at ({:.2}, {:.2}, {:.0}°), {:.2} m and {:.0}° from where the log says it started",
+                p.start[0],
+                p.start[1],
+                p.start[2].to_degrees(),
+                (p.start[0] - s.x_m).hypot(p.start[1] - s.y_m),
+                twindrive_kinematics::wrap_angle(p.start[2] - s.heading_rad)
+                    .to_degrees()
+                    .abs()
             )
         });
         let scans = mapped.mapping.poses.len();
@@ -327,6 +366,7 @@ pub fn update_site(
                     scans_matched: matched,
                     drawn: true,
                     refused: None,
+                    placed,
                 }
             }
         });

@@ -362,11 +362,12 @@ segments = [ { duration_s = 3.0, left_rad_s = 0.0, right_rad_s = 0.0 } ]
 /// from a first look (the robot standing still while a partition hid the
 /// room's far side) is extended by a mission's log (the whole drive, the
 /// partition gone). The new walls lie on true walls, the walls known before
-/// stay, the partition is cleared, and a log whose start is not where it
-/// says is not drawn. `TWINDRIVE_HELD_OUT=N`
+/// stay, the partition is cleared; a log whose start is metres and a third
+/// of a turn from where it says is placed where it did start and drawn
+/// alike, and another site's log is not drawn. `TWINDRIVE_HELD_OUT=N`
 /// runs N sites (one by default).
 #[test]
-fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
+fn a_mission_log_extends_the_twins_map_from_wherever_it_starts_and_another_sites_is_refused() {
     use twindrive_calibrate::site_map::{
         MapJob, Motion, SiteScenario, map_site, seen_wall_points, site_toml, write_site,
     };
@@ -511,12 +512,13 @@ fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
         );
         assert!(update.changes.unknown_to_occupied > 0 && update.changes.unknown_to_free > 0);
 
-        // The same log, saying it started 0.8 m and 0.5 rad from where it
-        // did: it does not agree with the map and is not drawn.
+        // The same log, saying it started 1.8 m and 2 rad from where it
+        // did: placed on the map where it did start, and drawn as the log
+        // that says so.
         let mut astray = mission.clone();
         let s = astray.header.start;
-        astray.header.start = Pose::new(s.x_m + 0.8, s.y_m - 0.6, wrap_angle(s.heading_rad + 0.5));
-        let refused = update_site(
+        astray.header.start = Pose::new(s.x_m + 1.4, s.y_m - 1.1, wrap_angle(s.heading_rad + 2.0));
+        let placed = update_site(
             &twin,
             &[RobotLog {
                 name: "astray",
@@ -527,7 +529,44 @@ fn a_mission_log_extends_the_twins_map_and_a_log_that_disagrees_is_refused() {
             |_, _| {},
         )
         .unwrap();
+        let log = &placed.logs[0];
+        assert!(log.drawn, "seed {seed}: {log:?}");
+        assert!(
+            log.placed
+                .as_deref()
+                .unwrap()
+                .contains("from where the log says"),
+            "{log:?}"
+        );
+        let (a, b) = (placed.cells_after(), update.cells_after());
+        let near = |x: usize, y: usize| (x as f64 - y as f64).abs() <= 0.02 * y as f64;
+        assert!(
+            near(a.free, b.free) && near(a.occupied, b.occupied),
+            "{a:?} {b:?}"
+        );
+        let placed_score = score(&placed.after, &walls, &seen, 0.05);
+        assert!(
+            placed_score.on_a_wall >= 0.85,
+            "seed {seed}: {placed_score:?}"
+        );
+
+        // Another site's mission: it matches nowhere on this map, or
+        // contradicts it, and is not drawn.
+        let other = self::site(seed + 1, DRIVE, true);
+        let stranger = twindrive_sim::Simulator::new(self::scenario(&other)).run(|_, _| {});
+        let refused = update_site(
+            &twin,
+            &[RobotLog {
+                name: "stranger",
+                log: &stranger,
+                params,
+            }],
+            &settings,
+            |_, _| {},
+        )
+        .unwrap();
         let log = &refused.logs[0];
+        eprintln!("seed {seed}: another site's log: {:?}", log.refused);
         assert!(!log.drawn, "seed {seed}: {log:?}");
         assert!(
             log.refused.as_deref().unwrap().contains("does not agree"),

@@ -126,6 +126,11 @@ impl KeptSite {
         if let Some(bar) = bar {
             bar.finish_and_clear();
         }
+        for l in &update.logs {
+            if let Some(placed) = &l.placed {
+                writeln!(out, "site map: {} {placed}", l.log)?;
+            }
+        }
         for l in update.logs.iter().filter(|l| !l.drawn) {
             writeln!(
                 out,

@@ -14,32 +14,26 @@ fn s(p: &Path) -> &str {
 }
 
 /// The wall-following mission and a calib.json with the twin's true
-/// parameters (what calibration recovers to 0.01 %), made once per run in
-/// cargo's scratch directory for tests (under `target/`).
+/// parameters (what calibration recovers to 0.01 %), made once per build
+/// and shared by the test processes (`common::shared_fixture`).
 fn mission() -> &'static (PathBuf, PathBuf) {
     static M: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     M.get_or_init(|| {
-        // One per test process: nextest runs each test in a process of its
-        // own, and they must not remove each other's.
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("plan-test-mission-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let log = dir.join("wf");
-        let out = twindrive(&[
-            "simulate",
-            s(&repo().join("scenarios/wall_following.toml")),
-            "--out",
-            s(&log),
-        ]);
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        let calib = dir.join("calib.json");
-        std::fs::write(
-            &calib,
-            r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678, "method": "smoother"}"#,
-        )
-        .unwrap();
-        (log, calib)
+        let dir = common::shared_fixture("plan-test-mission", |dir| {
+            let out = twindrive(&[
+                "simulate",
+                s(&repo().join("scenarios/wall_following.toml")),
+                "--out",
+                s(&dir.join("wf")),
+            ]);
+            assert!(out.status.success(), "{}", text(&out.stderr));
+            std::fs::write(
+                dir.join("calib.json"),
+                r#"{"left_diameter_m": 0.0652, "right_diameter_m": 0.0665, "wheelbase_m": 0.2678, "method": "smoother"}"#,
+            )
+            .unwrap();
+        });
+        (dir.join("wf"), dir.join("calib.json"))
     })
 }
 

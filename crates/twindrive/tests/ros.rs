@@ -44,39 +44,37 @@ fn py(script: &str, args: &[&str]) -> String {
 
 /// A 130 s calibration drive (the same as tests/calibrate.rs uses).
 fn calibration_drive() -> &'static Path {
-    static D: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    static D: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     D.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let o = twindrive(&[
-            "simulate",
-            "scenarios/calibration_drive.toml",
-            "--duration-s",
-            "130",
-            "--out",
-            s(&dir.path().join("sim")),
-        ]);
-        assert!(o.status.success(), "{}", text(&o.stderr));
-        dir
+        common::shared_fixture("ros-calibration-drive", |dir| {
+            let o = twindrive(&[
+                "simulate",
+                "scenarios/calibration_drive.toml",
+                "--duration-s",
+                "130",
+                "--out",
+                s(&dir.join("sim")),
+            ]);
+            assert!(o.status.success(), "{}", text(&o.stderr));
+        })
     })
-    .path()
 }
 
 /// The calibration drive as `twindrive rosbag` writes it.
 fn calibration_bag() -> &'static Path {
-    static D: std::sync::OnceLock<(tempfile::TempDir, PathBuf)> = std::sync::OnceLock::new();
-    &D.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let bag = dir.path().join("drive");
-        let o = twindrive(&[
-            "rosbag",
-            s(&calibration_drive().join("sim")),
-            "--out",
-            s(&bag),
-        ]);
-        assert!(o.status.success(), "{}", text(&o.stderr));
-        (dir, bag)
+    static D: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    D.get_or_init(|| {
+        common::shared_fixture("ros-calibration-bag", |dir| {
+            let o = twindrive(&[
+                "rosbag",
+                s(&calibration_drive().join("sim")),
+                "--out",
+                s(&dir.join("drive")),
+            ]);
+            assert!(o.status.success(), "{}", text(&o.stderr));
+        })
+        .join("drive")
     })
-    .1
 }
 
 fn calibrate(bag: &Path, out: &Path, extra: &[&str]) -> (std::process::Output, Option<Value>) {
@@ -1070,13 +1068,12 @@ fn assert_same_counts(bag: &Path, theirs: &Value) {
 /// The calibration drive rewritten by `rosbags` in every storage, split,
 /// compressed and metadata layout (scripts/ros/bag_variants.py).
 fn variants() -> &'static Path {
-    static D: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    static D: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     D.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        py("bag_variants.py", &[s(calibration_bag()), s(dir.path())]);
-        dir
+        common::shared_fixture("ros-bag-variants", |dir| {
+            py("bag_variants.py", &[s(calibration_bag()), s(dir)]);
+        })
     })
-    .path()
 }
 
 #[test]

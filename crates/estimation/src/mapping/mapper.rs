@@ -49,8 +49,11 @@ pub struct MappingSettings {
     pub matching: MatchSettings,
     /// A return within this of the map's local line is drawn on it (m).
     pub snap_m: f64,
-    /// A drive mapped without a prior map is located by the SLAM.
+    /// A drive is located by the SLAM (and then, with a prior map, placed
+    /// on it).
     pub slam: crate::slam::SlamSettings,
+    /// How a drive is placed on a prior map.
+    pub placement: super::PlacementSettings,
     /// Returns farther than this are left out of the grid (m): their
     /// angular error spreads them over several cells.
     pub max_range_m: f64,
@@ -79,6 +82,7 @@ impl Default for MappingSettings {
             },
             snap_m: 0.1,
             slam: crate::slam::SlamSettings::default(),
+            placement: super::PlacementSettings::default(),
             max_range_m: 10.0,
             log_odds: LogOdds::default(),
         }
@@ -393,6 +397,12 @@ pub struct Mapping {
     pub unmatched: Vec<(String, usize)>,
     /// Each match's RMS residual (m), in scan order.
     pub rms_m: Vec<f64>,
+    /// Where the drive was placed on the prior map (none without one, or
+    /// when it matched nowhere on it).
+    pub placement: Option<super::Placement>,
+    /// With a prior map: how well the whole drive, located, agrees with it
+    /// ([`super::drive_agreement`]).
+    pub prior_agreement: Option<f64>,
 }
 
 /// Maps a drive: `scans` with the robot's odometry pose at each, in time
@@ -401,13 +411,15 @@ pub struct Mapping {
 /// `progress(done, total)` as it goes (two passes over the scans, three
 /// with a prior).
 ///
-/// With a prior, the drive is located twice: against its own scans (as
-/// without a prior), and against the prior's occupied cells. A map of
-/// cell centres places each scan only to within a fraction of a cell (a
-/// wall's cells all sit in one row, wherever in it the wall is), so the
-/// poses are the drive's own, carried onto the prior by the rigid motion
-/// that best takes them to the poses located against it, over the scans
-/// that matched it. The matches reported are those against the prior.
+/// With a prior, the drive is located by the SLAM (as without a prior),
+/// placed on the prior ([`super::place`]: near where it says it started,
+/// else anywhere), then each scan is located against the prior's occupied
+/// cells from its SLAM pose carried there. A map of cell centres places
+/// each scan only to within a fraction of a cell (a wall's cells all sit
+/// in one row, wherever in it the wall is), so the poses are the drive's
+/// own, carried onto the prior by the rigid motion that best takes them to
+/// the poses located against it, over the scans that matched it. The
+/// matches reported are those against the prior.
 pub fn map_drive(
     scans: &[(Scan, [f64; 3])],
     mount: [f64; 3],
@@ -417,6 +429,7 @@ pub fn map_drive(
 ) -> Mapping {
     let passes = if prior.is_some() { 3 } else { 2 };
     let total = passes * scans.len();
+    let mut placement = None;
     let located = match prior {
         None => {
             let slam =
@@ -433,19 +446,46 @@ pub fn map_drive(
             }
         }
         Some(g) => {
-            let own = locate_all(Mapper::new(mount, settings), scans, |k| progress(k, total));
+            let own =
+                crate::slam::locate_drive(scans, mount, settings.slam, |k, _| progress(k, total))
+                    .poses;
+            placement = super::place(
+                g,
+                scans,
+                &own,
+                mount,
+                settings.max_range_m,
+                &settings.placement,
+            );
+            // Unplaced, the drive stays where it says it started (its
+            // first SLAM pose is its first odometry pose), and its scans
+            // are matched there to say how far they disagree.
+            let carry = placement.map_or([0.0; 3], |p| p.onto);
+            let predicted: Vec<[f64; 3]> = own.iter().map(|p| compose(carry, *p)).collect();
             let against = locate_all(
                 Mapper::with_map(mount, settings, &g.occupied_centres()),
                 scans,
+                &predicted,
                 |k| progress(scans.len() + k, total),
             );
-            let onto = rigid_fit(&own.poses, &against.poses, &against.matched_each);
+            let onto = rigid_fit(&own, &against.poses, &against.matched_each);
+            let carried: Vec<[f64; 3]> = own.iter().map(|p| compose(onto, *p)).collect();
             DriveLocated {
-                poses: own.poses.iter().map(|p| compose(onto, *p)).collect(),
+                poses: held_to_prior(&own, carried, &against.poses, &against.matched_each),
                 ..against
             }
         }
     };
+    let prior_agreement = prior.map(|g| {
+        super::drive_agreement(
+            g,
+            scans,
+            &located.poses,
+            mount,
+            settings.max_range_m,
+            &settings.placement,
+        )
+    });
     let mut grid = prior
         .cloned()
         .unwrap_or_else(|| LogOddsGrid::new(settings.resolution_m, settings.log_odds));
@@ -459,6 +499,8 @@ pub fn map_drive(
     }
     progress(total, total);
     Mapping {
+        placement,
+        prior_agreement,
         poses: located.poses,
         grid,
         matched: located.matched,
@@ -477,9 +519,12 @@ struct DriveLocated {
     rms_m: Vec<f64>,
 }
 
+/// Every scan located by `mapper`, each predicted by the motion from the
+/// previous scan's `predicted` pose.
 fn locate_all(
     mut mapper: Mapper,
     scans: &[(Scan, [f64; 3])],
+    predicted: &[[f64; 3]],
     mut progress: impl FnMut(usize),
 ) -> DriveLocated {
     let mut out = DriveLocated {
@@ -489,7 +534,7 @@ fn locate_all(
         unmatched: Vec::new(),
         rms_m: Vec::new(),
     };
-    for (k, (scan, odometry)) in scans.iter().enumerate() {
+    for (k, ((scan, _), odometry)) in scans.iter().zip(predicted).enumerate() {
         let located = mapper.locate(*odometry, scan);
         out.matched_each.push(located.matched.is_ok());
         match located.matched {
@@ -515,6 +560,78 @@ fn locate_all(
         }
     }
     out
+}
+
+/// The drive's poses on the prior: its own shape (`own`, the SLAM's: each
+/// step to within millimetres, drifting over a long drive) held to the
+/// poses located against the prior where they matched (each to within a
+/// fraction of the prior's cell, no drift), by a pose graph: a chain of the
+/// SLAM's steps and, from a fixed origin, each matched pose, with a Huber
+/// loss (a wrong match pulls with a bounded force). `start` is the rigid
+/// placement, the solve's first guess; it is returned unchanged if the
+/// solve fails or nothing matched.
+fn held_to_prior(
+    own: &[[f64; 3]],
+    start: Vec<[f64; 3]>,
+    against: &[[f64; 3]],
+    matched: &[bool],
+) -> Vec<[f64; 3]> {
+    use crate::slam::{Edge, PoseGraph};
+    if !matched.iter().any(|m| *m) {
+        return start;
+    }
+    let mut graph = PoseGraph::default();
+    graph.add_pose([0.0; 3]);
+    for p in &start {
+        graph.add_pose(*p);
+    }
+    for k in 1..own.len() {
+        graph.add_edge(Edge {
+            from: k,
+            to: k + 1,
+            measured: crate::se2::between(own[k - 1], own[k]),
+            std: [0.005, 0.005, 0.002],
+            huber: None,
+            active: true,
+        });
+    }
+    for (k, p) in against.iter().enumerate() {
+        if matched[k] {
+            graph.add_edge(Edge {
+                from: 0,
+                to: k + 1,
+                measured: *p,
+                std: [0.03, 0.03, 0.02],
+                huber: Some(2.0),
+                active: true,
+            });
+        }
+    }
+    // A step of the SLAM's that the prior contradicts by more than 10σ (a
+    // scan the SLAM matched wrongly, out of line with its neighbours) is
+    // loosened twentyfold and the graph solved again, so that scan
+    // follows its match against the prior.
+    let chain = own.len().saturating_sub(1);
+    let solved = graph.optimize(30).and_then(|_| {
+        let poses = graph.poses.clone();
+        let mut loosened = 0;
+        for e in graph.edges.iter_mut().take(chain) {
+            if e.chi(&poses) > 10.0 {
+                e.std = e.std.map(|s| 20.0 * s);
+                loosened += 1;
+            }
+        }
+        if loosened > 0 {
+            graph.optimize(30)?;
+        }
+        Ok(())
+    });
+    match solved {
+        Ok(()) => graph.poses[1..].to_vec(),
+        // A chain anchored by one matched pose or more always factorises;
+        // should it not, the rigid placement stands.
+        Err(_) => start,
+    }
 }
 
 /// The rigid motion `t` for which `t ⊕ from[i]` best matches `to[i]` over

@@ -6,10 +6,12 @@
 
 mod grid;
 mod mapper;
+mod placement;
 mod score;
 #[cfg(test)]
 mod tests;
 
 pub use grid::{Beam, CellState, FREE_BELOW, LogOdds, LogOddsGrid, OCCUPIED_ABOVE};
 pub use mapper::{Located, Mapper, Mapping, MappingSettings, MatchFailure, Surfaces, map_drive};
+pub use placement::{Placement, PlacementSettings, drive_agreement, place};
 pub use score::{MapScore, distance_to_segment, score};

@@ -122,6 +122,15 @@ impl LikelihoodGrid {
         }
     }
 
+    /// The centres of the grid's first and last cells (m, submap frame).
+    pub fn bounds(&self) -> ([f64; 2], [f64; 2]) {
+        let far = [
+            self.origin[0] + (self.width - 1) as f64 * self.resolution_m,
+            self.origin[1] + (self.height - 1) as f64 * self.resolution_m,
+        ];
+        (self.origin, far)
+    }
+
     /// The field at `p` (submap frame): level 0 at the nearest cell, 0 off
     /// the grid.
     pub fn at(&self, p: [f64; 2]) -> f64 {

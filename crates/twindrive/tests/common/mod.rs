@@ -24,6 +24,45 @@ pub fn twindrive(args: &[&str]) -> Output {
     twindrive_in(args, &repo())
 }
 
+/// A fixture built once per build of the binary and shared by every test
+/// process (nextest runs each test in its own, and a `TempDir` in a
+/// `static` is never dropped: each process would leave its copy behind).
+/// It lives in cargo's scratch directory for tests (under `target/`),
+/// named `name` and the binary's build time; `build` fills a staging
+/// directory that is renamed into place when complete, so a process never
+/// sees half a fixture. Earlier builds' copies are removed.
+pub fn shared_fixture(name: &str, build: impl FnOnce(&Path)) -> PathBuf {
+    let scratch = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let built = std::fs::metadata(env!("CARGO_BIN_EXE_twindrive"))
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos());
+    let dir = scratch.join(format!("{name}-{built}"));
+    if dir.join(".complete").exists() {
+        return dir;
+    }
+    std::fs::create_dir_all(scratch).unwrap();
+    if let Ok(entries) = std::fs::read_dir(scratch) {
+        for e in entries.flatten() {
+            let n = e.file_name().to_string_lossy().into_owned();
+            if n.starts_with(&format!("{name}-")) && e.path() != dir {
+                let _ = std::fs::remove_dir_all(e.path());
+            }
+        }
+    }
+    let staging = tempfile::tempdir_in(scratch).unwrap();
+    build(staging.path());
+    std::fs::write(staging.path().join(".complete"), "").unwrap();
+    let staged = staging.keep();
+    if std::fs::rename(&staged, &dir).is_err() {
+        // Another process finished first: use its copy.
+        let _ = std::fs::remove_dir_all(&staged);
+    }
+    assert!(dir.join(".complete").exists(), "{}", dir.display());
+    dir
+}
+
 /// Process output as text.
 pub fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
