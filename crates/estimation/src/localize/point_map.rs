@@ -52,8 +52,28 @@ impl PointMap {
         }
     }
 
+    /// Frees what only adding points needs (the voxels' sums), for a map
+    /// that is done growing; [`PointMap::extend`] recovers them.
+    pub fn compact(&mut self) {
+        self.voxels = HashMap::new();
+        self.points.shrink_to_fit();
+        self.counts.shrink_to_fit();
+        self.anchors.shrink_to_fit();
+    }
+
     /// Adds `points` (map frame) and rebuilds the tree and the normals.
     pub fn extend(&mut self, points: impl IntoIterator<Item = [f64; 2]>) {
+        if self.voxels.is_empty() {
+            // Compacted: each point is its voxel's mean of `count` returns.
+            for (p, n) in self.points.iter().zip(&self.counts) {
+                let key = (
+                    (p[0] / self.voxel_m).floor() as i32,
+                    (p[1] / self.voxel_m).floor() as i32,
+                );
+                let k = f64::from(*n);
+                self.voxels.insert(key, ([p[0] * k, p[1] * k], *n));
+            }
+        }
         for p in points {
             if !(p[0].is_finite() && p[1].is_finite()) {
                 continue;

@@ -359,7 +359,7 @@ fn a_drive_that_starts_elsewhere_is_placed_on_the_prior_and_another_sites_is_not
         );
         assert!(placed.moved, "seed {seed}");
         // (One seed has one scan the SLAM itself matched 18 cm astray.)
-        assert!(p99 < 0.04, "seed {seed}: poses {p99} m off");
+        assert!(p99 < 0.05, "seed {seed}: poses {p99} m off");
         assert!(both.matched * 10 >= second.len() * 9, "seed {seed}");
         let s = score(&both.grid, &case.site.walls, &case.seen, 0.05);
         assert!(s.on_a_wall >= 0.95, "seed {seed}: {s:?}");

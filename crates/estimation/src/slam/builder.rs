@@ -43,8 +43,10 @@ struct Submap {
     points: PointMap,
     /// The nodes inserted.
     nodes: Vec<usize>,
-    /// Built when the submap is finished.
-    grid: Option<LikelihoodGrid>,
+    /// Once the submap is finished: the part of it the loop search's grid
+    /// covers (submap frame), what a node's points can reach from where
+    /// the submap's nodes were.
+    reach: Option<([f64; 2], [f64; 2])>,
     /// The last node a loop closure joined to it.
     closed_at: Option<usize>,
     /// For local matching while it is active: dropped at each insertion,
@@ -92,6 +94,11 @@ pub struct Slam {
     /// Each scan: the node it is, or the node before it and its pose seen
     /// from that node.
     scans: Vec<(usize, [f64; 3])>,
+    /// The loop search's grids of the finished submaps searched last,
+    /// most recent last: a building's worth of them would not fit in
+    /// memory (a grid of 7 levels a submap), and a drive searches the few
+    /// submaps around it again and again.
+    grids: Vec<(usize, LikelihoodGrid)>,
     /// Loop edges since the last solve.
     fresh_loops: usize,
     nodes_since_solve: usize,
@@ -110,6 +117,7 @@ impl Slam {
             last: None,
             last_node: None,
             scans: Vec::new(),
+            grids: Vec::new(),
             fresh_loops: 0,
             nodes_since_solve: 0,
             stats: SlamStats::default(),
@@ -165,13 +173,21 @@ impl Slam {
             // near ones give the prior, PL-ICP refines on all.
             // (The points are already cut at `max_range_m`: no copy when
             // the search reaches that far.)
+            // At most `local_search_points` of them, evenly through the
+            // scan: the search only starts PL-ICP, which uses every point.
             let near: Vec<[f64; 2]>;
-            let searched = if s.local_search_range_m >= s.max_range_m {
+            let in_range = points
+                .iter()
+                .filter(|p| p[0].hypot(p[1]) <= s.local_search_range_m)
+                .count();
+            let searched = if in_range == points.len() && in_range <= s.local_search_points {
                 points
             } else {
+                let stride = in_range.div_ceil(s.local_search_points.max(1)).max(1);
                 near = points
                     .iter()
                     .filter(|p| p[0].hypot(p[1]) <= s.local_search_range_m)
+                    .step_by(stride)
                     .copied()
                     .collect();
                 &near
@@ -259,7 +275,7 @@ impl Slam {
                 anchor: k,
                 points: PointMap::new(s.voxel_m, s.matching.outlier_m),
                 nodes: Vec::new(),
-                grid: None,
+                reach: None,
                 closed_at: None,
                 local_grid: None,
             });
@@ -294,20 +310,9 @@ impl Slam {
                 }
             }
             let submap = &mut self.submaps[m];
-            let reachable: Vec<[f64; 2]> = submap
-                .points
-                .points()
-                .iter()
-                .filter(|p| (0..2).all(|c| p[c] >= lo[c] && p[c] <= hi[c]))
-                .copied()
-                .collect();
             submap.local_grid = None;
-            submap.grid = Some(LikelihoodGrid::new(
-                &reachable,
-                s.grid_resolution_m,
-                s.grid_sigma_m,
-                s.grid_levels,
-            ));
+            submap.reach = Some((lo, hi));
+            submap.points.compact();
         }
         self.stats.nodes += 1;
         self.nodes_since_solve += 1;
@@ -332,7 +337,7 @@ impl Slam {
             .submaps
             .iter()
             .enumerate()
-            .filter(|(_, m)| m.grid.is_some() && m.anchor + s.loop_min_separation <= k)
+            .filter(|(_, m)| m.reach.is_some() && m.anchor + s.loop_min_separation <= k)
             // A submap closed to a node a few nodes back is tied to this
             // stretch of the drive already (a drive that circles one room
             // would otherwise search every submap at every chance).
@@ -352,8 +357,9 @@ impl Slam {
         near.sort_by(|a, b| a.0.total_cmp(&b.0));
         near.truncate(s.loop_max_submaps);
         for (_, m) in near {
+            self.cache_loop_grid(m);
+            let grid = &self.grids.last().expect("just cached").1;
             let submap = &self.submaps[m];
-            let Some(grid) = &submap.grid else { continue };
             let frame = self.graph.poses[submap.anchor];
             let guess = between(frame, compose(global, self.mount));
             self.stats.loop_searches += 1;
@@ -381,6 +387,40 @@ impl Slam {
             self.submaps[m].closed_at = Some(k);
             self.stats.loop_closures += 1;
             self.fresh_loops += 1;
+        }
+    }
+
+    /// Puts the loop search's grid of finished submap `m` last in the
+    /// cache: found there, or built from its points (the same grid either
+    /// way).
+    fn cache_loop_grid(&mut self, m: usize) {
+        let s = self.settings;
+        match self.grids.iter().position(|(i, _)| *i == m) {
+            Some(at) => {
+                let hit = self.grids.remove(at);
+                self.grids.push(hit);
+            }
+            None => {
+                let submap = &self.submaps[m];
+                let (lo, hi) = submap.reach.unwrap_or_default();
+                let reachable: Vec<[f64; 2]> = submap
+                    .points
+                    .points()
+                    .iter()
+                    .filter(|p| (0..2).all(|c| p[c] >= lo[c] && p[c] <= hi[c]))
+                    .copied()
+                    .collect();
+                let grid = LikelihoodGrid::new(
+                    &reachable,
+                    s.grid_resolution_m,
+                    s.grid_sigma_m,
+                    s.grid_levels,
+                );
+                if self.grids.len() >= s.loop_grids_kept.max(1) {
+                    self.grids.remove(0);
+                }
+                self.grids.push((m, grid));
+            }
         }
     }
 

@@ -45,6 +45,8 @@ pub struct SlamSettings {
     /// The returns within this range (m) are searched for (the farther,
     /// the finer the headings searched must be).
     pub local_search_range_m: f64,
+    /// At most this many of them, evenly through the scan.
+    pub local_search_points: usize,
     /// A local match that moves the odometry's prediction further than
     /// this (m, rad) is not believed.
     pub max_correction_m: f64,
@@ -89,10 +91,13 @@ pub struct SlamSettings {
     /// A closure whose whitened residual is above this after a solve is
     /// switched off.
     pub loop_reject_chi: f64,
-    /// The grid the loop search runs on.
+    /// The grid the loop search runs on; at most `loop_grids_kept` of the
+    /// finished submaps' grids are kept (the others are built again when
+    /// searched).
     pub grid_resolution_m: f64,
     pub grid_sigma_m: f64,
     pub grid_levels: usize,
+    pub loop_grids_kept: usize,
     /// Solve every this many nodes when there are new closures, with at
     /// most `solve_iterations` steps; `final_iterations` at the end.
     pub optimize_every: usize,
@@ -115,6 +120,7 @@ impl Default for SlamSettings {
             },
             local_levels: 3,
             local_search_range_m: 30.0,
+            local_search_points: 150,
             max_correction_m: 0.3,
             max_correction_rad: 0.4,
             max_range_m: 30.0,
@@ -145,6 +151,7 @@ impl Default for SlamSettings {
             grid_resolution_m: 0.05,
             grid_sigma_m: 0.05,
             grid_levels: 7,
+            loop_grids_kept: 16,
             optimize_every: 30,
             solve_iterations: 10,
             final_iterations: 50,
