@@ -253,6 +253,17 @@ impl LogOddsGrid {
         }
     }
 
+    /// Grows the grid (unknown cells) to hold the rectangle `lo_m..=hi_m`
+    /// (m) at once: a drive whose extent is known before it is drawn
+    /// (every pose located, a known range) spares the grid growing a few
+    /// metres at a time, each growth a copy of every cell.
+    pub fn reserve_m(&mut self, lo_m: [f64; 2], hi_m: [f64; 2]) {
+        if lo_m.iter().chain(&hi_m).all(|v| v.is_finite()) {
+            let (lo, hi) = (self.index_of(lo_m), self.index_of(hi_m));
+            self.reserve(lo, hi);
+        }
+    }
+
     /// Grows the grid (unknown cells) to hold the plane's cells `lo..=hi`.
     fn reserve(&mut self, lo: [i64; 2], hi: [i64; 2]) {
         let last = [

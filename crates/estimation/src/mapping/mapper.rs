@@ -489,6 +489,16 @@ pub fn map_drive(
     let mut grid = prior
         .cloned()
         .unwrap_or_else(|| LogOddsGrid::new(settings.resolution_m, settings.log_odds));
+    // The grid's extent, once: every sensor pose and the range drawn.
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &located.poses {
+        let sensor = compose(*p, mount);
+        for k in 0..2 {
+            lo[k] = lo[k].min(sensor[k] - settings.max_range_m);
+            hi[k] = hi[k].max(sensor[k] + settings.max_range_m);
+        }
+    }
+    grid.reserve_m(lo, hi);
     let surfaces = Surfaces::new(scans, &located.poses, mount, settings);
     let drawn_from = (passes - 1) * scans.len();
     for (k, ((scan, _), pose)) in scans.iter().zip(&located.poses).enumerate() {
