@@ -62,9 +62,11 @@ pub enum Command {
     /// Input: a simulator output directory with a lidar, or --bag BAG with
     /// --scan-topic and the robot's motion: its own odometry (--odom-topic:
     /// a nav_msgs/msg/Odometry topic such as /odom, or TF odom -> base; no
-    /// calibration needed), or the wheel joints of a JointState topic with
-    /// --calibration (the wheels, and the lidar's mount when it is a
-    /// self-calibration), or --carmen LOG: a CARMEN log (.clf, .clf.gz, as
+    /// calibration needed), or the wheel joints of a JointState topic or
+    /// the wheel speeds of two std_msgs/msg/Float64 topics (or two elements
+    /// of a Float64MultiArray) with --calibration (the wheels, and the
+    /// lidar's mount when it is a self-calibration) or the nominal
+    /// --wheel-diameter-m and --wheelbase-m, or --carmen LOG: a CARMEN log (.clf, .clf.gz, as
     /// the 2D SLAM benchmark publishes them), read directly, with the
     /// robot's odometry it carries. The lidar's mount is otherwise the
     /// recording's (/tf_static in a bag, the laser lines' laser pose on the
@@ -83,8 +85,8 @@ pub enum Command {
     /// the robot's first pose in a bag or a CARMEN log.
     ///
     /// Not mapped (an error that says which): a recording without a
-    /// LaserScan topic, or with neither odometry nor wheel joints (wheel
-    /// speeds as std_msgs topics are not read yet), and a log without a
+    /// LaserScan topic, or with neither odometry nor wheel joints nor wheel
+    /// speeds, and a log without a
     /// range sensor of at least 30 beams. `twindrive bag info` suggests the
     /// command line for what a bag has.
     Map(Box<MapArgs>),
