@@ -347,6 +347,8 @@ fn every_commands_help_names_each_input_it_takes() {
                 "--bag",
                 "LaserScan",
                 "JointState",
+                "std_msgs/msg/Float64",
+                "--left-speed-topic",
                 "/odom",
                 "--carmen",
                 "CARMEN log",
