@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::Context;
+use twindrive_ros::extract::{NumberField, Stamps, number_track};
 use twindrive_ros::{Bag, MessageRef, Value};
 
 /// Names that mark an external reference (motion capture, a tracker, a
@@ -644,9 +645,8 @@ fn list_or_none(v: &[String]) -> String {
 /// array topic; with the sign a wheel's numbers need.
 #[derive(Debug, Clone, PartialEq)]
 struct WheelSpeeds {
-    /// `(topic, field)` of the left and the right wheel.
-    left: (String, String),
-    right: (String, String),
+    left: NumberField,
+    right: NumberField,
     /// Which wheel's numbers run backwards when the robot drives (the one
     /// whose mean is negative while the other's is positive: a motor
     /// mounted mirrored), if one does.
@@ -655,11 +655,11 @@ struct WheelSpeeds {
 
 impl WheelSpeeds {
     fn describe(&self) -> String {
-        let side = |(t, f): &(String, String)| {
-            if f == "data" {
-                t.clone()
+        let side = |n: &NumberField| {
+            if n.field == "data" {
+                n.topic.clone()
             } else {
-                format!("{t} {f}")
+                format!("{} {}", n.topic, n.field)
             }
         };
         format!(
@@ -676,13 +676,12 @@ impl WheelSpeeds {
     }
 
     fn flags(&self) -> String {
-        let mut f = format!(" --left-speed-topic {}", self.left.0);
-        if self.left.1 != "data" {
-            let _ = write!(f, " --left-speed-field '{}'", self.left.1);
-        }
-        let _ = write!(f, " --right-speed-topic {}", self.right.0);
-        if self.right.1 != "data" {
-            let _ = write!(f, " --right-speed-field '{}'", self.right.1);
+        let mut f = String::new();
+        for (side, n) in [("left", &self.left), ("right", &self.right)] {
+            let _ = write!(f, " --{side}-speed-topic {}", n.topic);
+            if n.field != "data" {
+                let _ = write!(f, " --{side}-speed-field '{}'", n.field);
+            }
         }
         if let Some(w) = self.backwards {
             let _ = write!(f, " --{w}-sign -1");
@@ -695,7 +694,10 @@ impl WheelSpeeds {
 /// apart: by `left`/`right` in their names, else the only two (in name
 /// order: `axis0` is the left); else an array topic's first two elements.
 fn wheel_speeds(bag: &Bag, topics: &[String], arrays: &[String]) -> Option<WheelSpeeds> {
-    let field = |t: &String, f: &str| (t.clone(), f.to_string());
+    let field = |t: &String, f: &str| NumberField {
+        topic: t.clone(),
+        field: f.to_string(),
+    };
     let by_side = |side: &str| {
         let mut m = topics
             .iter()
@@ -725,29 +727,11 @@ fn wheel_speeds(bag: &Bag, topics: &[String], arrays: &[String]) -> Option<Wheel
     })
 }
 
-/// The mean of a number field over a topic's messages (`data` or
-/// `data[i]`), if every message has it.
-fn mean_of(bag: &Bag, (topic, field): &(String, String)) -> Option<f64> {
-    let schema = bag.schema(topic).ok()?;
-    let data = schema.path("data").ok()?;
-    let index: Option<usize> = field
-        .strip_prefix("data[")
-        .and_then(|i| i.strip_suffix(']'))
-        .and_then(|i| i.parse().ok());
-    let (mut sum, mut n) = (0.0, 0u64);
-    bag.for_each(topic, |m| {
-        let v = m.value.at(&data).ok_or("no data")?;
-        let x = match (v, index) {
-            (Value::Array(a), Some(i)) => a.get(i).and_then(Value::as_f64),
-            (v, None) => v.as_f64(),
-            _ => None,
-        };
-        sum += x.ok_or("not a number")?;
-        n += 1;
-        Ok(())
-    })
-    .ok()?;
-    (n > 0).then(|| sum / n as f64)
+/// The mean of a number field over a topic's messages, if every message
+/// has it (read as `map` and `calibrate` read it).
+fn mean_of(bag: &Bag, field: &NumberField) -> Option<f64> {
+    let track = number_track(bag, field, Stamps::LogTime).ok()?;
+    (!track.is_empty()).then(|| track.iter().map(|(_, v)| v).sum::<f64>() / track.len() as f64)
 }
 
 /// The left and right wheel joints among `names`, if they can be told.

@@ -27,7 +27,7 @@ mod tf;
 
 pub use imu::{IMU, ImuRateTrack, imu_rate_track};
 pub use scan::{LASER_SCAN, ScanData, ScanTrack, scan_track};
-pub use speeds::NumberField;
+pub use speeds::{NumberField, number_track};
 pub use tf::{PlanarMount, TF_MESSAGE, base_frame_guess, static_transform, tf_frames};
 
 use crate::bag::{Bag, BagError};

@@ -449,8 +449,9 @@ pub fn map_drive(
             let own =
                 crate::slam::locate_drive(scans, mount, settings.slam, |k, _| progress(k, total))
                     .poses;
+            let occupied = g.occupied_centres();
             placement = super::place(
-                g,
+                &occupied,
                 scans,
                 &own,
                 mount,
@@ -463,7 +464,7 @@ pub fn map_drive(
             let carry = placement.map_or([0.0; 3], |p| p.onto);
             let predicted: Vec<[f64; 3]> = own.iter().map(|p| compose(carry, *p)).collect();
             let against = locate_all(
-                Mapper::with_map(mount, settings, &g.occupied_centres()),
+                Mapper::with_map(mount, settings, &occupied),
                 scans,
                 &predicted,
                 |k| progress(scans.len() + k, total),

@@ -69,13 +69,14 @@ pub struct Placement {
     pub moved: bool,
 }
 
-/// Places a drive on `prior`: `scans` with the odometry pose each claims
-/// (the first is where the log says it started, in the prior's frame),
-/// `own` the drive's poses as the SLAM located them (same frame, drift and
-/// all), the lidar at `mount`. `None` when nothing on the map scores
-/// `min_score`.
+/// Places a drive on a prior map, given by its occupied cells' centres
+/// (`occupied`, [`LogOddsGrid::occupied_centres`]): `scans` with the
+/// odometry pose each claims (the first is where the log says it started,
+/// in the prior's frame), `own` the drive's poses as the SLAM located them
+/// (same frame, drift and all), the lidar at `mount`. `None` when nothing
+/// on the map scores `min_score`.
 pub fn place(
-    prior: &LogOddsGrid,
+    occupied: &[[f64; 2]],
     scans: &[(Scan, [f64; 3])],
     own: &[[f64; 3]],
     mount: [f64; 3],
@@ -84,12 +85,11 @@ pub fn place(
 ) -> Option<Placement> {
     let (first_claim, first_own) = (scans.first()?.1, *own.first()?);
     let points = composite(scans, own, mount, max_range_m, settings);
-    let occupied = prior.occupied_centres();
     if points.is_empty() || occupied.is_empty() {
         return None;
     }
     let grid = LikelihoodGrid::new(
-        &occupied,
+        occupied,
         settings.resolution_m,
         settings.sigma_m,
         settings.levels,
@@ -130,8 +130,8 @@ pub fn place(
 /// How well a located drive agrees with `prior`, wall by wall: of the
 /// map's occupied cells the drive's beams (one per `voxel_m` cell of each
 /// scan, scans 0.2 m or 0.2 rad apart) reached, the share some return
-/// ended on (within the likelihood field's half) rather than only passed
-/// through. 0 when its beams reached none.
+/// ended on (within `sigma_m` of it) rather than only passed through. 0
+/// when its beams reached none.
 ///
 /// A site changes between missions: a partition taken away is a few cells
 /// that beams pass through, among the many walls a drive of the site

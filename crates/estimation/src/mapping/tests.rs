@@ -194,6 +194,16 @@ fn case_on(site: Site, rng: &mut ChaCha8Rng, laps: f64) -> Case {
     }
 }
 
+/// `scans` with their odometry moved so that the drive claims to start at
+/// `start` (its shape kept).
+fn claiming(scans: &[(Scan, [f64; 3])], start: [f64; 3]) -> Vec<(Scan, [f64; 3])> {
+    let at = scans[0].1;
+    scans
+        .iter()
+        .map(|(s, o)| (s.clone(), compose(start, between(at, *o))))
+        .collect()
+}
+
 fn draw(case: &Case, poses: &[[f64; 3]]) -> LogOddsGrid {
     let settings = MappingSettings::default();
     let surfaces = Surfaces::new(&case.scans, poses, case.mount, settings);
@@ -265,12 +275,10 @@ fn no_beam_no_knowledge_and_a_prior_map_keeps_its_frame() {
     );
     // The second half, from a start the odometry misplaces by a further
     // 11 cm and 3 degrees, is located in the first half's map.
-    let at = case.scans[half].1;
-    let moved = compose(at, [0.1, -0.05, 0.05]);
-    let second: Vec<(Scan, [f64; 3])> = case.scans[half..]
-        .iter()
-        .map(|(s, o)| (s.clone(), compose(moved, between(at, *o))))
-        .collect();
+    let second = claiming(
+        &case.scans[half..],
+        compose(case.scans[half].1, [0.1, -0.05, 0.05]),
+    );
     let both = map_drive(
         &second,
         case.mount,
@@ -321,12 +329,8 @@ fn a_drive_that_starts_elsewhere_is_placed_on_the_prior_and_another_sites_is_not
             r.random_range(1.0..4.0) * if r.random::<bool>() { 1.0 } else { -1.0 },
             r.random_range(-3.1..3.1),
         ];
-        let at = case.scans[half].1;
-        let claimed = compose(at, off);
-        let second: Vec<(Scan, [f64; 3])> = case.scans[half..]
-            .iter()
-            .map(|(s, o)| (s.clone(), compose(claimed, between(at, *o))))
-            .collect();
+        let claimed = compose(case.scans[half].1, off);
+        let second = claiming(&case.scans[half..], claimed);
         let both = map_drive(
             &second,
             case.mount,
@@ -382,12 +386,7 @@ fn a_drive_that_starts_elsewhere_is_placed_on_the_prior_and_another_sites_is_not
             loop_max: [w - 1.2, h - 1.2],
         };
         let other = case_on(hall, &mut r, 0.5);
-        let o_at = other.scans[0].1;
-        let stranger: Vec<(Scan, [f64; 3])> = other
-            .scans
-            .iter()
-            .map(|(s, o)| (s.clone(), compose(claimed, between(o_at, *o))))
-            .collect();
+        let stranger = claiming(&other.scans, claimed);
         let lost = map_drive(
             &stranger,
             other.mount,

@@ -61,6 +61,19 @@ fn series<const N: usize>(
     Ok(raw)
 }
 
+/// `(t_s, value)` of a number field over its topic's messages, in time
+/// order, one per time.
+pub fn number_track(
+    bag: &Bag,
+    field: &NumberField,
+    stamps: Stamps,
+) -> Result<Vec<(f64, f64)>, BagError> {
+    Ok(series(bag, &field.topic, [&field.field], 1.0, stamps)?
+        .into_iter()
+        .map(|(t, [v])| (t, v))
+        .collect())
+}
+
 /// The value of a time-ordered series at `t` inside its span, linearly
 /// interpolated; `cursor` only moves forward (calls come in time order).
 fn at(series: &[(f64, [f64; 1])], cursor: &mut usize, t: f64) -> f64 {
