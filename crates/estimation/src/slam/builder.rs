@@ -1,8 +1,13 @@
 //! The SLAM itself, one scan at a time.
 //!
 //! Local: each scan is matched (PL-ICP, [`register`]) against the older of
-//! two active submaps, from the pose the odometry predicts since the last
-//! scan. A scan that moved far enough since the last node becomes a node:
+//! two active submaps twice, from the pose the odometry predicts since the
+//! last scan and from the best pose of a correlative search around it; of
+//! the two, the likelier given the odometry's noise as this drive has
+//! measured it ([`MeasuredNoise`]) is kept (a corridor's repeating doors,
+//! a person walking ahead of the robot, make a second valley the search
+//! may prefer by a few returns). A scan that moved far enough since the
+//! last node becomes a node:
 //! a pose of the graph, joined to the previous node and to its submap's
 //! first node by what the local matching measured, and its points are
 //! inserted into both active submaps. A submap is finished after
@@ -18,10 +23,11 @@
 //! off and the graph solved again (false loops, such as a corridor's
 //! repeating doors).
 
-use crate::localize::{PointMap, register};
+use crate::localize::{PointMap, ScanMatch, register};
 
 use super::SlamSettings;
 use super::correlative::{LikelihoodGrid, SearchWindow};
+use super::odometry::MeasuredNoise;
 use super::pose_graph::{Edge, PoseGraph};
 use super::se2::{apply, between, compose, inverse, wrap};
 
@@ -103,6 +109,9 @@ pub struct Slam {
     fresh_loops: usize,
     nodes_since_solve: usize,
     stats: SlamStats,
+    /// The odometry's errors on this drive: each scan's best correlative
+    /// match less the odometry's prediction.
+    odometry_errors: MeasuredNoise,
 }
 
 impl Slam {
@@ -121,6 +130,7 @@ impl Slam {
             fresh_loops: 0,
             nodes_since_solve: 0,
             stats: SlamStats::default(),
+            odometry_errors: MeasuredNoise::new(settings.odometry_window),
         }
     }
 
@@ -128,6 +138,7 @@ impl Slam {
     /// range) taken at `t_s`, with the robot's odometry pose then.
     pub fn add(&mut self, t_s: f64, odometry: [f64; 3], points: &[[f64; 2]]) -> ScanOutcome {
         let s = self.settings;
+        let scale = self.odometry_errors.scale();
         let predicted = match self.last {
             None => odometry,
             Some((o, l)) => compose(l, between(o, odometry)),
@@ -197,12 +208,53 @@ impl Slam {
                 .as_ref()
                 .and_then(|g| g.search(searched, prior, window))
                 .map_or(prior, |f| f.pose);
-            if let Ok(found) = register(&submap.points, points, start, &s.matching) {
-                let moved = (found.pose[0] - prior[0]).hypot(found.pose[1] - prior[1]);
-                let turned = wrap(found.pose[2] - prior[2]).abs();
+            let from_prior = register(&submap.points, points, prior, &s.matching).ok();
+            let from_search = if start == prior {
+                None
+            } else {
+                register(&submap.points, points, start, &s.matching).ok()
+            };
+            let model = s.odometry_noise.std(step_m, step_rad);
+            let odometry_information = [
+                (model[0] * scale[0]).powi(-2),
+                (model[0] * scale[0]).powi(-2),
+                (model[1] * scale[1]).powi(-2),
+            ];
+            if let Some(q) = from_search.as_ref().or(from_prior.as_ref()) {
+                self.odometry_errors.record(
+                    (q.pose[0] - prior[0]).hypot(q.pose[1] - prior[1]),
+                    wrap(q.pose[2] - prior[2]),
+                    model,
+                );
+            }
+            // Of the two matches, the likelier given the odometry: a
+            // corridor's repeating doors or a person walking ahead make a
+            // second valley the search may prefer by a few returns.
+            let likelihood = |m: &ScanMatch| {
+                negative_log_likelihood(
+                    &submap.points,
+                    points,
+                    prior,
+                    m.pose,
+                    odometry_information,
+                    &s,
+                )
+            };
+            let chosen = match (from_prior, from_search) {
+                (Some(p), Some(q)) => Some(if likelihood(&q) < likelihood(&p) {
+                    q
+                } else {
+                    p
+                }),
+                (p, q) => p.or(q),
+            };
+            if let Some(found) = chosen {
+                let pose = found.pose;
+                let moved = (pose[0] - prior[0]).hypot(pose[1] - prior[1]);
+                let turned = wrap(pose[2] - prior[2]).abs();
                 if moved <= s.max_correction_m + step_m && turned <= s.max_correction_rad + step_rad
                 {
-                    local = compose(compose(frame, found.pose), inverse(self.mount));
+                    local = compose(compose(frame, pose), inverse(self.mount));
                     outcome = ScanOutcome {
                         matched: true,
                         rms_m: Some(found.rms_m),
@@ -468,4 +520,27 @@ impl Slam {
             .collect();
         (poses, self.stats)
     }
+}
+
+/// How unlikely a match is given the scan and the odometry's prediction:
+/// the scan's robust cost in units of its readings' variance (as many
+/// readings' worth as are independent) plus the odometry's Mahalanobis
+/// distance. Of two local optima, the likelier is kept.
+fn negative_log_likelihood(
+    map: &PointMap,
+    points: &[[f64; 2]],
+    prior: [f64; 3],
+    pose: [f64; 3],
+    odometry: [f64; 3],
+    s: &SlamSettings,
+) -> f64 {
+    let m = &s.matching;
+    let scan = crate::localize::cost(map, points, pose, m) / m.point_std_m.powi(2)
+        * (m.independent_points / points.len().max(1) as f64).min(1.0);
+    let d = [
+        pose[0] - prior[0],
+        pose[1] - prior[1],
+        wrap(pose[2] - prior[2]),
+    ];
+    scan + 0.5 * (0..3).map(|i| d[i] * d[i] * odometry[i]).sum::<f64>()
 }

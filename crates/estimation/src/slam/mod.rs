@@ -18,6 +18,7 @@
 
 mod builder;
 mod correlative;
+mod odometry;
 mod pose_graph;
 #[cfg(test)]
 mod tests;
@@ -27,6 +28,7 @@ use crate::localize::{MatchSettings, Scan};
 
 pub use builder::{ScanOutcome, Slam, SlamStats};
 pub use correlative::{Found, LikelihoodGrid, SearchWindow};
+pub use odometry::OdometryNoise;
 pub use pose_graph::{Edge, PoseGraph, SolveError, Solved};
 
 /// How the SLAM runs. One set of defaults serves every drive: they are
@@ -64,6 +66,15 @@ pub struct SlamSettings {
     pub node_s: f64,
     /// Nodes inserted into a submap before it is finished.
     pub submap_nodes: usize,
+    /// How far the odometry's prediction of one scan from the last may be
+    /// off (the best odometry there is; scaled to this drive's): of the
+    /// two local matches (from the prediction, from the search), the one
+    /// likelier given the scan and this is kept.
+    pub odometry_noise: OdometryNoise,
+    /// The noise model is scaled to the odometry's errors measured over
+    /// the last this-many scans (until a quarter of them are in, the
+    /// odometry is not trusted over the scans).
+    pub odometry_window: usize,
     /// Standard deviation of a local match's relative pose (m, m, rad), and
     /// of the odometry's when a scan did not match.
     pub local_std: [f64; 3],
@@ -130,6 +141,14 @@ impl Default for SlamSettings {
             node_rad: 0.1,
             node_s: 5.0,
             submap_nodes: 60,
+            odometry_noise: OdometryNoise {
+                m_per_m: 0.02,
+                rad_per_rad: 0.02,
+                rad_per_m: 0.01,
+                floor_m: 0.002,
+                floor_rad: 0.001,
+            },
+            odometry_window: 100,
             local_std: [0.01, 0.01, 0.005],
             odometry_std: [0.1, 0.1, 0.05],
             loop_every: 3,
