@@ -138,7 +138,6 @@ impl Slam {
     /// range) taken at `t_s`, with the robot's odometry pose then.
     pub fn add(&mut self, t_s: f64, odometry: [f64; 3], points: &[[f64; 2]]) -> ScanOutcome {
         let s = self.settings;
-        let scale = self.odometry_errors.scale();
         let predicted = match self.last {
             None => odometry,
             Some((o, l)) => compose(l, between(o, odometry)),
@@ -214,7 +213,10 @@ impl Slam {
             } else {
                 register(&submap.points, points, start, &s.matching).ok()
             };
+            // The odometry's noise for this step, scaled by its errors
+            // measured before this scan.
             let model = s.odometry_noise.std(step_m, step_rad);
+            let scale = self.odometry_errors.scale();
             let odometry_information = [
                 (model[0] * scale[0]).powi(-2),
                 (model[0] * scale[0]).powi(-2),

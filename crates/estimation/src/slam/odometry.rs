@@ -3,8 +3,8 @@
 //! measure on this drive. Real odometry differs by orders of magnitude
 //! from robot to robot (on the SLAM benchmark's relations the Freiburg
 //! hospital's is off by 0.08 m over seconds, MIT CSAIL's by 1.7 m and 5°),
-//! so no one constant serves: the model is the best odometry there is, and the drive's own
-//! innovations say how many times worse this one is.
+//! so no one constant serves: the model is the best odometry there is, and
+//! the drive's own innovations say how many times worse this one is.
 
 use std::collections::VecDeque;
 
@@ -82,7 +82,10 @@ impl MeasuredNoise {
 
 #[cfg(test)]
 mod tests {
+    use rand_distr::{Distribution, StandardNormal};
+
     use super::*;
+    use crate::localize::testkit::rng;
 
     fn noise() -> OdometryNoise {
         OdometryNoise {
@@ -94,21 +97,10 @@ mod tests {
         }
     }
 
-    /// Normal deviates from a fixed linear congruential stream (Box-Muller).
+    /// Standard normal deviates from the seed.
     fn normals(seed: u64, n: usize) -> Vec<f64> {
-        let mut state = seed;
-        let mut uniform = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
-        (0..n)
-            .map(|_| {
-                let (a, b) = (uniform(), uniform());
-                (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-            })
-            .collect()
+        let mut r = rng(seed);
+        (0..n).map(|_| StandardNormal.sample(&mut r)).collect()
     }
 
     #[test]
