@@ -429,16 +429,12 @@ pub(crate) fn commands_beside(
 
 /// `grid` as map_server files: `map.pgm`'s bytes and `map.yaml`'s text.
 pub(crate) fn map_files(grid: &LogOddsGrid) -> (Vec<u8>, String) {
-    let occupancy: Vec<Option<f64>> = (0..grid.height())
-        .flat_map(|r| (0..grid.width()).map(move |c| (c, r)))
-        .map(|(c, r)| grid.probability(c, r))
-        .collect();
     let image = twindrive_sim::map::MapImage {
         width: grid.width(),
         height: grid.height(),
         resolution_m: grid.resolution_m(),
         origin_m: grid.origin_m(),
-        occupancy: &occupancy,
+        occupancy: &|col, row| grid.probability(col, row),
     };
     twindrive_sim::map::encode_map(&image, "map.pgm")
 }

@@ -236,15 +236,29 @@ pub fn load_map(yaml_path: &Path) -> Result<OccupancyGrid, SimError> {
 }
 
 /// A map to write as map_server files: each cell's probability of being
-/// occupied, row-major from the bottom row, `None` for unknown.
-#[derive(Debug, Clone, Copy)]
+/// occupied, `None` for unknown.
+#[derive(Clone, Copy)]
 pub struct MapImage<'a> {
     pub width: usize,
     pub height: usize,
     pub resolution_m: f64,
     /// The lower-left corner of the lower-left cell in the world.
     pub origin_m: [f64; 2],
-    pub occupancy: &'a [Option<f64>],
+    /// The probability of the cell at (column, row), row 0 at the bottom:
+    /// read as the image is written, so that a building's map (tens of
+    /// millions of cells) is never held twice.
+    pub occupancy: &'a dyn Fn(usize, usize) -> Option<f64>,
+}
+
+impl std::fmt::Debug for MapImage<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MapImage")
+            .field("width", &self.width)
+            .field("height", &self.height)
+            .field("resolution_m", &self.resolution_m)
+            .field("origin_m", &self.origin_m)
+            .finish_non_exhaustive()
+    }
 }
 
 /// The PGM pixel of a cell for map_server's trinary reading with the
@@ -274,11 +288,7 @@ pub fn encode_map(map: &MapImage<'_>, image_name: &str) -> (Vec<u8>, String) {
     pgm.reserve(w * h);
     for y in 0..h {
         let row = h - 1 - y;
-        pgm.extend(
-            map.occupancy[row * w..(row + 1) * w]
-                .iter()
-                .map(|p| pixel(*p)),
-        );
+        pgm.extend((0..w).map(|col| pixel((map.occupancy)(col, row))));
     }
     let yaml = format!(
         "image: {image_name}\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: {}\nfree_thresh: {}\nmode: trinary\n",
@@ -431,7 +441,7 @@ mod tests {
             height: h,
             resolution_m: 0.05,
             origin_m: [-1.25, 2.5],
-            occupancy: &occupancy,
+            occupancy: &|col, row| occupancy[row * w + col],
         };
         let (pgm, yaml) = encode_map(&map, "m.pgm");
         let dir = tempfile::tempdir().unwrap();

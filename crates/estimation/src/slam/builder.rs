@@ -33,31 +33,43 @@ use super::se2::{apply, between, compose, inverse, wrap};
 
 /// One node: a scan that became a pose of the graph.
 #[derive(Debug)]
-struct Node {
+pub(super) struct Node {
     /// The robot's pose in the local frame.
     local: [f64; 3],
     /// The scan's points (sensor frame), thinned for the loop search.
-    points: Vec<[f64; 2]>,
+    pub(super) points: Vec<[f64; 2]>,
 }
 
 /// A submap: the points of the nodes inserted into it, in the frame of
 /// its first node's robot pose (the anchor).
 #[derive(Debug)]
-struct Submap {
+pub(super) struct Submap {
     /// The node whose robot pose is the submap's frame.
-    anchor: usize,
-    points: PointMap,
+    pub(super) anchor: usize,
+    pub(super) points: PointMap,
     /// The nodes inserted.
-    nodes: Vec<usize>,
+    pub(super) nodes: Vec<usize>,
     /// Once the submap is finished: the part of it the loop search's grid
     /// covers (submap frame), what a node's points can reach from where
     /// the submap's nodes were.
-    reach: Option<([f64; 2], [f64; 2])>,
+    pub(super) reach: Option<([f64; 2], [f64; 2])>,
     /// The last node a loop closure joined to it.
-    closed_at: Option<usize>,
+    pub(super) closed_at: Option<usize>,
+    /// The last node the global search looked for in it.
+    pub(super) searched_at: Option<usize>,
     /// For local matching while it is active: dropped at each insertion,
     /// built again when next needed.
     local_grid: Option<LikelihoodGrid>,
+}
+
+/// A match of the global search ([`Slam::search_globally`]) waiting for
+/// a second that agrees with it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Candidate {
+    pub(super) node: usize,
+    pub(super) submap: usize,
+    /// The node's robot pose in the submap's frame.
+    pub(super) measured: [f64; 3],
 }
 
 /// What happened to one scan.
@@ -76,6 +88,10 @@ pub struct SlamStats {
     pub submaps: usize,
     pub loop_searches: usize,
     pub loop_closures: usize,
+    /// Searches by the global search, and the closures it found (counted
+    /// in `loop_closures` too).
+    pub global_searches: usize,
+    pub global_closures: usize,
     /// Closures switched off after a solve (false loops).
     pub loops_rejected: usize,
     pub solves: usize,
@@ -85,12 +101,12 @@ pub struct SlamStats {
 /// [`Slam::finish`].
 #[derive(Debug)]
 pub struct Slam {
-    settings: SlamSettings,
+    pub(super) settings: SlamSettings,
     /// The lidar's pose on the robot.
-    mount: [f64; 3],
-    graph: PoseGraph,
-    nodes: Vec<Node>,
-    submaps: Vec<Submap>,
+    pub(super) mount: [f64; 3],
+    pub(super) graph: PoseGraph,
+    pub(super) nodes: Vec<Node>,
+    pub(super) submaps: Vec<Submap>,
     /// Indices of the active submaps (at most two, oldest first).
     active: Vec<usize>,
     /// The last scan's odometry and local poses.
@@ -104,11 +120,15 @@ pub struct Slam {
     /// most recent last: a building's worth of them would not fit in
     /// memory (a grid of 7 levels a submap), and a drive searches the few
     /// submaps around it again and again.
-    grids: Vec<(usize, LikelihoodGrid)>,
+    pub(super) grids: Vec<(usize, LikelihoodGrid)>,
     /// Loop edges since the last solve.
-    fresh_loops: usize,
+    pub(super) fresh_loops: usize,
+    /// The global search's matches waiting for one that agrees, and the
+    /// closures it made since the last solve (edge indices).
+    pub(super) pending: Vec<Candidate>,
+    pub(super) fresh_global: Vec<usize>,
     nodes_since_solve: usize,
-    stats: SlamStats,
+    pub(super) stats: SlamStats,
     /// The odometry's errors on this drive: each scan's best correlative
     /// match less the odometry's prediction.
     odometry_errors: MeasuredNoise,
@@ -128,6 +148,8 @@ impl Slam {
             scans: Vec::new(),
             grids: Vec::new(),
             fresh_loops: 0,
+            pending: Vec::new(),
+            fresh_global: Vec::new(),
             nodes_since_solve: 0,
             stats: SlamStats::default(),
             odometry_errors: MeasuredNoise::new(settings.odometry_window),
@@ -331,6 +353,7 @@ impl Slam {
                 nodes: Vec::new(),
                 reach: None,
                 closed_at: None,
+                searched_at: None,
                 local_grid: None,
             });
             self.active.push(self.submaps.len() - 1);
@@ -373,10 +396,26 @@ impl Slam {
         if k.is_multiple_of(s.loop_every.max(1)) {
             self.close_loops(k);
         }
+        if k.is_multiple_of(s.global_every.max(1)) {
+            self.search_globally(k);
+        }
         if self.fresh_loops > 0 && self.nodes_since_solve >= s.optimize_every {
             self.solve(s.solve_iterations);
         }
         k
+    }
+
+    /// The finished submaps node `k` may be searched for in: started
+    /// `loop_min_separation` nodes before it, and not closed to a node a
+    /// few nodes back (that one ties them already: a drive that circles
+    /// one room would otherwise search every submap at every chance).
+    pub(super) fn searchable(&self, k: usize) -> impl Iterator<Item = (usize, &Submap)> {
+        let s = self.settings;
+        self.submaps
+            .iter()
+            .enumerate()
+            .filter(move |(_, m)| m.reach.is_some() && m.anchor + s.loop_min_separation <= k)
+            .filter(move |(_, m)| m.closed_at.is_none_or(|c| c + s.loop_rest_nodes <= k))
     }
 
     /// Searches node `k` in every finished submap near it that local
@@ -388,14 +427,7 @@ impl Slam {
         // The finished submaps near the node, nearest first (by their
         // nearest node), at most `loop_max_submaps` of them.
         let mut near: Vec<(f64, usize)> = self
-            .submaps
-            .iter()
-            .enumerate()
-            .filter(|(_, m)| m.reach.is_some() && m.anchor + s.loop_min_separation <= k)
-            // A submap closed to a node a few nodes back is tied to this
-            // stretch of the drive already (a drive that circles one room
-            // would otherwise search every submap at every chance).
-            .filter(|(_, m)| m.closed_at.is_none_or(|c| c + s.loop_rest_nodes <= k))
+            .searchable(k)
             .filter_map(|(i, m)| {
                 let d = m
                     .nodes
@@ -411,27 +443,12 @@ impl Slam {
         near.sort_by(|a, b| a.0.total_cmp(&b.0));
         near.truncate(s.loop_max_submaps);
         for (_, m) in near {
-            self.cache_loop_grid(m);
-            let grid = &self.grids.last().expect("just cached").1;
-            let submap = &self.submaps[m];
-            let frame = self.graph.poses[submap.anchor];
-            let guess = between(frame, compose(global, self.mount));
             self.stats.loop_searches += 1;
-            let points = &self.nodes[k].points;
-            let Some(found) = grid.search(points, guess, window) else {
+            let Some(measured) = self.match_in_submap(k, m, window) else {
                 continue;
             };
-            let Ok(refined) = register(&submap.points, points, found.pose, &s.loop_matching) else {
-                continue;
-            };
-            if (refined.pose[0] - found.pose[0]).hypot(refined.pose[1] - found.pose[1])
-                > 2.0 * s.grid_resolution_m
-            {
-                continue;
-            }
-            let measured = compose(refined.pose, inverse(self.mount));
             self.graph.add_edge(Edge {
-                from: submap.anchor,
+                from: self.submaps[m].anchor,
                 to: k,
                 measured,
                 std: s.loop_std,
@@ -447,7 +464,7 @@ impl Slam {
     /// Puts the loop search's grid of finished submap `m` last in the
     /// cache: found there, or built from its points (the same grid either
     /// way).
-    fn cache_loop_grid(&mut self, m: usize) {
+    pub(super) fn cache_loop_grid(&mut self, m: usize) {
         let s = self.settings;
         match self.grids.iter().position(|(i, _)| *i == m) {
             Some(at) => {
@@ -480,19 +497,35 @@ impl Slam {
 
     /// Solves the graph: first with the closures' losses nearly quadratic
     /// (a closure found after metres of drift is far from the estimate
-    /// until the graph bends to it), then with their Huber losses; then
-    /// switches off the closures still far from the rest (false loops) and
-    /// solves again.
-    fn solve(&mut self, iterations: usize) {
+    /// until the graph bends to it) and the global search's new ones
+    /// quadratic (already checked against each other, and metres away),
+    /// then with their Huber losses; then switches off the closures still
+    /// far from the rest (false loops) and solves again.
+    pub(super) fn solve(&mut self, iterations: usize) {
         let s = self.settings;
         self.stats.solves += 1;
         self.fresh_loops = 0;
         self.nodes_since_solve = 0;
-        for huber in [s.loop_huber * 10.0, s.loop_huber] {
+        let fresh_global = std::mem::take(&mut self.fresh_global);
+        for first in [true, false] {
+            let huber = if first {
+                s.loop_huber * 10.0
+            } else {
+                s.loop_huber
+            };
             for e in self.graph.edges.iter_mut().filter(|e| e.huber.is_some()) {
                 e.huber = Some(huber);
             }
-            if self.graph.optimize(iterations).is_err() {
+            if first {
+                for &e in &fresh_global {
+                    self.graph.edges[e].huber = None;
+                }
+            }
+            let solved = self.graph.optimize(iterations);
+            for &e in &fresh_global {
+                self.graph.edges[e].huber = Some(s.loop_huber);
+            }
+            if solved.is_err() {
                 return;
             }
         }

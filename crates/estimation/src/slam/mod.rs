@@ -18,6 +18,7 @@
 
 mod builder;
 mod correlative;
+mod global;
 mod odometry;
 mod pose_graph;
 #[cfg(test)]
@@ -102,6 +103,24 @@ pub struct SlamSettings {
     /// A closure whose whitened residual is above this after a solve is
     /// switched off.
     pub loop_reject_chi: f64,
+    /// The global search (for drives that come back further off than the
+    /// loop window): every `global_every`-th node, in at most
+    /// `global_max_submaps` finished submaps beyond the loop window, the
+    /// window grown by `global_drift_m_per_m` of the path through the graph
+    /// between node and submap (`global_blind_drift_m_per_m` where scans
+    /// did not match), up to `global_max_m`; matches score at
+    /// least `global_min_score`, and two from different nodes within
+    /// `global_pending_nodes` of each other must move the drive alike
+    /// (within `global_agree_m`, `global_agree_rad`) to be closures.
+    pub global_every: usize,
+    pub global_max_submaps: usize,
+    pub global_drift_m_per_m: f64,
+    pub global_blind_drift_m_per_m: f64,
+    pub global_max_m: f64,
+    pub global_min_score: f64,
+    pub global_pending_nodes: usize,
+    pub global_agree_m: f64,
+    pub global_agree_rad: f64,
     /// The grid the loop search runs on; at most `loop_grids_kept` of the
     /// finished submaps' grids are kept (the others are built again when
     /// searched).
@@ -167,6 +186,15 @@ impl Default for SlamSettings {
             loop_std: [0.03, 0.03, 0.01],
             loop_huber: 2.0,
             loop_reject_chi: 10.0,
+            global_every: 5,
+            global_max_submaps: 2,
+            global_drift_m_per_m: 0.05,
+            global_blind_drift_m_per_m: 0.2,
+            global_max_m: 25.0,
+            global_min_score: 0.6,
+            global_pending_nodes: 100,
+            global_agree_m: 0.3,
+            global_agree_rad: 0.05,
             grid_resolution_m: 0.05,
             grid_sigma_m: 0.05,
             grid_levels: 7,

@@ -91,6 +91,30 @@ fn odometry(truth: &[[f64; 3]], rng: &mut rand_chacha::ChaCha8Rng) -> Vec<[f64; 
     odo
 }
 
+/// A scan from each true pose, 0.2 s apart, with the odometry's pose; the
+/// scans where `blind(k)` see nothing.
+fn drive(
+    walls: &[[f64; 4]],
+    truth: &[[f64; 3]],
+    odo: &[[f64; 3]],
+    blind: impl Fn(usize) -> bool,
+    rng: &mut rand_chacha::ChaCha8Rng,
+) -> Vec<(Scan, [f64; 3])> {
+    truth
+        .iter()
+        .zip(odo)
+        .enumerate()
+        .map(|(k, (t, o))| {
+            let mut scan = testkit::scan(walls, *t, LIDAR, rng);
+            if blind(k) {
+                scan.ranges_m.fill(scan.range_max_m as f32);
+            }
+            scan.t_s = k as f64 * 0.2;
+            (scan, *o)
+        })
+        .collect()
+}
+
 #[test]
 fn two_laps_of_a_ring_with_drifting_odometry_close_on_themselves() {
     for seed in 0..3u64 {
@@ -99,16 +123,7 @@ fn two_laps_of_a_ring_with_drifting_odometry_close_on_themselves() {
         let walls = ring(w, h, 2.0, &mut rng);
         let truth = lap_poses(w, h, 2, 0.1);
         let odo = odometry(&truth, &mut rng);
-        let scans: Vec<(Scan, [f64; 3])> = truth
-            .iter()
-            .zip(&odo)
-            .enumerate()
-            .map(|(k, (t, o))| {
-                let mut scan = testkit::scan(&walls, *t, LIDAR, &mut rng);
-                scan.t_s = k as f64 * 0.2;
-                (scan, *o)
-            })
-            .collect();
+        let scans = drive(&walls, &truth, &odo, |_| false, &mut rng);
         let run = locate_drive(&scans, [0.0; 3], SlamSettings::default(), |_, _| {});
         assert_eq!(run.poses.len(), truth.len());
         let worst = |poses: &[[f64; 3]]| {
@@ -143,6 +158,73 @@ fn two_laps_of_a_ring_with_drifting_odometry_close_on_themselves() {
         assert!(
             heading < 0.03,
             "seed {seed}: a heading is {heading:.3} rad off"
+        );
+    }
+}
+
+/// A lap of the ring, then half a lap driven blind (the lidar sees
+/// nothing) on odometry that overstates distance by 45-50 % and whose
+/// heading drifts 8-10 mrad a metre (wheels spinning, slipping), back into the first
+/// lap's corridor metres further off than the loop window reaches: the
+/// global search finds where it is, and the rest of the drive lies on the
+/// first lap (the second lap ends where the first began).
+#[test]
+fn a_drive_back_from_a_blind_stretch_metres_off_is_found_by_the_global_search() {
+    for seed in 10..13u64 {
+        let mut rng = testkit::rng(seed);
+        let (w, h) = (rng.random_range(20.0..24.0), rng.random_range(10.0..12.0));
+        let walls = ring(w, h, 2.0, &mut rng);
+        let lap = lap_poses(w, h, 1, 0.1).len();
+        let truth: Vec<[f64; 3]> = lap_poses(w, h, 2, 0.1).into_iter().take(lap * 2).collect();
+        // Blind from 3 m into the second lap, for half of it.
+        let blind = lap + 30..lap + 30 + lap / 2;
+        let stretch = rng.random_range(1.45..1.50);
+        let drift_rad_per_m = rng.random_range(0.008..0.010);
+        let mut odo = odometry(&truth, &mut rng);
+        let steps: Vec<[f64; 3]> = (1..truth.len())
+            .map(|k| {
+                let d = between(truth[k - 1], truth[k]);
+                if blind.contains(&k) {
+                    let len = d[0].hypot(d[1]);
+                    [d[0] * stretch, d[1], d[2] - drift_rad_per_m * len]
+                } else {
+                    between(odo[k - 1], odo[k])
+                }
+            })
+            .collect();
+        for (k, step) in steps.into_iter().enumerate() {
+            odo[k + 1] = compose(odo[k], step);
+        }
+        let scans = drive(&walls, &truth, &odo, |k| blind.contains(&k), &mut rng);
+        let settings = SlamSettings::default();
+        // Where the odometry brings the robot back, seen from where it
+        // went blind: beyond the loop window.
+        let back = blind.end;
+        let off = between(truth[blind.start - 1], truth[back]);
+        let drifted = between(odo[blind.start - 1], odo[back]);
+        let came_back_off = (drifted[0] - off[0]).hypot(drifted[1] - off[1]);
+        assert!(
+            came_back_off > settings.loop_window.linear_m + 0.5,
+            "seed {seed}: the odometry must come back beyond the loop window ({came_back_off:.2} m)"
+        );
+        let run = locate_drive(&scans, [0.0; 3], settings, |_, _| {});
+        let seen_worst = run
+            .poses
+            .iter()
+            .zip(&truth)
+            .enumerate()
+            .filter(|(k, _)| *k >= back)
+            .map(|(_, (p, t))| (p[0] - t[0]).hypot(p[1] - t[1]))
+            .fold(0.0, f64::max);
+        assert!(
+            run.stats.global_closures >= 2,
+            "seed {seed}: nothing found by the global search ({:?})",
+            run.stats
+        );
+        assert!(
+            seen_worst < 0.15,
+            "seed {seed}: a pose after the blind stretch is {seen_worst:.3} m from the truth, {:?}",
+            run.stats
         );
     }
 }
