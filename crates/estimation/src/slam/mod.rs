@@ -190,7 +190,7 @@ impl Default for SlamSettings {
             global_max_submaps: 2,
             global_drift_m_per_m: 0.05,
             global_blind_drift_m_per_m: 0.2,
-            global_max_m: 25.0,
+            global_max_m: 40.0,
             global_min_score: 0.6,
             global_pending_nodes: 100,
             global_agree_m: 0.3,
