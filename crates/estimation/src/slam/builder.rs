@@ -418,6 +418,18 @@ impl Slam {
             .filter(move |(_, m)| m.closed_at.is_none_or(|c| c + s.loop_rest_nodes <= k))
     }
 
+    /// How far `at` is from the nearest of submap `m`'s nodes, by the
+    /// current estimate (m).
+    pub(super) fn nearest_node_m(&self, m: &Submap, at: [f64; 3]) -> f64 {
+        m.nodes
+            .iter()
+            .map(|&n| {
+                let p = self.graph.poses[n];
+                (p[0] - at[0]).hypot(p[1] - at[1])
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// Searches node `k` in every finished submap near it that local
     /// matching does not already join it to.
     fn close_loops(&mut self, k: usize) {
@@ -429,14 +441,7 @@ impl Slam {
         let mut near: Vec<(f64, usize)> = self
             .searchable(k)
             .filter_map(|(i, m)| {
-                let d = m
-                    .nodes
-                    .iter()
-                    .map(|&n| {
-                        let p = self.graph.poses[n];
-                        (p[0] - global[0]).hypot(p[1] - global[1])
-                    })
-                    .fold(f64::INFINITY, f64::min);
+                let d = self.nearest_node_m(m, global);
                 (d <= window.linear_m).then_some((d, i))
             })
             .collect();

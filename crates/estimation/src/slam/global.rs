@@ -25,7 +25,7 @@ use crate::localize::register;
 use super::builder::{Candidate, Slam};
 use super::correlative::SearchWindow;
 use super::pose_graph::Edge;
-use super::se2::{compose, inverse, wrap};
+use super::se2::{between, compose, inverse, wrap};
 
 impl Slam {
     /// Searches node `k` in the finished submaps beyond the loop window
@@ -38,12 +38,12 @@ impl Slam {
         let mut wanted: Vec<(f64, f64, usize)> = self
             .searchable(k)
             .filter_map(|(i, m)| {
-                let (mut nearest, mut path) = (f64::INFINITY, f64::INFINITY);
-                for &n in &m.nodes {
-                    let p = self.graph.poses[n];
-                    nearest = nearest.min((p[0] - global[0]).hypot(p[1] - global[1]));
-                    path = path.min(along[n]);
-                }
+                let nearest = self.nearest_node_m(m, global);
+                let path = m
+                    .nodes
+                    .iter()
+                    .map(|&n| along[n])
+                    .fold(f64::INFINITY, f64::min);
                 let window =
                     (s.loop_window.linear_m + s.global_drift_m_per_m * path).min(s.global_max_m);
                 (nearest > s.loop_window.linear_m && nearest <= window)
@@ -123,7 +123,6 @@ impl Slam {
             self.stats.loop_closures += 1;
             self.stats.global_closures += 1;
         }
-        self.fresh_loops += 2;
         self.solve(s.solve_iterations);
     }
 
@@ -141,7 +140,7 @@ impl Slam {
         let grid = &self.grids.last().expect("just cached").1;
         let submap = &self.submaps[m];
         let frame = self.graph.poses[submap.anchor];
-        let guess = super::se2::between(frame, compose(self.graph.poses[k], self.mount));
+        let guess = between(frame, compose(self.graph.poses[k], self.mount));
         let points = &self.nodes[k].points;
         let found = grid.search(points, guess, window)?;
         let refined = register(&submap.points, points, found.pose, &s.loop_matching).ok()?;
