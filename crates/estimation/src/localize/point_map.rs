@@ -25,6 +25,8 @@ pub struct PointMap {
     counts: Vec<u32>,
     anchors: Vec<Anchor>,
     tree: Option<ImmutableKdTree<f64, 2>>,
+    /// Points were added since the tree and the normals were built.
+    stale: bool,
 }
 
 impl std::fmt::Debug for PointMap {
@@ -49,12 +51,14 @@ impl PointMap {
             counts: Vec::new(),
             anchors: Vec::new(),
             tree: None,
+            stale: false,
         }
     }
 
     /// Frees what only adding points needs (the voxels' sums), for a map
     /// that is done growing; [`PointMap::extend`] recovers them.
     pub fn compact(&mut self) {
+        self.refresh();
         self.voxels = HashMap::new();
         self.points.shrink_to_fit();
         self.counts.shrink_to_fit();
@@ -63,6 +67,14 @@ impl PointMap {
 
     /// Adds `points` (map frame) and rebuilds the tree and the normals.
     pub fn extend(&mut self, points: impl IntoIterator<Item = [f64; 2]>) {
+        self.add(points);
+        self.refresh();
+    }
+
+    /// Adds `points` (map frame) without rebuilding: the map answers as
+    /// before until [`refresh`](Self::refresh) (for a map that takes many
+    /// additions between queries).
+    pub fn add(&mut self, points: impl IntoIterator<Item = [f64; 2]>) {
         if self.voxels.is_empty() {
             // Compacted: each point is its voxel's mean of `count` returns.
             for (p, n) in self.points.iter().zip(&self.counts) {
@@ -87,10 +99,18 @@ impl PointMap {
             v.0[1] += p[1];
             v.1 += 1;
         }
-        self.rebuild();
+        self.stale = true;
+    }
+
+    /// Rebuilds the tree and the normals if points were added since.
+    pub fn refresh(&mut self) {
+        if self.stale {
+            self.rebuild();
+        }
     }
 
     fn rebuild(&mut self) {
+        self.stale = false;
         // Voxels in a fixed order, so the same points give the same map.
         let mut keys: Vec<&(i32, i32)> = self.voxels.keys().collect();
         keys.sort_unstable();

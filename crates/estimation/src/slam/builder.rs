@@ -174,6 +174,8 @@ impl Slam {
             let frame = self.nodes[self.submaps[m].anchor].local;
             let prior = between(frame, compose(predicted, self.mount));
             let submap = &mut self.submaps[m];
+            // Only the submap matched against is kept built.
+            submap.points.refresh();
             if submap.local_grid.is_none() {
                 submap.local_grid = Some(LikelihoodGrid::new(
                     submap.points.points(),
@@ -360,13 +362,18 @@ impl Slam {
             self.stats.submaps += 1;
         }
         let sensor = compose(local, self.mount);
-        for &m in &self.active {
+        for (i, &m) in self.active.iter().enumerate() {
             let frame = self.nodes[self.submaps[m].anchor].local;
             let in_submap = between(frame, sensor);
             let submap = &mut self.submaps[m];
+            // The newer submap is not matched against until the older is
+            // finished: it is built then.
             submap
                 .points
-                .extend(points.iter().map(|p| apply(in_submap, *p)));
+                .add(points.iter().map(|p| apply(in_submap, *p)));
+            if i == 0 {
+                submap.points.refresh();
+            }
             submap.nodes.push(k);
             submap.local_grid = None;
         }
