@@ -17,9 +17,13 @@ use super::se2::apply;
 /// A likelihood field over a submap and its coarser max-levels.
 #[derive(Debug, Clone)]
 pub struct LikelihoodGrid {
-    /// The centre of cell (0, 0) (m, submap frame).
-    origin: [f64; 2],
+    /// The grid's cells are those of a lattice centred at `phase + i ×
+    /// resolution_m` (set by the first points: a grid grows without
+    /// moving its cells); cell (0, 0) is lattice cell `origin_cells`.
+    phase: [f64; 2],
+    origin_cells: [i64; 2],
     resolution_m: f64,
+    sigma_m: f64,
     width: usize,
     height: usize,
     /// `levels[h][y * width + x]`: the most of level 0 over
@@ -53,48 +57,183 @@ pub struct Found {
     pub score: f64,
 }
 
+/// Cells added on each side a grid grows to (a submap grows a few metres
+/// at a time).
+const GROWTH_CELLS: i64 = 128;
+
 impl LikelihoodGrid {
     /// The field of `points` (the submap's surfaces, submap frame), with
     /// cells of `resolution_m`, a spread `sigma_m` and `levels` levels
     /// (the coarsest spans `2^(levels-1)` cells).
     pub fn new(points: &[[f64; 2]], resolution_m: f64, sigma_m: f64, levels: usize) -> Self {
-        let reach = (3.0 * sigma_m / resolution_m).ceil() as i64;
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in points {
+        let mut grid = Self {
+            phase: [0.0; 2],
+            origin_cells: [0; 2],
+            resolution_m,
+            sigma_m,
+            width: 0,
+            height: 0,
+            levels: vec![Vec::new(); levels.max(1)],
+        };
+        grid.insert(points);
+        grid
+    }
+
+    /// Cells a point's field reaches on each side.
+    fn reach_cells(&self) -> i64 {
+        (3.0 * self.sigma_m / self.resolution_m).ceil() as i64
+    }
+
+    /// The lattice cell of `p` (m, submap frame).
+    fn lattice(&self, p: [f64; 2]) -> [i64; 2] {
+        [
+            ((p[0] - self.phase[0]) / self.resolution_m).round() as i64,
+            ((p[1] - self.phase[1]) / self.resolution_m).round() as i64,
+        ]
+    }
+
+    /// Adds `points` (submap frame) to the field, growing the grid to
+    /// hold them: the same field as a grid made of all the points at
+    /// once.
+    pub fn insert(&mut self, points: &[[f64; 2]]) {
+        let points: Vec<[f64; 2]> = points
+            .iter()
+            .filter(|p| p[0].is_finite() && p[1].is_finite())
+            .copied()
+            .collect();
+        if points.is_empty() {
+            return;
+        }
+        let margin = self.reach_cells() + 1;
+        if self.width == 0 || self.height == 0 {
+            // The first points: the lattice starts `margin` cells below
+            // and left of the lowest.
+            let mut low = [f64::INFINITY; 2];
+            for p in &points {
+                low = [low[0].min(p[0]), low[1].min(p[1])];
+            }
+            self.phase = low.map(|v| v - margin as f64 * self.resolution_m);
+        }
+        let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
+        for p in &points {
+            let c = self.lattice(*p);
             for k in 0..2 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
+                lo[k] = lo[k].min(c[k] - margin);
+                hi[k] = hi[k].max(c[k] + margin);
             }
         }
-        if points.is_empty() {
-            lo = [0.0; 2];
-            hi = [0.0; 2];
-        }
-        let margin = (reach + 1) as f64 * resolution_m;
-        let origin = [lo[0] - margin, lo[1] - margin];
-        let width = ((hi[0] - lo[0] + 2.0 * margin) / resolution_m).ceil() as usize + 1;
-        let height = ((hi[1] - lo[1] + 2.0 * margin) / resolution_m).ceil() as usize + 1;
-        let mut base = vec![0u8; width * height];
-        let inv_two_var = 1.0 / (2.0 * sigma_m * sigma_m);
-        for p in points {
-            let cx = ((p[0] - origin[0]) / resolution_m).round() as i64;
-            let cy = ((p[1] - origin[1]) / resolution_m).round() as i64;
-            for y in (cy - reach).max(0)..=(cy + reach).min(height as i64 - 1) {
-                let dy = origin[1] + y as f64 * resolution_m - p[1];
-                for x in (cx - reach).max(0)..=(cx + reach).min(width as i64 - 1) {
-                    let dx = origin[0] + x as f64 * resolution_m - p[0];
-                    let v = ((-(dx * dx + dy * dy) * inv_two_var).exp() * 255.0).round() as u8;
-                    let cell = &mut base[y as usize * width + x as usize];
+        self.grow(lo, hi);
+        // Level 0: each point's field, separable (exp(-(dx² + dy²)/2σ²)
+        // is the product of its x and y parts).
+        let reach = self.reach_cells();
+        let inv_two_var = 1.0 / (2.0 * self.sigma_m * self.sigma_m);
+        let res = self.resolution_m;
+        let side = (2 * reach + 1) as usize;
+        let (mut wx, mut wy) = (vec![0.0; side], vec![0.0; side]);
+        let mut boxes = Vec::with_capacity(points.len());
+        for p in &points {
+            let c = self.lattice(*p);
+            let (cx, cy) = (c[0] - self.origin_cells[0], c[1] - self.origin_cells[1]);
+            for i in 0..side {
+                let off = i as i64 - reach;
+                let dx = self.phase[0] + (c[0] + off) as f64 * res - p[0];
+                let dy = self.phase[1] + (c[1] + off) as f64 * res - p[1];
+                wx[i] = (-dx * dx * inv_two_var).exp();
+                wy[i] = (-dy * dy * inv_two_var).exp();
+            }
+            let base = &mut self.levels[0];
+            for (j, wy) in wy.iter().enumerate() {
+                let row = (cy - reach + j as i64) as usize * self.width;
+                for (i, wx) in wx.iter().enumerate() {
+                    let v = (wx * wy * 255.0).round() as u8;
+                    let cell = &mut base[row + (cx - reach + i as i64) as usize];
                     if v > *cell {
                         *cell = v;
                     }
                 }
             }
+            boxes.push(([cx - reach, cy - reach], [cx + reach, cy + reach]));
         }
-        let mut grids = vec![base];
-        for h in 1..levels.max(1) {
+        // The coarser levels over what changed: point by point when the
+        // points' boxes are small beside the grid, else all of it.
+        let levels = self.levels.len();
+        let per_point: i64 = (1..levels)
+            .map(|h| (side as i64 + (1i64 << h)).pow(2))
+            .sum::<i64>()
+            * points.len() as i64;
+        if per_point < (self.width * self.height * (levels - 1)) as i64 {
+            for (lo, hi) in boxes {
+                self.update_levels(lo, hi);
+            }
+        } else {
+            self.update_levels([0, 0], [self.width as i64 - 1, self.height as i64 - 1]);
+        }
+    }
+
+    /// Makes the grid cover lattice cells `lo..=hi` (grown with room to
+    /// spare unless it was empty), moving what it holds.
+    fn grow(&mut self, lo: [i64; 2], hi: [i64; 2]) {
+        let old_lo = self.origin_cells;
+        let old_hi = [
+            old_lo[0] + self.width as i64 - 1,
+            old_lo[1] + self.height as i64 - 1,
+        ];
+        let empty = self.width == 0 || self.height == 0;
+        if !empty && (0..2).all(|k| lo[k] >= old_lo[k] && hi[k] <= old_hi[k]) {
+            return;
+        }
+        let (new_lo, new_hi) = if empty {
+            (lo, hi)
+        } else {
+            let mut new_lo = old_lo;
+            let mut new_hi = old_hi;
+            for k in 0..2 {
+                if lo[k] < old_lo[k] {
+                    new_lo[k] = lo[k] - GROWTH_CELLS;
+                }
+                if hi[k] > old_hi[k] {
+                    new_hi[k] = hi[k] + GROWTH_CELLS;
+                }
+            }
+            (new_lo, new_hi)
+        };
+        let width = (new_hi[0] - new_lo[0] + 1) as usize;
+        let height = (new_hi[1] - new_lo[1] + 1) as usize;
+        let (dx, dy) = (
+            (old_lo[0] - new_lo[0]) as usize,
+            (old_lo[1] - new_lo[1]) as usize,
+        );
+        for level in &mut self.levels {
+            let mut grown = vec![0u8; width * height];
+            for y in 0..self.height {
+                let from = &level[y * self.width..(y + 1) * self.width];
+                let at = (y + dy) * width + dx;
+                grown[at..at + self.width].copy_from_slice(from);
+            }
+            *level = grown;
+        }
+        self.origin_cells = new_lo;
+        self.width = width;
+        self.height = height;
+    }
+
+    /// Recomputes the coarser levels where level 0 changed in cells
+    /// `lo..=hi` (grid indices).
+    fn update_levels(&mut self, lo: [i64; 2], hi: [i64; 2]) {
+        let (width, height) = (self.width, self.height);
+        let (mut lo, hi) = (lo, hi);
+        for h in 1..self.levels.len() {
             let half = 1usize << (h - 1);
-            let prev = &grids[h - 1];
+            // Level h at x reads level h-1 at x and x + half.
+            lo = [lo[0] - half as i64, lo[1] - half as i64];
+            let (x0, y0) = (lo[0].max(0) as usize, lo[1].max(0) as usize);
+            let (x1, y1) = (
+                (hi[0].min(width as i64 - 1)) as usize,
+                (hi[1].min(height as i64 - 1)) as usize,
+            );
+            let (below, above) = self.levels.split_at_mut(h);
+            let prev = &below[h - 1];
+            let next = &mut above[0];
             let at = |x: usize, y: usize| {
                 if x < width && y < height {
                     prev[y * width + x]
@@ -102,44 +241,52 @@ impl LikelihoodGrid {
                     0
                 }
             };
-            let mut next = vec![0u8; width * height];
-            for y in 0..height {
-                for x in 0..width {
+            for y in y0..=y1 {
+                for x in x0..=x1 {
                     next[y * width + x] = at(x, y)
                         .max(at(x + half, y))
                         .max(at(x, y + half))
                         .max(at(x + half, y + half));
                 }
             }
-            grids.push(next);
-        }
-        Self {
-            origin,
-            resolution_m,
-            width,
-            height,
-            levels: grids,
         }
     }
 
     /// The centres of the grid's first and last cells (m, submap frame).
     pub fn bounds(&self) -> ([f64; 2], [f64; 2]) {
-        let far = [
-            self.origin[0] + (self.width - 1) as f64 * self.resolution_m,
-            self.origin[1] + (self.height - 1) as f64 * self.resolution_m,
+        let res = self.resolution_m;
+        let o = self.origin_cells;
+        let near = [
+            self.phase[0] + o[0] as f64 * res,
+            self.phase[1] + o[1] as f64 * res,
         ];
-        (self.origin, far)
+        let far = [
+            self.phase[0] + (o[0] + self.width as i64 - 1) as f64 * res,
+            self.phase[1] + (o[1] + self.height as i64 - 1) as f64 * res,
+        ];
+        (near, far)
     }
 
     /// The field at `p` (submap frame): level 0 at the nearest cell, 0 off
     /// the grid.
     pub fn at(&self, p: [f64; 2]) -> f64 {
-        let x = ((p[0] - self.origin[0]) / self.resolution_m).round();
-        let y = ((p[1] - self.origin[1]) / self.resolution_m).round();
-        if x < 0.0 || y < 0.0 || x >= self.width as f64 || y >= self.height as f64 {
+        let c = self.lattice(p);
+        let (x, y) = (c[0] - self.origin_cells[0], c[1] - self.origin_cells[1]);
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
             return 0.0;
         }
         f64::from(self.levels[0][y as usize * self.width + x as usize]) / 255.0
+    }
+
+    /// Level `h` at `p` (submap frame), 0 off the grid.
+    #[cfg(test)]
+    fn level_at(&self, h: usize, p: [f64; 2]) -> u8 {
+        let c = self.lattice(p);
+        let (x, y) = (c[0] - self.origin_cells[0], c[1] - self.origin_cells[1]);
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            return 0;
+        }
+        self.levels[h][y as usize * self.width + x as usize]
     }
 
     /// Mean of the field at `points` (sensor frame) seen from `pose`.
@@ -159,7 +306,7 @@ impl LikelihoodGrid {
         guess: [f64; 3],
         window: SearchWindow,
     ) -> Option<Found> {
-        if points.is_empty() {
+        if points.is_empty() || self.width == 0 {
             return None;
         }
         let res = self.resolution_m;
@@ -184,11 +331,8 @@ impl LikelihoodGrid {
                 let cells = points
                     .iter()
                     .map(|p| {
-                        let w = apply(pose, *p);
-                        (
-                            ((w[0] - self.origin[0]) / res).round() as i64,
-                            ((w[1] - self.origin[1]) / res).round() as i64,
-                        )
+                        let c = self.lattice(apply(pose, *p));
+                        (c[0] - self.origin_cells[0], c[1] - self.origin_cells[1])
                     })
                     .collect();
                 (heading, cells)
@@ -410,6 +554,74 @@ mod tests {
         assert!(found.score > 0.5, "its own scan scores {:.3}", found.score);
         window.min_score = found.score + 1e-6;
         assert_eq!(grid.search(&scan, [0.2, -0.3, 0.1], window), None);
+    }
+
+    /// A grid grown scan by scan (the points of each inserted as they
+    /// come, the grid growing where they fall outside it) is the grid of
+    /// all the points at once (on the same lattice): the same field, and the same bounds on it
+    /// wherever the grid made at once reaches (a bigger grid bounds the
+    /// cells beyond the other's edge more tightly), so the same best
+    /// score. Random rooms, scans from random poses, batches of random
+    /// sizes.
+    #[test]
+    fn a_grid_grown_scan_by_scan_is_the_grid_made_at_once() {
+        for seed in 0..4u64 {
+            let mut rng = testkit::rng(seed + 40);
+            let walls = testkit::room(&mut rng);
+            let mut batches = Vec::new();
+            for _ in 0..5 {
+                let at = testkit::free_pose(&walls, 0.5, &mut rng);
+                let scan = testkit::scan(&walls, at, LIDAR, &mut rng).points();
+                let seen: Vec<[f64; 2]> = scan.iter().map(|p| apply(at, *p)).collect();
+                // Split at random: a few points, then the rest.
+                let cut = rng.random_range(1..seen.len());
+                batches.push(seen[..cut].to_vec());
+                batches.push(seen[cut..].to_vec());
+            }
+            let all: Vec<[f64; 2]> = batches.concat();
+            // The first points set the lattice: the lowest in x and in y
+            // first, as the grid made at once has it.
+            let lowest = |k: usize| {
+                *all.iter()
+                    .min_by(|a, b| a[k].total_cmp(&b[k]))
+                    .expect("points")
+            };
+            batches.insert(0, vec![lowest(0), lowest(1)]);
+            let at_once = LikelihoodGrid::new(&all, 0.05, 0.05, 4);
+            let mut grown = LikelihoodGrid::new(&[], 0.05, 0.05, 4);
+            for batch in &batches {
+                grown.insert(batch);
+            }
+            let (lo, hi) = at_once.bounds();
+            let mut r = ChaCha8Rng::seed_from_u64(seed);
+            for _ in 0..2_000 {
+                let p = [
+                    r.random_range(lo[0] - 1.0..hi[0] + 1.0),
+                    r.random_range(lo[1] - 1.0..hi[1] + 1.0),
+                ];
+                assert_eq!(at_once.level_at(0, p), grown.level_at(0, p), "{p:?}");
+                let inside = (0..2).all(|k| p[k] >= lo[k] && p[k] <= hi[k]);
+                for h in (1..4).filter(|_| inside) {
+                    assert_eq!(
+                        at_once.level_at(h, p),
+                        grown.level_at(h, p),
+                        "{p:?} level {h}"
+                    );
+                }
+            }
+            let here = testkit::free_pose(&walls, 0.5, &mut rng);
+            let scan = testkit::scan(&walls, here, LIDAR, &mut rng).points();
+            let window = SearchWindow {
+                linear_m: 0.5,
+                angular_rad: 0.2,
+                min_score: 0.0,
+                min_step_rad: 0.0,
+            };
+            let guess = compose(here, [0.2, -0.1, 0.05]);
+            let score = |g: &LikelihoodGrid| g.search(&scan, guess, window).map(|f| f.score);
+            assert_eq!(score(&at_once), score(&grown));
+            assert!(score(&grown).is_some_and(|s| s > 0.5));
+        }
     }
 
     const LIDAR: Lidar = Lidar {
