@@ -362,18 +362,15 @@ impl Slam {
             self.stats.submaps += 1;
         }
         let sensor = compose(local, self.mount);
-        for (i, &m) in self.active.iter().enumerate() {
+        for &m in &self.active {
             let frame = self.nodes[self.submaps[m].anchor].local;
             let in_submap = between(frame, sensor);
             let submap = &mut self.submaps[m];
-            // The newer submap is not matched against until the older is
-            // finished: it is built then.
+            // Built when next matched against (the newer submap only once
+            // the older is finished) or when finished (`compact`).
             submap
                 .points
                 .add(points.iter().map(|p| apply(in_submap, *p)));
-            if i == 0 {
-                submap.points.refresh();
-            }
             submap.nodes.push(k);
             submap.local_grid = None;
         }

@@ -270,19 +270,19 @@ impl LikelihoodGrid {
     /// The field at `p` (submap frame): level 0 at the nearest cell, 0 off
     /// the grid.
     pub fn at(&self, p: [f64; 2]) -> f64 {
+        f64::from(self.level_at(0, p)) / 255.0
+    }
+
+    /// The grid cell (x, y) holding `p` (submap frame), which may lie off
+    /// the grid.
+    fn cell(&self, p: [f64; 2]) -> [i64; 2] {
         let c = self.lattice(p);
-        let (x, y) = (c[0] - self.origin_cells[0], c[1] - self.origin_cells[1]);
-        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
-            return 0.0;
-        }
-        f64::from(self.levels[0][y as usize * self.width + x as usize]) / 255.0
+        [c[0] - self.origin_cells[0], c[1] - self.origin_cells[1]]
     }
 
     /// Level `h` at `p` (submap frame), 0 off the grid.
-    #[cfg(test)]
     fn level_at(&self, h: usize, p: [f64; 2]) -> u8 {
-        let c = self.lattice(p);
-        let (x, y) = (c[0] - self.origin_cells[0], c[1] - self.origin_cells[1]);
+        let [x, y] = self.cell(p);
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
             return 0;
         }
@@ -331,8 +331,8 @@ impl LikelihoodGrid {
                 let cells = points
                     .iter()
                     .map(|p| {
-                        let c = self.lattice(apply(pose, *p));
-                        (c[0] - self.origin_cells[0], c[1] - self.origin_cells[1])
+                        let [x, y] = self.cell(apply(pose, *p));
+                        (x, y)
                     })
                     .collect();
                 (heading, cells)
