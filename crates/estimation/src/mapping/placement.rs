@@ -98,7 +98,6 @@ pub fn place(
         linear_m,
         angular_rad,
         min_score: settings.min_score,
-        min_step_rad: 0.0,
     };
     let near = grid.search(
         &points,

@@ -42,10 +42,6 @@ pub struct SearchWindow {
     /// Candidates scoring below this (mean likelihood, 0 to 1) are not
     /// matches.
     pub min_score: f64,
-    /// The headings are stepped so the farthest point moves a cell, but
-    /// never finer than this (rad; 0 for no bound): a search whose best
-    /// pose is refined after needs no finer one.
-    pub min_step_rad: f64,
 }
 
 /// The best pose found and its score.
@@ -484,7 +480,6 @@ mod tests {
                 linear_m: 2.0,
                 angular_rad: 0.4,
                 min_score: 0.1,
-                min_step_rad: 0.0,
             };
             let found = grid.search(&scan, guess, window).expect("a match");
             let off = between(truth, found.pose);
@@ -546,7 +541,6 @@ mod tests {
             linear_m: 1.0,
             angular_rad: 0.3,
             min_score: 0.3,
-            min_step_rad: 0.0,
         };
         let found = grid
             .search(&scan, [0.2, -0.3, 0.1], window)
@@ -615,7 +609,6 @@ mod tests {
                 linear_m: 0.5,
                 angular_rad: 0.2,
                 min_score: 0.0,
-                min_step_rad: 0.0,
             };
             let guess = compose(here, [0.2, -0.1, 0.05]);
             let score = |g: &LikelihoodGrid| g.search(&scan, guess, window).map(|f| f.score);
