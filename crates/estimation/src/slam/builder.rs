@@ -2,11 +2,13 @@
 //!
 //! Local: each scan is matched (PL-ICP, [`register`]) against the older of
 //! two active submaps twice, from the pose the odometry predicts since the
-//! last scan and from the best pose of a correlative search around it; of
-//! the two, the likelier given the odometry's noise as this drive has
-//! measured it ([`MeasuredNoise`]) is kept (a corridor's repeating doors,
-//! a person walking ahead of the robot, make a second valley the search
-//! may prefer by a few returns). A scan that moved far enough since the
+//! last scan and from the best pose of a correlative search around it
+//! (on the submap's likelihood field, grown node by node); of the two and
+//! the prediction itself, the likeliest given the odometry's noise as this
+//! drive has measured it ([`MeasuredNoise`]) is kept (a corridor's
+//! repeating doors, a person walking ahead of the robot, make a second
+//! valley the search may prefer by a few returns; along a bare corridor
+//! PL-ICP slides). A scan that moved far enough since the
 //! last node becomes a node:
 //! a pose of the graph, joined to the previous node and to its submap's
 //! first node by what the local matching measured, and its points are
@@ -57,8 +59,9 @@ pub(super) struct Submap {
     pub(super) closed_at: Option<usize>,
     /// The last node the global search looked for in it.
     pub(super) searched_at: Option<usize>,
-    /// For local matching while it is active: dropped at each insertion,
-    /// built again when next needed.
+    /// For local matching while it is active: the likelihood field of
+    /// the returns of the nodes inserted, grown as they are (dropped when
+    /// the submap is finished).
     local_grid: Option<LikelihoodGrid>,
 }
 
@@ -75,9 +78,10 @@ pub(super) struct Candidate {
 /// What happened to one scan.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScanOutcome {
-    /// Whether local matching placed it (else the odometry's prediction).
+    /// Whether local matching placed it: at the likeliest of its matches
+    /// and the odometry's prediction (else at the prediction, unjudged).
     pub matched: bool,
-    /// The match's RMS residual (m), when matched.
+    /// The match's RMS residual (m), when placed at a match.
     pub rms_m: Option<f64>,
 }
 
@@ -176,14 +180,6 @@ impl Slam {
             let submap = &mut self.submaps[m];
             // Only the submap matched against is kept built.
             submap.points.refresh();
-            if submap.local_grid.is_none() {
-                submap.local_grid = Some(LikelihoodGrid::new(
-                    submap.points.points(),
-                    s.grid_resolution_m,
-                    s.grid_sigma_m,
-                    s.local_levels,
-                ));
-            }
             // A correlative search around the odometry's prediction first
             // (the odometry's heading can be tens of degrees off in a fast
             // turn, where PL-ICP alone settles in the wrong valley), then
@@ -274,8 +270,32 @@ impl Slam {
                 }),
                 (p, q) => p.or(q),
             };
-            if let Some(found) = chosen {
-                let pose = found.pose;
+            // The prediction itself competes too, once the odometry's
+            // noise is measured: along a corridor PL-ICP can slide a
+            // decimetre or more from it (from the prediction and from the
+            // search alike) where the scan barely prefers the slide, and
+            // of two slides the lesser is still one.
+            // Only where the two conflict (the match beyond
+            // `odometry_conflict_sigmas` of the prediction): within that,
+            // the scan refines the odometry, and keeping the prediction
+            // there lets a slight bias of the odometry (a wheel 0.5 % large)
+            // bend the drive unchecked.
+            let trusted = scale.iter().all(|v| v.is_finite());
+            let placed = chosen.map(|m| {
+                let unmoved = ScanMatch { pose: prior, ..m };
+                let sigmas = ((m.pose[0] - prior[0]).hypot(m.pose[1] - prior[1])
+                    / (model[0] * scale[0]))
+                    .max(wrap(m.pose[2] - prior[2]).abs() / (model[1] * scale[1]));
+                if trusted
+                    && sigmas > s.odometry_conflict_sigmas
+                    && likelihood(&unmoved) < likelihood(&m)
+                {
+                    (prior, None)
+                } else {
+                    (m.pose, Some(m.rms_m))
+                }
+            });
+            if let Some((pose, rms_m)) = placed {
                 let moved = (pose[0] - prior[0]).hypot(pose[1] - prior[1]);
                 let turned = wrap(pose[2] - prior[2]).abs();
                 if moved <= s.max_correction_m + step_m && turned <= s.max_correction_rad + step_rad
@@ -283,7 +303,7 @@ impl Slam {
                     local = compose(compose(frame, pose), inverse(self.mount));
                     outcome = ScanOutcome {
                         matched: true,
-                        rms_m: Some(found.rms_m),
+                        rms_m,
                     };
                 }
             }
@@ -356,7 +376,12 @@ impl Slam {
                 reach: None,
                 closed_at: None,
                 searched_at: None,
-                local_grid: None,
+                local_grid: Some(LikelihoodGrid::new(
+                    &[],
+                    s.grid_resolution_m,
+                    s.grid_sigma_m,
+                    s.local_levels,
+                )),
             });
             self.active.push(self.submaps.len() - 1);
             self.stats.submaps += 1;
@@ -366,13 +391,15 @@ impl Slam {
             let frame = self.nodes[self.submaps[m].anchor].local;
             let in_submap = between(frame, sensor);
             let submap = &mut self.submaps[m];
-            // Built when next matched against (the newer submap only once
-            // the older is finished) or when finished (`compact`).
-            submap
-                .points
-                .add(points.iter().map(|p| apply(in_submap, *p)));
+            // The likelihood field grows now; the point map is built when
+            // next matched against (the newer submap only once the older
+            // is finished) or when finished (`compact`).
+            let seen: Vec<[f64; 2]> = points.iter().map(|p| apply(in_submap, *p)).collect();
+            if let Some(grid) = &mut submap.local_grid {
+                grid.insert(&seen);
+            }
+            submap.points.add(seen);
             submap.nodes.push(k);
-            submap.local_grid = None;
         }
         // The oldest is finished once full.
         if let Some(&m) = self.active.first()
@@ -569,7 +596,8 @@ impl Slam {
 /// How unlikely a match is given the scan and the odometry's prediction:
 /// the scan's robust cost in units of its readings' variance (as many
 /// readings' worth as are independent) plus the odometry's Mahalanobis
-/// distance. Of two local optima, the likelier is kept.
+/// distance (squared, halved, up to `odometry_conflict_sigmas`; linear
+/// beyond). Of the local optima and the prediction, the likeliest is kept.
 fn negative_log_likelihood(
     map: &PointMap,
     points: &[[f64; 2]],
@@ -586,5 +614,14 @@ fn negative_log_likelihood(
         pose[1] - prior[1],
         wrap(pose[2] - prior[2]),
     ];
-    scan + 0.5 * (0..3).map(|i| d[i] * d[i] * odometry[i]).sum::<f64>()
+    // Huber beyond the conflict threshold: real odometry's errors are
+    // heavy-tailed (a wheel slips), so a match far from the prediction
+    // pays linearly, not quadratically, for the distance.
+    let squared = (0..3).map(|i| d[i] * d[i] * odometry[i]).sum::<f64>();
+    let (distance, k) = (squared.sqrt(), s.odometry_conflict_sigmas);
+    scan + if distance <= k {
+        0.5 * squared
+    } else {
+        k * distance - 0.5 * k * k
+    }
 }

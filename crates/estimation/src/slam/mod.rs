@@ -76,6 +76,11 @@ pub struct SlamSettings {
     /// the last this-many scans (until a quarter of them are in, the
     /// odometry is not trusted over the scans).
     pub odometry_window: usize,
+    /// A local match more than this many of the odometry's (measured)
+    /// standard deviations from its prediction conflicts with it: the
+    /// prediction itself then competes with the match, and the odometry's
+    /// cost grows linearly beyond it (its errors are heavy-tailed).
+    pub odometry_conflict_sigmas: f64,
     /// Standard deviation of a local match's relative pose (m, m, rad), and
     /// of the odometry's when a scan did not match.
     pub local_std: [f64; 3],
@@ -167,6 +172,7 @@ impl Default for SlamSettings {
                 floor_rad: 0.001,
             },
             odometry_window: 100,
+            odometry_conflict_sigmas: 3.0,
             local_std: [0.01, 0.01, 0.005],
             odometry_std: [0.1, 0.1, 0.05],
             loop_every: 3,

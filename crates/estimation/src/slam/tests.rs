@@ -167,10 +167,13 @@ fn two_laps_of_a_ring_with_drifting_odometry_close_on_themselves() {
 /// heading drifts 8-10 mrad a metre (wheels spinning, slipping), back into the first
 /// lap's corridor metres further off than the loop window reaches: the
 /// global search finds where it is, and the rest of the drive lies on the
-/// first lap (the second lap ends where the first began).
+/// first lap (the second lap ends where the first began). Twelve rings:
+/// on two of them local matching once slid 1.3 m along a bare side in a
+/// few scans while the odometry ran straight, and the drive after the
+/// return stayed that far off.
 #[test]
 fn a_drive_back_from_a_blind_stretch_metres_off_is_found_by_the_global_search() {
-    for seed in 10..13u64 {
+    for seed in 10..22u64 {
         let mut rng = testkit::rng(seed);
         let (w, h) = (rng.random_range(20.0..24.0), rng.random_range(10.0..12.0));
         let walls = ring(w, h, 2.0, &mut rng);
