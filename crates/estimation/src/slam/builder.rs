@@ -25,7 +25,7 @@
 //! off and the graph solved again (false loops, such as a corridor's
 //! repeating doors).
 
-use crate::localize::{PointMap, ScanMatch, register};
+use crate::localize::{PointMap, register};
 
 use super::SlamSettings;
 use super::correlative::{LikelihoodGrid, SearchWindow};
@@ -252,18 +252,18 @@ impl Slam {
             // Of the two matches, the likelier given the odometry: a
             // corridor's repeating doors or a person walking ahead make a
             // second valley the search may prefer by a few returns.
-            let likelihood = |m: &ScanMatch| {
+            let likelihood = |pose: [f64; 3]| {
                 negative_log_likelihood(
                     &submap.points,
                     points,
                     prior,
-                    m.pose,
+                    pose,
                     odometry_information,
                     &s,
                 )
             };
             let chosen = match (from_prior, from_search) {
-                (Some(p), Some(q)) => Some(if likelihood(&q) < likelihood(&p) {
+                (Some(p), Some(q)) => Some(if likelihood(q.pose) < likelihood(p.pose) {
                     q
                 } else {
                     p
@@ -282,13 +282,12 @@ impl Slam {
             // bend the drive unchecked.
             let trusted = scale.iter().all(|v| v.is_finite());
             let placed = chosen.map(|m| {
-                let unmoved = ScanMatch { pose: prior, ..m };
                 let sigmas = ((m.pose[0] - prior[0]).hypot(m.pose[1] - prior[1])
                     / (model[0] * scale[0]))
                     .max(wrap(m.pose[2] - prior[2]).abs() / (model[1] * scale[1]));
                 if trusted
                     && sigmas > s.odometry_conflict_sigmas
-                    && likelihood(&unmoved) < likelihood(&m)
+                    && likelihood(prior) < likelihood(m.pose)
                 {
                     (prior, None)
                 } else {

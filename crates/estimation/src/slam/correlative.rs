@@ -320,17 +320,11 @@ impl LikelihoodGrid {
         let top = self.levels.len() - 1;
         let span = 1i64 << top;
         // Each heading's points as cell indices at zero offset.
-        let rotated: Vec<(f64, Vec<(i64, i64)>)> = (-turns..=turns)
+        let rotated: Vec<(f64, Vec<[i64; 2]>)> = (-turns..=turns)
             .map(|k| {
                 let heading = guess[2] + k as f64 * step_rad;
                 let pose = [guess[0], guess[1], heading];
-                let cells = points
-                    .iter()
-                    .map(|p| {
-                        let [x, y] = self.cell(apply(pose, *p));
-                        (x, y)
-                    })
-                    .collect();
+                let cells = points.iter().map(|p| self.cell(apply(pose, *p))).collect();
                 (heading, cells)
             })
             .collect();
@@ -341,7 +335,7 @@ impl LikelihoodGrid {
             // (below) the grid by less than that bounds the grid's first.
             let span = 1i64 << level;
             let mut sum = 0u32;
-            for &(x, y) in &rotated[angle].1 {
+            for &[x, y] in &rotated[angle].1 {
                 let (x, y) = (x + dx, y + dy);
                 if x + span <= 0 || y + span <= 0 {
                     continue;
