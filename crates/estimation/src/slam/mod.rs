@@ -113,7 +113,9 @@ pub struct SlamSettings {
     /// `global_max_submaps` finished submaps beyond the loop window, the
     /// window grown by `global_drift_m_per_m` of the path through the graph
     /// between node and submap (`global_blind_drift_m_per_m` where scans
-    /// did not match), up to `global_max_m`; matches score at
+    /// did not match), up to `global_max_m`, and its headings by
+    /// `global_drift_rad_per_m` of that path (a kilometre's drive turns
+    /// tens of degrees off), up to a half turn; matches score at
     /// least `global_min_score`, and two from different nodes within
     /// `global_pending_nodes` of each other must move the drive alike
     /// (within `global_agree_m`, `global_agree_rad`) to be closures.
@@ -122,6 +124,7 @@ pub struct SlamSettings {
     pub global_drift_m_per_m: f64,
     pub global_blind_drift_m_per_m: f64,
     pub global_max_m: f64,
+    pub global_drift_rad_per_m: f64,
     pub global_min_score: f64,
     pub global_pending_nodes: usize,
     pub global_agree_m: f64,
@@ -195,6 +198,7 @@ impl Default for SlamSettings {
             global_drift_m_per_m: 0.05,
             global_blind_drift_m_per_m: 0.2,
             global_max_m: 40.0,
+            global_drift_rad_per_m: 0.0005,
             global_min_score: 0.6,
             global_pending_nodes: 100,
             global_agree_m: 0.3,
