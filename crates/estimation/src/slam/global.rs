@@ -11,8 +11,8 @@
 //! edges count their length, odometry's more, loop closures nothing), up
 //! to `global_max_m`; its headings grow with that path too
 //! (`global_drift_rad_per_m`: the hospital comes back 20° off when local
-//! matching drifts a little more). A wide window finds a corridor that merely looks
-//! alike, so a match is only a candidate: two candidates from different
+//! matching drifts a little more). A wide window finds a corridor that
+//! merely looks alike, so a match is only a candidate: two candidates from different
 //! nodes that move the drive's recent stretch the same way (within
 //! `global_agree_m` and `global_agree_rad`) become loop closures, and the
 //! graph is solved at once with them as least-squares edges (a correction
@@ -36,8 +36,8 @@ impl Slam {
         let s = self.settings;
         let global = self.graph.poses[k];
         let along = self.path_lengths(k);
-        // (window, headings, distance, submap) of the submaps worth searching.
-        let mut wanted: Vec<(f64, f64, f64, usize)> = self
+        // (window, distance, submap) of the submaps worth searching.
+        let mut wanted: Vec<(SearchWindow, f64, usize)> = self
             .searchable(k)
             .filter_map(|(i, m)| {
                 let nearest = self.nearest_node_m(m, global);
@@ -46,33 +46,28 @@ impl Slam {
                     .iter()
                     .map(|&n| along[n])
                     .fold(f64::INFINITY, f64::min);
-                let window =
-                    (s.loop_window.linear_m + s.global_drift_m_per_m * path).min(s.global_max_m);
-                let headings = (s.loop_window.angular_rad + s.global_drift_rad_per_m * path)
-                    .min(std::f64::consts::PI);
-                (nearest > s.loop_window.linear_m && nearest <= window)
-                    .then_some((window, headings, nearest, i))
+                let window = SearchWindow {
+                    linear_m: (s.loop_window.linear_m + s.global_drift_m_per_m * path)
+                        .min(s.global_max_m),
+                    angular_rad: (s.loop_window.angular_rad + s.global_drift_rad_per_m * path)
+                        .min(std::f64::consts::PI),
+                    min_score: s.global_min_score,
+                };
+                (nearest > s.loop_window.linear_m && nearest <= window.linear_m)
+                    .then_some((window, nearest, i))
             })
             .collect();
         // The least recently searched first, so that a drive that stays
         // in reach of many submaps tries each in turn.
         wanted.sort_by(|a, b| {
             let last = |m: usize| self.submaps[m].searched_at.map_or(-1, |n| n as i64);
-            last(a.3).cmp(&last(b.3)).then(a.2.total_cmp(&b.2))
+            last(a.2).cmp(&last(b.2)).then(a.1.total_cmp(&b.1))
         });
         wanted.truncate(s.global_max_submaps);
-        for (window, headings, _, m) in wanted {
+        for (window, _, m) in wanted {
             self.submaps[m].searched_at = Some(k);
             self.stats.global_searches += 1;
-            let Some(measured) = self.match_in_submap(
-                k,
-                m,
-                SearchWindow {
-                    linear_m: window,
-                    angular_rad: headings,
-                    min_score: s.global_min_score,
-                },
-            ) else {
+            let Some(measured) = self.match_in_submap(k, m, window) else {
                 continue;
             };
             self.consider(Candidate {
