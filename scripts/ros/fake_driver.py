@@ -216,7 +216,10 @@ def main():
     pub_hazard, _ = ros.publisher("/hazard_detection", "irobot_create_msgs/msg/HazardDetectionVector")
     pub_ranges = []
     for s in sensors:
-        kind = "sensor_msgs/msg/Range" if s.get("beams", 1) == 1 else "sensor_msgs/msg/LaserScan"
+        # The sensor's kind as the site says it; a site written before
+        # `kind` existed means a ranger for one beam (as twindrive reads it).
+        ranger = s.get("kind", "ranger" if s.get("beams", 1) == 1 else "lidar") == "ranger"
+        kind = "sensor_msgs/msg/Range" if ranger else "sensor_msgs/msg/LaserScan"
         pub_ranges.append((s, kind, ros.publisher("/" + s["name"], kind)[0]))
 
     sim = MujocoSite(site, a.seed) if a.physics == "mujoco" else SiteSim(a.twindrive, a.site)

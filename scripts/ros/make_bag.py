@@ -12,7 +12,7 @@ clocks.
                       reference as geometry_msgs/msg/PoseStamped on
                       /mocap/pose.
   --scans             (rosbags only) also the log's lidar (its first range
-                      sensor with at least 30 beams) as
+                      sensor of kind "lidar") as
                       sensor_msgs/msg/LaserScan on /scan in frame `laser`,
                       its gyro as sensor_msgs/msg/Imu on /imu in frame
                       `imu_link`, and /tf_static with the lidar's mount as a
@@ -63,7 +63,9 @@ def read_sensors(log_dir: Path):
     import json
 
     meta = json.loads((log_dir / "log.meta.json").read_text())
-    lidar = next(s for s in meta["range_sensors"] if s["beams"] >= 30)
+    # Logs written before sensors had a kind: a fan of beams is a lidar.
+    lidar = next(s for s in meta["range_sensors"]
+                 if s.get("kind", "ranger" if s["beams"] == 1 else "lidar") == "lidar")
     cols = [f"range_{lidar['name']}_{i}" for i in range(lidar["beams"])]
     scans, gyro = [], []
     with open(log_dir / "log.csv", newline="") as f:

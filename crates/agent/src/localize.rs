@@ -3,10 +3,11 @@
 //! time comes with each reading.
 //!
 //! Two ways, by what the robot carries:
-//! - a **scan** (a sensor of [`SCAN_BEAMS`] beams or more, a 2D lidar): every
+//! - a **scan** (a robot with a lidar, [`SensorKind::Lidar`]): every
 //!   fresh scan is matched on its own, Gauss-Newton from the filter's
 //!   estimate;
-//! - **a few beams** (side IR sensors): one scan says almost nothing, so
+//! - **rangers** (side IR sensors, [`SensorKind::Ranger`]): one reading
+//!   says almost nothing, so
 //!   endpoints are gathered over [`LocalizeSettings::window_s`] of driving,
 //!   carried into the robot's frame by odometry, and matched together with
 //!   a grid search around the estimate before Gauss-Newton. Each reading is
@@ -21,11 +22,8 @@
 
 use twindrive_estimation::localize::{MatchSettings, ScanMatch, SegmentMap, match_points, search};
 use twindrive_kinematics::{DiffDriveParams, Pose, WheelOdometry};
-use twindrive_log::RangeSensorInfo;
+use twindrive_log::{RangeSensorInfo, SensorKind};
 use twindrive_mission::plan::MissionPlan;
-
-/// A sensor with at least this many beams is matched scan by scan.
-pub const SCAN_BEAMS: u32 = 30;
 
 /// How the robot localizes.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -140,7 +138,7 @@ impl Localizer {
         let mode =
             if !settings.enabled || beams.is_empty() || plan.header.site_map.segments.is_empty() {
                 Mode::None
-            } else if sensors.iter().any(|s| s.beams >= SCAN_BEAMS) {
+            } else if sensors.iter().any(|s| s.kind == SensorKind::Lidar) {
                 Mode::Scan
             } else {
                 Mode::Window

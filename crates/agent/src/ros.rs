@@ -228,12 +228,14 @@ impl RosBridge {
                         .join(", ")
                 )
             })?;
+            let kind = header.range_sensors[k].kind;
             let beams = header.range_sensors[k].beams as usize;
-            if (beams == 1) != (r.type_name == "sensor_msgs/msg/Range") {
+            let ranger = kind == twindrive_log::SensorKind::Ranger;
+            if ranger != (r.type_name == "sensor_msgs/msg/Range") {
                 return Err(format!(
-                    "ros.ranges[{i}]: sensor `{}` has {beams} beam(s), so its type is {}",
+                    "ros.ranges[{i}]: sensor `{}` is a {kind}, so its type is {}",
                     r.sensor,
-                    if beams == 1 {
+                    if ranger {
                         "sensor_msgs/msg/Range"
                     } else {
                         "sensor_msgs/msg/LaserScan"

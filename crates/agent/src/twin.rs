@@ -810,6 +810,7 @@ mod tests {
             r#"
 [[range_sensors]]
 name = "lidar"
+kind = "lidar"
 mount = { x_m = 0.0, y_m = 0.0, heading_rad = 0.0 }
 beams = 181
 fov_rad = 3.141592653589793

@@ -262,3 +262,34 @@ fn one_beam_in_an_open_room_cannot_localize_and_goes_by_odometry() {
     assert_eq!(t.localized_fixes, 0, "no wall in reach, no fix");
     assert_eq!(t.stop, Some(Stop::Finished), "odometry alone, as before");
 }
+
+#[test]
+fn the_localizer_asks_each_sensor_its_kind_not_its_beam_count() {
+    use twindrive_agent::localize::Localizer;
+    use twindrive_log::SensorKind;
+    let lidar = office_plan().as_ref().clone();
+    let mode = |plan: &MissionPlan| Localizer::new(plan, LocalizeSettings::default()).mode();
+    assert_eq!(lidar.header.robot.range_sensors[0].kind, SensorKind::Lidar);
+    assert_eq!(mode(&lidar), Mode::Scan);
+    // A sparse lidar (a dozen beams) is still a lidar: matched scan by scan.
+    let mut sparse = lidar.clone();
+    let s = &mut sparse.header.robot.range_sensors[0];
+    s.beams = 12;
+    s.fov_rad = 3.0;
+    assert_eq!(mode(&sparse), Mode::Scan);
+    // Rangers alone gather their readings over a window of driving, however
+    // many there are.
+    let mut rangers = lidar.clone();
+    let one = &lidar.header.robot.range_sensors[0];
+    rangers.header.robot.range_sensors = (0..40)
+        .map(|i| twindrive_log::RangeSensorInfo {
+            name: format!("ir{i}"),
+            kind: SensorKind::Ranger,
+            mount: twindrive_kinematics::Pose::new(0.0, 0.0, f64::from(i) * 0.15),
+            beams: 1,
+            fov_rad: 0.0,
+            ..one.clone()
+        })
+        .collect();
+    assert_eq!(mode(&rangers), Mode::Window);
+}

@@ -5,12 +5,12 @@
 use anyhow::{Context, bail};
 use twindrive_estimation::WheelSample;
 use twindrive_estimation::localize::Scan;
-use twindrive_log::{MissionLog, RangeSensorInfo};
+use twindrive_log::{MissionLog, RangeSensorInfo, SensorKind};
 use twindrive_ros::extract::{self, Stamps, WheelSource};
 
 use crate::inputs;
 
-/// Fewest beams a range sensor needs to be matched scan to scan.
+/// Fewest beams a lidar needs to be matched scan to scan.
 pub const MIN_SCAN_BEAMS: u32 = 30;
 
 /// What a self-calibration reads from a recording.
@@ -29,8 +29,8 @@ pub struct ScanRecording {
     pub time_origin_s: f64,
 }
 
-/// The range sensor called `name`, or the first with at least
-/// [`MIN_SCAN_BEAMS`] beams; an error names the sensors the log has.
+/// The lidar called `name`, or the log's first lidar; it needs at least
+/// [`MIN_SCAN_BEAMS`] beams. An error names the sensors the log has.
 pub fn lidar_of<'a>(
     log: &'a MissionLog,
     name: Option<&str>,
@@ -38,31 +38,49 @@ pub fn lidar_of<'a>(
     let sensors = &log.header.range_sensors;
     let found = match name {
         Some(n) => sensors.iter().position(|s| s.name == n),
-        None => sensors.iter().position(|s| s.beams >= MIN_SCAN_BEAMS),
+        None => sensors.iter().position(|s| s.kind == SensorKind::Lidar),
     };
-    match found {
-        Some(i) if sensors[i].beams >= MIN_SCAN_BEAMS => Ok((i, &sensors[i])),
-        _ => {
-            let have: Vec<String> = sensors
-                .iter()
-                .map(|s| format!("{} ({} beams)", s.name, s.beams))
-                .collect();
-            let have = if have.is_empty() {
-                "none".to_string()
-            } else {
-                have.join(", ")
-            };
-            match name {
-                Some(n) => bail!(
-                    "--scan-sensor {n}: the log has no range sensor of that name with at least {MIN_SCAN_BEAMS} beams; \
-                     its range sensors: {have}"
-                ),
-                None => bail!(
-                    "the log has no range sensor with at least {MIN_SCAN_BEAMS} beams to match scan to scan; \
-                     its range sensors: {have}"
-                ),
-            }
+    let have = || {
+        let have: Vec<String> = sensors
+            .iter()
+            .map(|s| match s.kind {
+                SensorKind::Ranger => format!("{} (a ranger)", s.name),
+                SensorKind::Lidar => format!("{} (a lidar of {} beams)", s.name, s.beams),
+            })
+            .collect();
+        if have.is_empty() {
+            "none".to_string()
+        } else {
+            have.join(", ")
         }
+    };
+    let flag = name.map_or(String::new(), |n| format!("--scan-sensor {n}: "));
+    match found {
+        Some(i) if sensors[i].kind != SensorKind::Lidar => bail!(
+            "{flag}`{}` is a {}, not a lidar: only a lidar's scans can be matched scan to scan; \
+             the log's range sensors: {}",
+            sensors[i].name,
+            sensors[i].kind,
+            have()
+        ),
+        Some(i) if sensors[i].beams < MIN_SCAN_BEAMS => bail!(
+            "{flag}the lidar `{}` has {} beams, too few to match scan to scan (at least {MIN_SCAN_BEAMS}); \
+             the log's range sensors: {}",
+            sensors[i].name,
+            sensors[i].beams,
+            have()
+        ),
+        Some(i) => Ok((i, &sensors[i])),
+        None => match name {
+            Some(_) => bail!(
+                "{flag}the log has no range sensor of that name; its range sensors: {}",
+                have()
+            ),
+            None => bail!(
+                "the log has no lidar to match scan to scan; its range sensors: {}",
+                have()
+            ),
+        },
     }
 }
 
@@ -216,6 +234,7 @@ pub fn from_bag(
     let first = &scans.scans[0];
     let beams = first.ranges_m.len() as u32;
     let lidar = RangeSensorInfo {
+        kind: SensorKind::Lidar,
         name: scans.frame_id.clone(),
         mount: mount.unwrap_or(twindrive_kinematics::Pose::new(0.0, 0.0, 0.0)),
         beams,
@@ -337,6 +356,7 @@ pub fn from_carmen(path: &std::path::Path) -> anyhow::Result<ScanRecording> {
     );
     let beams = first.ranges_m.len() as u32;
     let lidar = RangeSensorInfo {
+        kind: SensorKind::Lidar,
         name: match first.line_kind {
             twindrive_log::carmen::LaserLine::Flaser => "FLASER".into(),
             twindrive_log::carmen::LaserLine::RobotLaser1 => "ROBOTLASER1".into(),
@@ -394,5 +414,46 @@ impl ScanRecording {
         self.wheels.truncate(k);
         let k = keep(&self.gyro.iter().map(|g| g.0).collect::<Vec<_>>());
         self.gyro.truncate(k);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A log of the mapping bench's robot: a 360-beam lidar and a side IR.
+    fn log_with(sensors: impl FnOnce(&mut Vec<RangeSensorInfo>)) -> MissionLog {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bench/mapping_drive.toml");
+        let mut header = twindrive_sim::Scenario::load(&path).unwrap().log_header();
+        sensors(&mut header.range_sensors);
+        MissionLog::new(header)
+    }
+
+    #[test]
+    fn scans_come_from_a_lidar_and_a_ranger_or_a_sparse_lidar_is_refused_by_name() {
+        let log = log_with(|_| {});
+        let (i, lidar) = lidar_of(&log, None).unwrap();
+        assert_eq!((i, lidar.kind), (0, SensorKind::Lidar));
+        // With the ranger first, the lidar is still the one found.
+        let log = log_with(|s| s.reverse());
+        assert_eq!(lidar_of(&log, None).unwrap().1.name, "lidar");
+        let e = lidar_of(&log, Some("side_ir")).unwrap_err().to_string();
+        assert!(
+            e.contains("--scan-sensor side_ir: `side_ir` is a ranger, not a lidar")
+                && e.contains("side_ir (a ranger), lidar (a lidar of 360 beams)"),
+            "{e}"
+        );
+        let sparse = log_with(|s| s[0].beams = 12);
+        let e = lidar_of(&sparse, None).unwrap_err().to_string();
+        assert!(e.contains("the lidar `lidar` has 12 beams, too few"), "{e}");
+        let rangers = log_with(|s| s.retain(|s| s.kind == SensorKind::Ranger));
+        let e = lidar_of(&rangers, None).unwrap_err().to_string();
+        assert!(
+            e.contains(
+                "the log has no lidar to match scan to scan; its range sensors: side_ir (a ranger)"
+            ),
+            "{e}"
+        );
     }
 }

@@ -331,6 +331,7 @@ pub fn site_toml(
             doc.insert("encoders".into(), enc.into());
             let mut lidar = toml::Table::new();
             lidar.insert("name".into(), job.lidar.name.clone().into());
+            lidar.insert("kind".into(), job.lidar.kind.as_str().into());
             lidar.insert("mount".into(), pose_table(mount).into());
             lidar.insert("beams".into(), i64::from(job.lidar.beams).into());
             lidar.insert("fov_rad".into(), job.lidar.fov_rad.into());

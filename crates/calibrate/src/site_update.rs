@@ -23,7 +23,7 @@ use serde::Serialize;
 use twindrive_estimation::mapping::{CellState, LogOddsGrid, MappingSettings};
 use twindrive_files::Staging;
 use twindrive_kinematics::DiffDriveParams;
-use twindrive_log::{MissionLog, RangeSensorInfo};
+use twindrive_log::{MissionLog, RangeSensorInfo, SensorKind};
 use twindrive_sim::Scenario;
 use twindrive_sim::map::{Cell, OccupancyGrid};
 
@@ -233,19 +233,27 @@ pub fn check_twin(twin: &Scenario) -> anyhow::Result<(&OccupancyGrid, &RangeSens
         .range_sensors
         .iter()
         .map(|s| &s.info)
-        .find(|s| s.beams >= MIN_SCAN_BEAMS)
+        .find(|s| s.kind == SensorKind::Lidar)
     else {
         bail!(
-            "the twin's robot in `{}` has no lidar (a range sensor of {MIN_SCAN_BEAMS} beams or more): there are no scans to map with",
+            "the twin's robot in `{}` has no lidar (a range sensor of kind = \"lidar\"): there are no scans to map with",
             twin.name
         );
     };
+    if lidar.beams < MIN_SCAN_BEAMS {
+        bail!(
+            "the twin's lidar `{}` in `{}` has {} beams, too few to map with (at least {MIN_SCAN_BEAMS})",
+            lidar.name,
+            twin.name,
+            lidar.beams
+        );
+    }
     Ok((map, lidar))
 }
 
 /// Extends the map of `twin`'s site with the scans of `logs`, in the
-/// order they were driven. The twin's lidar (its first range sensor with
-/// a lidar's beams) gives the mount. `progress(done, total)` over all
+/// order they were driven. The twin's lidar (its first range sensor of
+/// kind lidar) gives the mount. `progress(done, total)` over all
 /// logs' scans.
 pub fn update_site(
     twin: &Scenario,

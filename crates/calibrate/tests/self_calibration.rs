@@ -109,6 +109,7 @@ ticks_per_rev = 2048
 rate_hz = 50.0
 [[range_sensors]]
 name = "lidar"
+kind = "lidar"
 mount = {{ x_m = 0.0, y_m = 0.0, heading_rad = 0.0 }}
 beams = 360
 fov_rad = 6.283185307179586

@@ -41,6 +41,7 @@ use crate::rehearsal::{Rehearsal, SITE_BOX, score};
 const LIDAR: &str = r#"
 [[range_sensors]]
 name = "lidar"
+kind = "lidar"
 mount = { x_m = 0.0, y_m = 0.0, heading_rad = 0.0 }
 beams = 181
 fov_rad = 3.141592653589793

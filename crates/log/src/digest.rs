@@ -331,6 +331,7 @@ mod tests {
         let sensor =
             |name: &str, mount: Pose, beams: u32, fov_rad: f64, max_range_m: f64| RangeSensorInfo {
                 name: name.into(),
+                kind: crate::SensorKind::of_unlabelled(beams),
                 mount,
                 beams,
                 fov_rad,

@@ -132,7 +132,7 @@ impl LogHeader {
     }
 }
 
-pub use twindrive_kinematics::RangeSensorInfo;
+pub use twindrive_kinematics::{RangeSensorInfo, SensorKind};
 
 /// Everything recorded at one simulation step.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -261,6 +261,7 @@ pub(crate) mod testutil {
             range_sensors: vec![
                 RangeSensorInfo {
                     name: "side_ir".into(),
+                    kind: SensorKind::Ranger,
                     mount: Pose::new(0.1, -0.1, -0.7),
                     beams: 1,
                     fov_rad: 0.0,
@@ -269,6 +270,7 @@ pub(crate) mod testutil {
                 },
                 RangeSensorInfo {
                     name: "scan".into(),
+                    kind: SensorKind::Lidar,
                     mount: Pose::new(0.0, 0.0, 0.0),
                     beams: 4,
                     fov_rad: std::f64::consts::TAU,

@@ -24,8 +24,8 @@ use std::io::Write;
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
-pub use twindrive_kinematics::RangeSensorInfo;
 use twindrive_kinematics::{DiffDriveParams, Pose};
+pub use twindrive_kinematics::{RangeSensorInfo, SensorKind};
 
 /// A plan that cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -413,6 +413,7 @@ mod tests {
                 ticks_per_rev: 512,
                 range_sensors: vec![RangeSensorInfo {
                     name: "side_ir".into(),
+                    kind: SensorKind::Ranger,
                     mount: Pose::new(0.05, -0.12, -1.047),
                     beams: 1,
                     fov_rad: 0.0,

@@ -21,7 +21,7 @@
 //! mission's start; pass the wall-clock start to place it in time).
 
 use twindrive_kinematics::{DiffDriveParams, Pose, arc_step_wheels};
-use twindrive_log::{MissionLog, WorldMap};
+use twindrive_log::{MissionLog, SensorKind, WorldMap};
 
 use crate::bag::{BagWriter, WriteError};
 use crate::msgs::{
@@ -114,7 +114,7 @@ pub fn write_log_bag(
         .iter()
         .map(|s| {
             let name = format!("/{}", s.name);
-            if s.beams == 1 {
+            if s.kind == SensorKind::Ranger {
                 bag.topic::<Range>(&name, Qos::DEFAULT)
             } else {
                 bag.topic::<LaserScan>(&name, Qos::DEFAULT)
@@ -314,7 +314,7 @@ pub fn write_log_bag(
                 continue;
             };
             let header = Header::new(t, &format!("{}_link", info.name));
-            if info.beams == 1 {
+            if info.kind == SensorKind::Ranger {
                 bag.write(
                     sensors[i],
                     t,

@@ -188,15 +188,17 @@ impl Scenario {
                     ),
                 ));
             }
+            let info = RangeSensorInfo::labelled_or_not(
+                s.name.clone(),
+                s.kind,
+                s.mount,
+                s.beams,
+                s.fov_rad,
+                [s.min_range_m, s.max_range_m],
+            )
+            .map_err(|e| SimError::field(path, &f("kind"), e))?;
             range_sensors.push(RangeSensorConfig {
-                info: RangeSensorInfo {
-                    name: s.name.clone(),
-                    mount: s.mount,
-                    beams: s.beams,
-                    fov_rad: s.fov_rad,
-                    min_range_m: s.min_range_m,
-                    max_range_m: s.max_range_m,
-                },
+                info,
                 noise_std_m: s.noise_std_m,
                 period_ns: period(&f("rate_hz"), s.rate_hz)?,
                 dropout_probability: s.dropout_probability,

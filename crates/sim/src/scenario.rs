@@ -112,6 +112,10 @@ impl Default for EncoderSection {
 #[serde(deny_unknown_fields)]
 pub struct RangeSensorSection {
     pub name: String,
+    /// `"ranger"` (one beam: IR, ultrasound, time of flight) or `"lidar"`
+    /// (a fan of beams). Absent: a ranger for one beam, a lidar for more
+    /// (what sites written before `kind` existed meant).
+    pub kind: Option<twindrive_log::SensorKind>,
     /// Mount pose in the body frame.
     pub mount: Pose,
     #[serde(default = "one")]

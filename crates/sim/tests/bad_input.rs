@@ -185,3 +185,42 @@ fn gyro_and_dropout_fields_are_named() {
         );
     }
 }
+
+#[test]
+fn a_sensor_kind_its_beams_contradict_is_refused_by_field() {
+    let sensor = |fields: &str| {
+        base().replace(
+            "[encoders]",
+            &format!(
+                "[[range_sensors]]\nname = \"front\"\nmount = {{ x_m = 0.0, y_m = 0.0, heading_rad = 0.0 }}\nmax_range_m = 5.0\n{fields}\n[encoders]"
+            ),
+        )
+    };
+    let kind_of = |fields: &str| {
+        common::parse(&sensor(fields)).unwrap().range_sensors[0]
+            .info
+            .kind
+    };
+    use twindrive_log::SensorKind;
+    assert_eq!(kind_of(""), SensorKind::Ranger);
+    assert_eq!(kind_of("kind = \"ranger\""), SensorKind::Ranger);
+    assert_eq!(kind_of("beams = 12\nfov_rad = 1.0"), SensorKind::Lidar);
+    assert_eq!(
+        kind_of("kind = \"lidar\"\nbeams = 12\nfov_rad = 1.0"),
+        SensorKind::Lidar
+    );
+    for (fields, want) in [
+        (
+            "kind = \"ranger\"\nbeams = 12\nfov_rad = 1.0",
+            "field `range_sensors[0].kind` is \"ranger\": a ranger has one beam, got 12",
+        ),
+        (
+            "kind = \"lidar\"",
+            "field `range_sensors[0].kind` is \"lidar\": a lidar sweeps a fan of at least 2 beams, got 1",
+        ),
+        ("kind = \"sonar\"", "unknown variant `sonar`"),
+    ] {
+        let err = error_of(&sensor(fields));
+        assert!(err.contains(want), "{fields}: {err}");
+    }
+}

@@ -546,7 +546,7 @@ fn a_log_with_a_lidar_and_no_tracker_self_calibrates_with_the_lidar_mount() {
     ]);
     assert!(!o.status.success());
     assert!(
-        text(&o.stderr).contains("lidar (360 beams)"),
+        text(&o.stderr).contains("lidar (a lidar of 360 beams)"),
         "{}",
         text(&o.stderr)
     );

@@ -153,7 +153,10 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
     ]);
     assert_eq!(o.status.code(), Some(1));
     let err = text(&o.stderr);
-    assert!(err.contains("side_ir (1 beams)"), "{err}");
+    assert!(
+        err.contains("no lidar to match scan to scan; its range sensors: side_ir (a ranger)"),
+        "{err}"
+    );
     assert!(!out.exists());
     // A calibration that is not one names the file.
     let bad = tmp.path().join("bad.json");

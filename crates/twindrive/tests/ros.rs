@@ -316,7 +316,7 @@ fn exported_bags_decode_with_independent_decoders_to_the_log() {
                 .collect();
             assert_eq!(count(&name), readings.len(), "{name}");
             let last = &topic(&name)["last"];
-            if sensor.beams == 1 {
+            if sensor.kind == twindrive_log::SensorKind::Ranger {
                 assert_eq!(topic(&name)["type"], "sensor_msgs/msg/Range");
                 assert_eq!(last["radiation_type"], 1);
                 assert!(close(

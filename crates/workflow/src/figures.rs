@@ -99,13 +99,13 @@ pub fn mission_figures(log: &MissionLog, world: &World, dir: &Path) -> anyhow::R
     }
     .write(&dir.join("wheel_speeds"))?;
 
-    // One figure of every single-beam range sensor (the side IR of the case study).
+    // One figure of every ranger (the side IR of the case study).
     let singles: Vec<(usize, &str)> = log
         .header
         .range_sensors
         .iter()
         .enumerate()
-        .filter(|(_, s)| s.beams == 1)
+        .filter(|(_, s)| s.kind == twindrive_log::SensorKind::Ranger)
         .map(|(i, s)| (i, s.name.as_str()))
         .collect();
     if !singles.is_empty() {

@@ -61,6 +61,7 @@ rate_hz = 50.0
 
 [[range_sensors]]
 name = "lidar"
+kind = "lidar"
 mount = { x_m = 0.04, y_m = -0.015, heading_rad = 0.35 }
 beams = 360
 fov_rad = 6.283185307179586
@@ -71,6 +72,7 @@ rate_hz = 10.0
 
 [[range_sensors]]
 name = "side_ir"
+kind = "ranger"
 mount = { x_m = 0.05, y_m = -0.12, heading_rad = -1.0471975511965976 }
 min_range_m = 0.1
 max_range_m = 0.8

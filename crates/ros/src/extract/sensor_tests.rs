@@ -495,6 +495,7 @@ fn an_exported_log_reads_back_as_logged() {
         start: Pose::new(1.0, 2.0, 0.5),
         range_sensors: vec![twindrive_log::RangeSensorInfo {
             name: "lidar".into(),
+            kind: twindrive_log::SensorKind::Lidar,
             mount,
             beams: 8,
             fov_rad: TAU,
