@@ -29,17 +29,26 @@ pub struct ScanRecording {
     pub time_origin_s: f64,
 }
 
-/// The lidar called `name`, or the log's first lidar; it needs at least
+/// The lidar called `name`, or the log's first lidar with at least
 /// [`MIN_SCAN_BEAMS`] beams. An error names the sensors the log has.
 pub fn lidar_of<'a>(
     log: &'a MissionLog,
     name: Option<&str>,
 ) -> anyhow::Result<(usize, &'a RangeSensorInfo)> {
-    let sensors = &log.header.range_sensors;
-    let found = match name {
-        Some(n) => sensors.iter().position(|s| s.name == n),
-        None => sensors.iter().position(|s| s.kind == SensorKind::Lidar),
-    };
+    let sensors: Vec<&RangeSensorInfo> = log.header.range_sensors.iter().collect();
+    choose_lidar(&sensors, name, "the log")
+}
+
+/// The one rule for which lidar a recording's or a twin's scans come
+/// from: the sensor called `name`, or else the first lidar with at least
+/// [`MIN_SCAN_BEAMS`] beams (a sparse lidar listed first is passed over).
+/// A named ranger or sparse lidar is refused. An error names `owner`
+/// ("the log", "the twin's robot in `site`") and the sensors it has.
+pub fn choose_lidar<'a>(
+    sensors: &[&'a RangeSensorInfo],
+    name: Option<&str>,
+    owner: &str,
+) -> anyhow::Result<(usize, &'a RangeSensorInfo)> {
     let have = || {
         let have: Vec<String> = sensors
             .iter()
@@ -54,33 +63,46 @@ pub fn lidar_of<'a>(
             have.join(", ")
         }
     };
-    let flag = name.map_or(String::new(), |n| format!("--scan-sensor {n}: "));
-    match found {
+    let usable = |s: &RangeSensorInfo| s.kind == SensorKind::Lidar && s.beams >= MIN_SCAN_BEAMS;
+    let Some(name) = name else {
+        if let Some(i) = sensors.iter().position(|s| usable(s)) {
+            return Ok((i, sensors[i]));
+        }
+        if let Some(sparse) = sensors.iter().find(|s| s.kind == SensorKind::Lidar) {
+            bail!(
+                "{owner} has no lidar with enough beams to match scan to scan (at least {MIN_SCAN_BEAMS}): \
+                 the lidar `{}` has {}; its range sensors: {}",
+                sparse.name,
+                sparse.beams,
+                have()
+            );
+        }
+        bail!(
+            "{owner} has no lidar to match scan to scan; its range sensors: {}",
+            have()
+        );
+    };
+    let flag = format!("--scan-sensor {name}: ");
+    match sensors.iter().position(|s| s.name == name) {
+        None => bail!(
+            "{flag}{owner} has no range sensor of that name; its range sensors: {}",
+            have()
+        ),
         Some(i) if sensors[i].kind != SensorKind::Lidar => bail!(
             "{flag}`{}` is a {}, not a lidar: only a lidar's scans can be matched scan to scan; \
-             the log's range sensors: {}",
+             {owner}'s range sensors: {}",
             sensors[i].name,
             sensors[i].kind,
             have()
         ),
-        Some(i) if sensors[i].beams < MIN_SCAN_BEAMS => bail!(
+        Some(i) if !usable(sensors[i]) => bail!(
             "{flag}the lidar `{}` has {} beams, too few to match scan to scan (at least {MIN_SCAN_BEAMS}); \
-             the log's range sensors: {}",
+             {owner}'s range sensors: {}",
             sensors[i].name,
             sensors[i].beams,
             have()
         ),
-        Some(i) => Ok((i, &sensors[i])),
-        None => match name {
-            Some(_) => bail!(
-                "{flag}the log has no range sensor of that name; its range sensors: {}",
-                have()
-            ),
-            None => bail!(
-                "the log has no lidar to match scan to scan; its range sensors: {}",
-                have()
-            ),
-        },
+        Some(i) => Ok((i, sensors[i])),
     }
 }
 
@@ -111,8 +133,8 @@ pub fn scans_from_log(log: &MissionLog, sensor: usize) -> Vec<Scan> {
 
 impl ScanRecording {
     /// A simulator log's wheels (`signs` flip counters that run
-    /// backwards), the scans of its lidar `sensor` (or the first with
-    /// enough beams) and its gyro. Never its true track.
+    /// backwards), the scans of its lidar `sensor` (or the one
+    /// [`choose_lidar`] picks) and its gyro. Never its true track.
     pub fn from_log(
         log: &MissionLog,
         sensor: Option<&str>,
@@ -446,7 +468,22 @@ mod tests {
         );
         let sparse = log_with(|s| s[0].beams = 12);
         let e = lidar_of(&sparse, None).unwrap_err().to_string();
+        assert!(
+            e.contains("the log has no lidar with enough beams")
+                && e.contains("the lidar `lidar` has 12"),
+            "{e}"
+        );
+        let e = lidar_of(&sparse, Some("lidar")).unwrap_err().to_string();
         assert!(e.contains("the lidar `lidar` has 12 beams, too few"), "{e}");
+        // A sparse lidar listed first is passed over for a usable one.
+        let two = log_with(|s| {
+            let mut front = s[0].clone();
+            front.name = "bumper_lidar".into();
+            front.beams = 12;
+            s.insert(0, front);
+        });
+        let (i, lidar) = lidar_of(&two, None).unwrap();
+        assert_eq!((i, lidar.name.as_str()), (1, "lidar"));
         let rangers = log_with(|s| s.retain(|s| s.kind == SensorKind::Ranger));
         let e = lidar_of(&rangers, None).unwrap_err().to_string();
         assert!(

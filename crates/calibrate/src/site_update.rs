@@ -23,11 +23,11 @@ use serde::Serialize;
 use twindrive_estimation::mapping::{CellState, LogOddsGrid, MappingSettings};
 use twindrive_files::Staging;
 use twindrive_kinematics::DiffDriveParams;
-use twindrive_log::{MissionLog, RangeSensorInfo, SensorKind};
+use twindrive_log::{MissionLog, RangeSensorInfo};
 use twindrive_sim::Scenario;
 use twindrive_sim::map::{Cell, OccupancyGrid};
 
-use crate::scan_inputs::{MIN_SCAN_BEAMS, ScanRecording};
+use crate::scan_inputs::{ScanRecording, choose_lidar};
 use crate::site_map::{MapJob, Motion, commands_beside, map_files, map_site, stage_copy};
 
 /// How robot logs update a map.
@@ -229,31 +229,15 @@ pub fn check_twin(twin: &Scenario) -> anyhow::Result<(&OccupancyGrid, &RangeSens
             twin.name
         );
     };
-    let Some(lidar) = twin
-        .range_sensors
-        .iter()
-        .map(|s| &s.info)
-        .find(|s| s.kind == SensorKind::Lidar)
-    else {
-        bail!(
-            "the twin's robot in `{}` has no lidar (a range sensor of kind = \"lidar\"): there are no scans to map with",
-            twin.name
-        );
-    };
-    if lidar.beams < MIN_SCAN_BEAMS {
-        bail!(
-            "the twin's lidar `{}` in `{}` has {} beams, too few to map with (at least {MIN_SCAN_BEAMS})",
-            lidar.name,
-            twin.name,
-            lidar.beams
-        );
-    }
+    let sensors: Vec<&RangeSensorInfo> = twin.range_sensors.iter().map(|s| &s.info).collect();
+    let owner = format!("the twin's robot in `{}`", twin.name);
+    let (_, lidar) = choose_lidar(&sensors, None, &owner)?;
     Ok((map, lidar))
 }
 
 /// Extends the map of `twin`'s site with the scans of `logs`, in the
-/// order they were driven. The twin's lidar (its first range sensor of
-/// kind lidar) gives the mount. `progress(done, total)` over all
+/// order they were driven. The twin's lidar (the one
+/// [`choose_lidar`] picks) gives the mount. `progress(done, total)` over all
 /// logs' scans.
 pub fn update_site(
     twin: &Scenario,

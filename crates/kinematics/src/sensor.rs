@@ -120,9 +120,15 @@ impl RangeSensorInfo {
         fov_rad: f64,
         [min_range_m, max_range_m]: [f64; 2],
     ) -> Result<Self, String> {
+        let labelled = kind.is_some();
         let kind = kind.unwrap_or(SensorKind::of_unlabelled(beams));
-        kind.check_beams(beams)
-            .map_err(|e| format!("is \"{kind}\": {e}"))?;
+        kind.check_beams(beams).map_err(|e| {
+            if labelled {
+                format!("is \"{kind}\": {e}")
+            } else {
+                format!("has no `kind` and {beams} beams: {e}")
+            }
+        })?;
         Ok(Self {
             name,
             kind,
@@ -210,6 +216,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("sonar"), "{e}");
+        let e = serde_json::from_str::<RangeSensorInfo>(&json(None, 0))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("has no `kind` and 0 beams") && !e.contains(r#"is "lidar""#),
+            "{e}"
+        );
         let extra = json(None, 1).replace(r#""beams""#, r#""colour":1,"beams""#);
         let e = serde_json::from_str::<RangeSensorInfo>(&extra)
             .unwrap_err()

@@ -75,8 +75,10 @@ impl WheelLimits {
 
 /// Identifies a plan document.
 pub const PLAN_FORMAT: &str = "twindrive-mission-plan";
-/// Bumped whenever the meaning of a field changes.
-pub const PLAN_VERSION: u32 = 2;
+/// Bumped whenever the meaning of a field changes (3: each range sensor
+/// says its kind, which the plan's hash covers, so a version-2 plan is
+/// refused by version rather than read as damaged).
+pub const PLAN_VERSION: u32 = 3;
 
 /// The robot the plan is for.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -504,6 +506,18 @@ mod tests {
             let err = a.clone().with_start_covariance(bad).validate().unwrap_err();
             assert!(err.to_string().contains("header.start_covariance"), "{err}");
         }
+    }
+
+    #[test]
+    fn a_plan_of_an_older_version_is_refused_by_its_version_not_as_damaged() {
+        let mut old = plan();
+        old.version = 2;
+        old.sha256 = old.content_hash();
+        let err = old.validate().unwrap_err().to_string();
+        assert!(
+            err.contains("version 2, expected `twindrive-mission-plan` version 3"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! | `/tracker/pose` | `geometry_msgs/msg/PoseStamped` in `map`, the external reference | each tracker sample |
 //! | `/cmd_vel` | `geometry_msgs/msg/Twist`, the commanded wheel speeds through the nominal parameters | each encoder sample |
 //! | `/bump` | `irobot_create_msgs/msg/HazardDetectionVector` (one `BUMP` while pressed) | each encoder sample |
-//! | `/<sensor>` | `sensor_msgs/msg/Range` (`INFRARED`) for one beam, else `sensor_msgs/msg/LaserScan` | each reading |
+//! | `/<sensor>` | `sensor_msgs/msg/Range` (`INFRARED`) for a ranger, `sensor_msgs/msg/LaserScan` for a lidar | each reading |
 //! | `/tf` | `tf2_msgs/msg/TFMessage`: `odom` → `base_link`; `map` → `odom` from the tracker | encoder / tracker samples |
 //! | `/imu` | `sensor_msgs/msg/Imu` in `imu_link`: the gyro's yaw rate as `angular_velocity.z`, no orientation or acceleration (covariance −1) | each gyro sample, when the log has a gyro |
 //! | `/tf_static` | `base_link` → `<sensor>_link`, and `imu_link` (identity) with a gyro | once, latched |

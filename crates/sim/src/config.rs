@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use parry2d_f64::bounding_volume::Aabb;
 use parry2d_f64::math::Vector;
-use twindrive_kinematics::{DiffDriveParams, EncoderSpec, Pose};
+use twindrive_kinematics::{DiffDriveParams, EncoderSpec, Pose, SensorKind};
 use twindrive_log::{
     GyroInfo, LOG_FORMAT, LOG_VERSION, LogHeader, RangeSensorInfo, ns_from_seconds,
 };
@@ -273,13 +273,14 @@ impl Scenario {
                             format!("no range sensor is named `{}`", spec.side_sensor),
                         )
                     })?;
-                if range_sensors[sensor].info.beams != 1 {
+                let info = &range_sensors[sensor].info;
+                if info.kind != SensorKind::Ranger {
                     return Err(SimError::field(
                         path,
                         "controller.side_sensor",
                         format!(
-                            "`{}` has {} beams; the wall follower needs a single-beam sensor",
-                            spec.side_sensor, range_sensors[sensor].info.beams
+                            "`{}` is a {}; the wall follower holds its distance with a ranger (kind = \"ranger\")",
+                            spec.side_sensor, info.kind
                         ),
                     ));
                 }

@@ -9,7 +9,7 @@ use crate::manual::ManualCommand;
 use crate::scenario::{ScriptedSpec, WallFollowerSpec};
 
 /// What a controller sees at a step: the bump state and the latest reading
-/// of each single-beam range sensor (held between samples).
+/// of each ranger (held between samples).
 #[derive(Debug, Clone, Copy)]
 pub struct Observation<'a> {
     pub t_ns: u64,

@@ -224,3 +224,23 @@ fn a_sensor_kind_its_beams_contradict_is_refused_by_field() {
         assert!(err.contains(want), "{fields}: {err}");
     }
 }
+
+#[test]
+fn a_wall_follower_on_a_lidar_is_refused_by_kind() {
+    let follower = "kind = \"wall_follower\"\nside_sensor = \"side\"\ntarget_range_m = 0.3\ncruise_speed_m_s = 0.2\ngain_rad_s_per_m = 1.0\nmax_turn_rate_rad_s = 1.0\nreverse_speed_m_s = 0.1\nreverse_duration_s = 1.0\nturn_rate_rad_s = 1.0\nturn_duration_s = 1.0";
+    let with_side = |fields: &str| {
+        common::scenario_toml("", follower, 5.0, 0.0).replace(
+            "[encoders]",
+            &format!(
+                "[[range_sensors]]\nname = \"side\"\nmount = {{ x_m = 0.0, y_m = -0.1, heading_rad = -1.5 }}\nmax_range_m = 2.0\n{fields}\n[encoders]"
+            ),
+        )
+    };
+    common::parse(&with_side("")).unwrap();
+    let err = error_of(&with_side("kind = \"lidar\"\nbeams = 90\nfov_rad = 1.0"));
+    assert!(
+        err.contains("field `controller.side_sensor` `side` is a lidar")
+            && err.contains("kind = \"ranger\""),
+        "{err}"
+    );
+}

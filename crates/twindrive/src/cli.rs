@@ -87,7 +87,7 @@ pub enum Command {
     /// Not mapped (an error that says which): a recording without a
     /// LaserScan topic, or with neither odometry nor wheel joints nor wheel
     /// speeds, and a log without a
-    /// range sensor of at least 30 beams. `twindrive bag info` suggests the
+    /// lidar of at least 30 beams. `twindrive bag info` suggests the
     /// command line for what a bag has.
     Map(Box<MapArgs>),
     /// Turn a mission run on the twin into a plan for the real robot.
@@ -1154,8 +1154,8 @@ pub struct CalibrateArgs {
     /// inputs give poses).
     #[arg(long, value_enum, default_value_t = ReferenceArg::Auto)]
     pub reference: ReferenceArg,
-    /// The lidar whose scans self-calibrate (default: the log's first range
-    /// sensor with at least 30 beams).
+    /// The lidar whose scans self-calibrate (default: the log's first
+    /// sensor of kind lidar with at least 30 beams).
     #[arg(long, value_name = "NAME")]
     pub scan_sensor: Option<String>,
     /// The lidar's mount X,Y,HEADING (m, m, rad) as believed, for the scan
@@ -1233,8 +1233,8 @@ pub struct MapArgs {
     /// -1 for a right counter that runs backwards when driving forward.
     #[arg(long, default_value_t = 1, value_parser = usage::wheel_sign)]
     pub right_sign: i8,
-    /// The lidar (simulator logs; default: the first range sensor with at
-    /// least 30 beams).
+    /// The lidar (simulator logs; default: the first sensor of kind lidar
+    /// with at least 30 beams).
     #[arg(long, value_name = "NAME")]
     pub scan_sensor: Option<String>,
     /// calib.json from `twindrive calibrate`: its wheels, and its

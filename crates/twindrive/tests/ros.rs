@@ -308,7 +308,7 @@ fn exported_bags_decode_with_independent_decoders_to_the_log() {
             usize::from(last_enc.bump)
         );
 
-        // One Range topic per single-beam sensor, INFRARED, with the log's readings.
+        // One Range topic per ranger, INFRARED, with the log's readings.
         for (i, sensor) in log.header.range_sensors.iter().enumerate() {
             let name = format!("/{}", sensor.name);
             let readings: Vec<f64> = (0..log.steps.len())

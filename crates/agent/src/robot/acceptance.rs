@@ -86,14 +86,16 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 robot.ticks_per_rev, me.ticks_per_rev
             ));
         }
-        let beams = |s: &[twindrive_log::RangeSensorInfo]| -> Vec<(String, u32)> {
-            s.iter().map(|r| (r.name.clone(), r.beams)).collect()
+        let sensors = |s: &[twindrive_log::RangeSensorInfo]| -> Vec<String> {
+            s.iter()
+                .map(|r| format!("{} ({}, {} beams)", r.name, r.kind, r.beams))
+                .collect()
         };
-        if beams(&robot.range_sensors) != beams(&me.range_sensors) {
+        if sensors(&robot.range_sensors) != sensors(&me.range_sensors) {
             return Err(format!(
-                "the plan predicts range sensors {:?}, this robot has {:?}",
-                beams(&robot.range_sensors),
-                beams(&me.range_sensors)
+                "the plan predicts range sensors [{}], this robot has [{}]",
+                sensors(&robot.range_sensors).join(", "),
+                sensors(&me.range_sensors).join(", ")
             ));
         }
         Ok(())
