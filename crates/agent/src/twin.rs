@@ -366,6 +366,7 @@ impl Twin {
             scenario,
             &self.calibrated,
             &TrackerSettings::default(),
+            &twindrive_mission::freedom::FreedomMap::of_plan(&plan),
         )?;
         let verdict = Verdict::judge_closed_loop(&closed.report, criteria);
         if !verdict.passed {

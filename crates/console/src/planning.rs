@@ -75,6 +75,7 @@ pub fn make_plan(
         planner: Default::default(),
         redundancy,
         filter: Default::default(),
+        freedom: Default::default(),
     };
     let (plan, stages) = plan_from_log(
         log,
@@ -185,9 +186,8 @@ fn track(replay: &Replay) -> Value {
 /// returns the verdict and what the page draws.
 pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> Result<(Verification, Value), String> {
     let checked = twindrive_mission::verify::verify(
-        &plan.samples,
+        plan,
         scenario,
-        &plan.header.calibrated,
         &twindrive_agent::executive::criteria(&Tolerances::default()),
     )
     .map_err(|e| format!("the replays: {e}"))?;

@@ -41,6 +41,7 @@ impl Rehearsal {
             planner: Default::default(),
             redundancy: RedundancyConfig::with_pinch_distance(twin.robot.footprint_radius_m),
             filter: Default::default(),
+            freedom: Default::default(),
         };
         let (plan, _) = twindrive_mission::pipeline::plan_from_log(
             &log,

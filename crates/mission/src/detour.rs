@@ -15,13 +15,11 @@
 //! timed by the caller (the pipeline's time-optimal re-timing under the
 //! wheel limits).
 
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
-
 use twindrive_kinematics::{Pose, wrap_angle};
 use twindrive_sim::World;
 
 use crate::error::PipelineError;
+use crate::grid_search::{ClearanceGrid, Clearances};
 use crate::path::PathSample;
 
 /// How detours are planned.
@@ -117,43 +115,13 @@ pub fn continuation_path(
     Ok(out)
 }
 
-/// Occupancy with clearances, over the world's box.
+/// The world's clearances over its box, and the exact clearance between
+/// cell centres.
 struct Grid<'w> {
     world: &'w World,
-    origin: [f64; 2],
-    cell_m: f64,
-    size: [usize; 2],
-    /// Clearance of the footprint at each cell centre (m; negative: it
-    /// would overlap a wall).
-    clearance: Vec<f64>,
+    cells: ClearanceGrid,
     footprint_m: f64,
-    wanted_m: f64,
-    /// `DetourSettings::min_clearance_m`.
-    floor_m: f64,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Open {
-    f: f64,
-    cell: usize,
-}
-
-impl Eq for Open {}
-
-impl Ord for Open {
-    fn cmp(&self, other: &Self) -> Ordering {
-        // Min-heap on f, ties by cell for determinism.
-        other
-            .f
-            .total_cmp(&self.f)
-            .then_with(|| other.cell.cmp(&self.cell))
-    }
-}
-
-impl PartialOrd for Open {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
+    keep: Clearances,
 }
 
 impl<'w> Grid<'w> {
@@ -195,201 +163,36 @@ impl<'w> Grid<'w> {
                 size[0], size[1]
             )));
         }
-        let wanted_m = footprint_m + settings.clearance_m;
+        let keep = Clearances {
+            want_m: settings.clearance_m,
+            floor_m: settings.min_clearance_m,
+            ends_m: footprint_m + settings.clearance_m + cell_m,
+        };
         let mut grid = Self {
             world,
-            origin,
-            cell_m,
-            size,
-            clearance: Vec::new(),
+            cells: ClearanceGrid::new(origin, cell_m, size, vec![0.0; size[0] * size[1]]),
             footprint_m,
-            wanted_m,
-            floor_m: settings.min_clearance_m,
+            keep,
         };
-        grid.clearance = (0..size[0] * size[1])
-            .map(|c| {
-                let p = grid.centre(c);
-                grid.clearance_at(p)
-            })
+        let clearance: Vec<f64> = (0..size[0] * size[1])
+            .map(|c| grid.clearance_at(grid.cells.centre(c)))
             .collect();
+        grid.cells.clearances_mut().copy_from_slice(&clearance);
         Ok(grid)
     }
 
     /// Clearance of the footprint centred at `p`, capped a little above the
     /// wanted one (further is as good).
     fn clearance_at(&self, p: [f64; 2]) -> f64 {
-        let cap = self.wanted_m + self.cell_m;
+        let cap = self.footprint_m + self.keep.want_m + self.cells.cell_m();
         self.world.clearance_m(p[0], p[1], cap) - self.footprint_m
     }
 
-    fn centre(&self, cell: usize) -> [f64; 2] {
-        let (i, j) = (cell % self.size[0], cell / self.size[0]);
-        [
-            self.origin[0] + i as f64 * self.cell_m,
-            self.origin[1] + j as f64 * self.cell_m,
-        ]
-    }
-
-    fn cell_of(&self, p: [f64; 2]) -> usize {
-        let i = ((p[0] - self.origin[0]) / self.cell_m).round() as usize;
-        let j = ((p[1] - self.origin[1]) / self.cell_m).round() as usize;
-        i.min(self.size[0] - 1) + j.min(self.size[1] - 1) * self.size[0]
-    }
-
-    /// Cost factor of passing a cell: 1 where the clearance is the wanted
-    /// one, growing steeply below it; `None` where the footprint would touch.
-    fn factor(&self, clearance_m: f64) -> Option<f64> {
-        (clearance_m > 0.002).then(|| {
-            let deficit = (self.wanted_m - self.footprint_m - clearance_m).max(0.0);
-            1.0 + 40.0 * deficit / (self.wanted_m - self.footprint_m).max(1e-3)
-        })
-    }
-
-    /// A* from `from` to `to`; the cells along the way. Keeps the floor
-    /// clearance away from the ends when any way does.
-    fn search(&self, from: [f64; 2], to: [f64; 2]) -> Option<Vec<usize>> {
-        if self.floor_m > 0.0
-            && let Some(path) = self.search_above(from, to, self.floor_m)
-        {
-            return Some(path);
-        }
-        self.search_above(from, to, 0.0)
-    }
-
-    /// A* through cells that keep `floor_m` of clearance, or are within
-    /// the wanted clearance and a cell of either end.
-    fn search_above(&self, from: [f64; 2], to: [f64; 2], floor_m: f64) -> Option<Vec<usize>> {
-        let near_end = self.wanted_m + self.cell_m;
-        let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) <= near_end;
-        let (start, goal) = (self.cell_of(from), self.cell_of(to));
-        let n = self.clearance.len();
-        let mut cost = vec![f64::INFINITY; n];
-        let mut parent = vec![usize::MAX; n];
-        let mut open = BinaryHeap::new();
-        let goal_p = self.centre(goal);
-        let h = |c: usize| {
-            let p = self.centre(c);
-            (p[0] - goal_p[0]).hypot(p[1] - goal_p[1])
-        };
-        cost[start] = 0.0;
-        open.push(Open {
-            f: h(start),
-            cell: start,
-        });
-        let (w, hgt) = (self.size[0] as isize, self.size[1] as isize);
-        while let Some(Open { f, cell }) = open.pop() {
-            if cell == goal {
-                let mut path = vec![goal];
-                let mut c = goal;
-                while c != start {
-                    c = parent[c];
-                    path.push(c);
-                }
-                path.reverse();
-                return Some(path);
-            }
-            if f > cost[cell] + h(cell) + 1e-12 {
-                continue; // A stale entry.
-            }
-            let (i, j) = (
-                (cell % self.size[0]) as isize,
-                (cell / self.size[0]) as isize,
-            );
-            for (di, dj) in [
-                (1, 0),
-                (-1, 0),
-                (0, 1),
-                (0, -1),
-                (1, 1),
-                (1, -1),
-                (-1, 1),
-                (-1, -1),
-            ] {
-                let (ni, nj) = (i + di, j + dj);
-                if ni < 0 || nj < 0 || ni >= w || nj >= hgt {
-                    continue;
-                }
-                let next = (ni + nj * w) as usize;
-                // The goal and the start are where the robot must be; every
-                // other cell must keep the footprint off the walls.
-                let factor = match self.factor(self.clearance[next]) {
-                    Some(_)
-                        if self.clearance[next] < floor_m
-                            && !near(self.centre(next), from)
-                            && !near(self.centre(next), to) =>
-                    {
-                        continue;
-                    }
-                    Some(f) => f,
-                    None if next == goal => 1.0,
-                    None => continue,
-                };
-                let step = self.cell_m * if di != 0 && dj != 0 { 2f64.sqrt() } else { 1.0 };
-                let c = cost[cell] + step * factor;
-                if c < cost[next] {
-                    cost[next] = c;
-                    parent[next] = cell;
-                    open.push(Open {
-                        f: c + h(next),
-                        cell: next,
-                    });
-                }
-            }
-        }
-        None
-    }
-
-    /// The lowest clearance along the straight leg from `a` to `b`.
-    fn leg_clearance(&self, a: [f64; 2], b: [f64; 2]) -> f64 {
-        let length = (b[0] - a[0]).hypot(b[1] - a[1]);
-        let steps = (length / (0.25 * self.cell_m)).ceil().max(1.0) as usize;
-        (0..=steps)
-            .map(|k| {
-                let s = k as f64 / steps as f64;
-                self.clearance_at([a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1])])
-            })
-            .fold(f64::INFINITY, f64::min)
-    }
-
-    /// Waypoints from `from` to `to`: the searched cells shortened by line
-    /// of sight. Where the robot starts or ends closer to a wall than the
-    /// wanted clearance (it stopped against what it touched), the cells are
-    /// kept until the clearance is reached: the search leaves contact the
-    /// cheapest way, and a leg straight from there could slide along the
-    /// face. Between, a leg replaces a run of cells when it keeps the wanted
-    /// clearance, or at least the lowest clearance of the cells it replaces
-    /// (a narrow passage stays as narrow, never narrower).
+    /// Waypoints from `from` to `to` ([`ClearanceGrid::waypoints`], with
+    /// the world's exact clearances).
     fn waypoints(&self, from: [f64; 2], to: [f64; 2]) -> Option<Vec<[f64; 2]>> {
-        let cells = self.search(from, to)?;
-        let mut points: Vec<[f64; 2]> = Vec::with_capacity(cells.len() + 2);
-        points.push(from);
-        points.extend(cells.iter().skip(1).map(|&c| self.centre(c)));
-        if cells.len() > 1 {
-            points.pop(); // The goal cell's centre: `to` itself follows.
-        }
-        points.push(to);
-        let wanted = self.wanted_m - self.footprint_m;
-        let clearance: Vec<f64> = points.iter().map(|&p| self.clearance_at(p)).collect();
-        let clear = |k: usize| clearance[k] >= wanted - 1e-9;
-        let last = points.len() - 1;
-        let head = (0..=last).find(|&k| clear(k)).unwrap_or(last);
-        let tail = (head..=last).rev().find(|&k| clear(k)).unwrap_or(head);
-        let mut out = points[..=head].to_vec();
-        let mut at = head;
-        while at < tail {
-            let mut next = at + 1;
-            for j in (at + 2..=tail).rev() {
-                let need = clearance[at..=j].iter().fold(wanted, |a, &c| a.min(c));
-                if self.leg_clearance(points[at], points[j]) >= need - 1e-9 {
-                    next = j;
-                    break;
-                }
-            }
-            out.push(points[next]);
-            at = next;
-        }
-        out.extend_from_slice(&points[tail + 1..]);
-        Some(out)
+        self.cells
+            .waypoints(from, to, &self.keep, &|p| self.clearance_at(p))
     }
 
     /// A robot that stopped against something (closer than the wanted
@@ -398,7 +201,7 @@ impl<'w> Grid<'w> {
     /// place against a face keeps the bumper pressed. Appends the reverse
     /// leg (if any) and returns where it ends.
     fn back_off(&self, from: Pose, settings: &DetourSettings, out: &mut Vec<PathSample>) -> Pose {
-        let wanted = self.wanted_m - self.footprint_m;
+        let wanted = self.keep.want_m;
         let mut clearance = self.clearance_at([from.x_m, from.y_m]);
         if clearance >= wanted {
             return from;

@@ -11,6 +11,9 @@
 //! - [`plan`]: the mission plan (`twindrive-plan`, data only) with what needs
 //!   the simulator: its range model, its map as a world, the TUM export;
 //! - [`retime`]: the fastest timing of a path under wheel speed and acceleration limits;
+//! - [`freedom`]: the robot's corridor and keep-out zones along a plan;
+//! - [`grid_search`]: the shortest way for a circular robot over a grid of
+//!   clearances (the twin's continuations and the robot's local planner);
 //! - [`verify`]: replaying a plan on the twin, open and closed loop;
 //! - [`pipeline`]: the whole chain on one mission log.
 //!
@@ -19,6 +22,8 @@
 pub mod control;
 pub mod detour;
 mod error;
+pub mod freedom;
+pub mod grid_search;
 pub mod path;
 pub mod pipeline;
 pub mod plan;

@@ -8,6 +8,7 @@ use twindrive_log::MissionLog;
 
 use crate::control::{WheelCommand, recompute};
 use crate::error::PipelineError;
+use crate::freedom::FreedomSettings;
 use crate::path::{PathSample, path_length_m};
 use crate::plan::{SiteMap, SiteMapGeometry};
 use crate::planner::{PlannerSettings, executed_path};
@@ -27,6 +28,9 @@ pub struct PipelineSettings {
     pub redundancy: RedundancyConfig,
     #[serde(default)]
     pub filter: FilterSettings,
+    /// The robot's corridor, keep-out zones and detour bounds.
+    #[serde(default)]
+    pub freedom: FreedomSettings,
 }
 
 /// Each stage's output.
@@ -212,6 +216,10 @@ pub fn plan_from_log(
         max_speed_rad_s: header.max_wheel_speed_rad_s,
         max_accel_rad_s2: header.max_wheel_accel_rad_s2,
     };
+    settings
+        .freedom
+        .validate(header.footprint_radius_m)
+        .map_err(|e| PipelineError::Infeasible(format!("the freedom settings: {e}")))?;
     let stages = run(log, params, &limits, settings)?;
     let (path, commands) = if time_optimal {
         let (p, c) = stages.fastest.as_ref().map_err(|e| {
@@ -239,6 +247,11 @@ pub fn plan_from_log(
             start: header.start,
             start_covariance: None,
             site_map: SiteMap::default(),
+            freedom: settings.freedom.freedom_along(
+                &positions(path),
+                &scenario.world,
+                header.footprint_radius_m,
+            ),
             source_log_sha256: log_sha256.to_owned(),
             settings: serde_json::json!({
                 "pipeline": settings,
@@ -250,6 +263,10 @@ pub fn plan_from_log(
     );
     plan.validate()?;
     Ok((plan, stages))
+}
+
+fn positions(path: &[PathSample]) -> Vec<[f64; 2]> {
+    path.iter().map(PathSample::position).collect()
 }
 
 /// The plan document for a timed path and its commands: the site's map
@@ -313,8 +330,10 @@ pub fn continuation_plan(
         )));
     }
     let start = scenario.robot.start;
+    // The detours keep out of the operator's zones as out of walls.
+    let world = crate::freedom::with_zones_as_walls(&scenario.world, &h.freedom.keep_out);
     let path = crate::detour::continuation_path(
-        &scenario.world,
+        &world,
         h.robot.footprint_radius_m,
         start,
         &remaining,
@@ -323,6 +342,19 @@ pub fn continuation_plan(
     )?;
     let limits = h.limits.scaled(pace);
     let (path, commands) = crate::spikes::time_optimal(&path, params, &limits, h.time_step_s)?;
+    // The operator's freedom goes on: their corridor settings (recorded
+    // with the interrupted plan, or the defaults) on the new path, their
+    // zones and bounds as they were.
+    let freedom_settings = FreedomSettings {
+        keep_out: h.freedom.keep_out.clone(),
+        max_extra_time_s: h.freedom.max_extra_time_s,
+        max_extra_distance_m: h.freedom.max_extra_distance_m,
+        ..["/pipeline/freedom", "/freedom"]
+            .iter()
+            .find_map(|at| h.settings.pointer(at))
+            .and_then(|v| serde_json::from_value::<FreedomSettings>(v.clone()).ok())
+            .unwrap_or_default()
+    };
     let length_m = path_length_m(&path);
     let duration_s = path.last().map_or(0.0, |s| s.t_s) - path[0].t_s;
     let plan = plan_document(
@@ -336,6 +368,19 @@ pub fn continuation_plan(
             start,
             start_covariance: None,
             site_map: SiteMap::default(),
+            freedom: if h.freedom.corridor.is_empty() {
+                // No corridor before, none now: only the zones and bounds.
+                twindrive_plan::Freedom {
+                    corridor: Vec::new(),
+                    ..h.freedom.clone()
+                }
+            } else {
+                freedom_settings.freedom_along(
+                    &positions(&path),
+                    &scenario.world,
+                    h.robot.footprint_radius_m,
+                )
+            },
             source_log_sha256: h.source_log_sha256.clone(),
             settings: serde_json::json!({
                 "continuation_of": interrupted.sha256,
@@ -343,6 +388,7 @@ pub fn continuation_plan(
                 "clearance_m": detour.clearance_m,
                 "pace": pace,
                 "timing": "time_optimal",
+                "freedom": freedom_settings,
             }),
             summary: serde_json::json!({
                 "continuation_of": interrupted.sha256,

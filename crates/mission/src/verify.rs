@@ -25,7 +25,8 @@ use twindrive_kinematics::{DiffDriveParams, Pose, arc_step_wheels, wheel_speeds,
 use twindrive_sim::{Scenario, Sensed, Simulator, StepOutput};
 
 use crate::error::PipelineError;
-use crate::plan::PlanSample;
+use crate::freedom::FreedomMap;
+use crate::plan::{MissionPlan, PlanSample};
 
 /// What a replay found.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -41,6 +42,12 @@ pub struct ReplayReport {
     pub start_contact_s: f64,
     pub max_deviation_m: f64,
     pub mean_deviation_m: f64,
+    /// The plan's keep-out zones the robot's footprint entered (each
+    /// named once, in the order entered).
+    pub keep_out_entered: Vec<String>,
+    /// The furthest the footprint reached beyond the plan's corridor (m;
+    /// 0 when it stayed inside, or the plan has none).
+    pub corridor_excess_m: f64,
     /// Distance from the plan's last position when the replay ended.
     pub final_error_m: f64,
     pub duration_s: f64,
@@ -134,11 +141,13 @@ impl<'a> PathCursor<'a> {
 }
 
 /// Runs `control` on the twin from the plan's start until it says stop or
-/// the time runs out, measuring deviation from the plan's path.
+/// the time runs out, measuring deviation from the plan's path and where
+/// the footprint went against `freedom`.
 fn replay(
     samples: &[PlanSample],
     mut scenario: Scenario,
     max_duration_s: f64,
+    freedom: &FreedomMap<'_>,
     mut control: impl FnMut(&Sensed) -> Option<[f64; 2]>,
 ) -> Result<Replay, PipelineError> {
     let first = samples
@@ -157,6 +166,8 @@ fn replay(
     let mut start_contact_s = 0.0;
     let (mut max_dev, mut sum_dev, mut n) = (0.0f64, 0.0, 0usize);
     let mut track = vec![(0.0, sim.pose())];
+    let mut keep_out_entered: Vec<String> = Vec::new();
+    let mut corridor_excess_m = 0.0f64;
     let mut length = 0.0;
     let mut done_at = None;
     while done_at.is_none() {
@@ -182,6 +193,19 @@ fn replay(
             contacts.record(out.record.bump, out.blocked, dt_s);
         }
         let d = deviation.advance((pose.x_m, pose.y_m), 0.5);
+        if let Some(zone) = freedom.zone_hit([pose.x_m, pose.y_m])
+            && !keep_out_entered.contains(&zone.name)
+        {
+            keep_out_entered.push(zone.name.clone());
+        }
+        if let Some(excess) = freedom.corridor_excess_m(deviation.index, d) {
+            // A NaN distance is beyond any corridor.
+            corridor_excess_m = if excess.is_nan() {
+                f64::NAN
+            } else {
+                corridor_excess_m.max(excess)
+            };
+        }
         max_dev = max_dev.max(d);
         sum_dev += d;
         n += 1;
@@ -198,6 +222,8 @@ fn replay(
             start_contact_s,
             max_deviation_m: max_dev,
             mean_deviation_m: sum_dev / n.max(1) as f64,
+            keep_out_entered,
+            corridor_excess_m,
             final_error_m: (end.x_m - last.x_m).hypot(end.y_m - last.y_m),
             duration_s: done_at.unwrap_or(track.last().expect("non-empty").0),
             path_length_m: length,
@@ -215,6 +241,7 @@ pub fn open_loop(
     samples: &[PlanSample],
     scenario: Scenario,
     params: Option<&DiffDriveParams>,
+    freedom: &FreedomMap<'_>,
 ) -> Result<Replay, PipelineError> {
     let t0 = samples.first().map_or(0.0, |s| s.t_s);
     let end = samples.last().map_or(0.0, |s| s.t_s) - t0;
@@ -253,7 +280,7 @@ pub fn open_loop(
     };
     let dt_s = scenario.dt_s();
     let (mut k0, mut k1) = (0, 0);
-    replay(samples, scenario, end + 1.0, |s| {
+    replay(samples, scenario, end + 1.0, freedom, |s| {
         let t = s.t_ns as f64 * 1e-9 + t0;
         if t >= t0 + end {
             return None;
@@ -417,6 +444,7 @@ pub fn closed_loop(
     scenario: Scenario,
     params: &DiffDriveParams,
     settings: &TrackerSettings,
+    freedom: &FreedomMap<'_>,
 ) -> Result<Replay, PipelineError> {
     let mut tracker = Tracker::new(
         samples,
@@ -430,6 +458,7 @@ pub fn closed_loop(
         samples,
         scenario,
         duration + settings.timeout_extra_s,
+        freedom,
         move |s| tracker.command(samples, s.t_ns as f64 * 1e-9, s.encoder_ticks),
     )
 }
@@ -499,6 +528,23 @@ impl Verdict {
                     r.start_contact_s
                 ));
             }
+            if !r.keep_out_entered.is_empty() {
+                reasons.push(format!(
+                    "{name}: enters keep-out zone(s) {}",
+                    r.keep_out_entered
+                        .iter()
+                        .map(|z| format!("`{z}`"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+            // A NaN excess is outside any corridor.
+            if r.corridor_excess_m.is_nan() || r.corridor_excess_m > 0.0 {
+                reasons.push(format!(
+                    "{name}: leaves the plan's corridor by {:.3} m",
+                    r.corridor_excess_m
+                ));
+            }
             if beyond(r.max_deviation_m) {
                 reasons.push(format!(
                     "{name}: departs {:.3} m from the plan's path (tolerance {tol:.3} m)",
@@ -540,31 +586,53 @@ pub struct PlanVerification {
     pub verdict: Verdict,
 }
 
-/// Replays `samples` on the twin `scenario` open loop (the plan's wheel
-/// speeds) and closed loop (tracked on odometry through `calibrated`, the
-/// plan's parameters), side by side, and judges both by `criteria`.
+/// Replays `plan` on the twin `scenario` open loop (the plan's wheel
+/// speeds) and closed loop (tracked on odometry through the plan's
+/// calibrated parameters), side by side, and judges both by `criteria` and
+/// by the plan's freedom (its keep-out zones and corridor, the plan's own
+/// path included).
 pub fn verify(
-    samples: &[PlanSample],
+    plan: &MissionPlan,
     scenario: &Scenario,
-    calibrated: &DiffDriveParams,
     criteria: &Criteria,
 ) -> Result<PlanVerification, PipelineError> {
+    let samples = &plan.samples;
+    let freedom = FreedomMap::of_plan(plan);
     let (open, closed) = std::thread::scope(|s| {
         let closed = s.spawn(|| {
             closed_loop(
                 samples,
                 scenario.clone(),
-                calibrated,
+                &plan.header.calibrated,
                 &TrackerSettings::default(),
+                &freedom,
             )
         });
-        let open = open_loop(samples, scenario.clone(), None);
+        let open = open_loop(samples, scenario.clone(), None, &freedom);
         (open, closed.join())
     });
     let closed = closed
         .map_err(|_| PipelineError::Infeasible("the closed-loop replay panicked".into()))??;
     let open = open?;
-    let verdict = Verdict::judge(&open.report, &closed.report, criteria);
+    let mut verdict = Verdict::judge(&open.report, &closed.report, criteria);
+    // The plan's own path, beside its replays: the operator's zones are
+    // never crossed on purpose.
+    if let Some((s, zone)) = samples
+        .iter()
+        .find_map(|s| freedom.zone_hit([s.x_m, s.y_m]).map(|z| (s, z)))
+    {
+        verdict.passed = false;
+        verdict.reasons.insert(
+            0,
+            format!(
+                "the plan's own path enters keep-out zone `{}` at {:.2} s ({:.2}, {:.2})",
+                zone.name,
+                s.t_s - samples[0].t_s,
+                s.x_m,
+                s.y_m
+            ),
+        );
+    }
     Ok(PlanVerification {
         open_loop: open,
         closed_loop: closed,
@@ -583,6 +651,8 @@ mod tests {
             start_contact_s: 0.0,
             max_deviation_m: 0.02,
             mean_deviation_m: 0.01,
+            keep_out_entered: Vec::new(),
+            corridor_excess_m: 0.0,
             final_error_m: 0.01,
             duration_s: 10.0,
             path_length_m: 3.0,
@@ -649,6 +719,30 @@ mod tests {
                 },
                 clean(),
                 "stays in contact at its start for 2.5 s",
+            ),
+            (
+                clean(),
+                ReplayReport {
+                    keep_out_entered: vec!["crater".into()],
+                    ..clean()
+                },
+                "closed loop: enters keep-out zone(s) `crater`",
+            ),
+            (
+                ReplayReport {
+                    corridor_excess_m: 0.004,
+                    ..clean()
+                },
+                clean(),
+                "open loop: leaves the plan's corridor by 0.004 m",
+            ),
+            (
+                ReplayReport {
+                    corridor_excess_m: f64::NAN,
+                    ..clean()
+                },
+                clean(),
+                "leaves the plan's corridor by NaN m",
             ),
         ];
         for (open, closed, reason) in cases {

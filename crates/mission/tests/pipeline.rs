@@ -2,6 +2,7 @@
 //! mission on the twin), checked against the forward model and the limits.
 
 use std::sync::OnceLock;
+use twindrive_mission::freedom::FreedomMap;
 
 use twindrive_kinematics::DiffDriveParams;
 use twindrive_log::MissionLog;
@@ -216,9 +217,15 @@ fn closed_loop_tracking_reaches_the_goal_even_when_the_plan_ends_standing_still(
         });
     }
     let settings = twindrive_mission::verify::TrackerSettings::default();
-    let r = twindrive_mission::verify::closed_loop(&samples, scenario(), &CALIBRATED, &settings)
-        .unwrap()
-        .report;
+    let r = twindrive_mission::verify::closed_loop(
+        &samples,
+        scenario(),
+        &CALIBRATED,
+        &settings,
+        &FreedomMap::unconstrained(),
+    )
+    .unwrap()
+    .report;
     let plan_duration = samples.last().unwrap().t_s - samples[0].t_s;
     assert!(r.final_error_m < 0.03, "{r:?}");
     assert!(
@@ -247,6 +254,7 @@ fn closed_loop_tracking_corrects_a_sideways_start_error() {
         scenario(),
         &CALIBRATED,
         &twindrive_mission::verify::TrackerSettings::default(),
+        &FreedomMap::unconstrained(),
     )
     .unwrap();
     // Converged within the first few seconds and on track to the end.
@@ -273,6 +281,7 @@ fn case_study_settings() -> twindrive_mission::pipeline::PipelineSettings {
             scenario().robot.footprint_radius_m,
         ),
         filter: FilterSettings::default(),
+        freedom: Default::default(),
     }
 }
 
@@ -319,12 +328,19 @@ fn the_case_study_plan_keeps_the_explored_route_and_drops_the_second_lap() {
         .zip(&stages.filtered.commands)
         .map(|(p, c)| twindrive_mission::plan::plan_sample(p, c, false))
         .collect();
-    let open = twindrive_mission::verify::open_loop(&samples, scenario(), None).unwrap();
+    let open = twindrive_mission::verify::open_loop(
+        &samples,
+        scenario(),
+        None,
+        &FreedomMap::unconstrained(),
+    )
+    .unwrap();
     let closed = twindrive_mission::verify::closed_loop(
         &samples,
         scenario(),
         &CALIBRATED,
         &twindrive_mission::verify::TrackerSettings::default(),
+        &FreedomMap::unconstrained(),
     )
     .unwrap();
     for r in [&open.report, &closed.report] {

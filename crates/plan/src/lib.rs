@@ -27,6 +27,9 @@ use sha2::{Digest, Sha256};
 use twindrive_kinematics::{DiffDriveParams, Pose};
 pub use twindrive_kinematics::{RangeSensorInfo, SensorKind};
 
+mod freedom;
+pub use freedom::{CorridorStretch, Freedom, KeepOutZone, check_polygon};
+
 /// A plan that cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PlanError {
@@ -77,7 +80,8 @@ impl WheelLimits {
 pub const PLAN_FORMAT: &str = "twindrive-mission-plan";
 /// Bumped whenever the meaning of a field changes (3: each range sensor
 /// says its kind, which the plan's hash covers, so a version-2 plan is
-/// refused by version rather than read as damaged).
+/// refused by version rather than read as damaged; the header carries the
+/// robot's [`Freedom`]).
 pub const PLAN_VERSION: u32 = 3;
 
 /// The robot the plan is for.
@@ -112,6 +116,9 @@ pub struct PlanHeader {
     /// The site as the twin knows it: what the robot localizes against and
     /// predicts its readings from.
     pub site_map: SiteMap,
+    /// Where the robot may go on its own (its corridor), where never
+    /// (keep-out zones), and how much a detour may cost; see [`Freedom`].
+    pub freedom: Freedom,
     /// SHA-256 (hex) of the source log files.
     pub source_log_sha256: String,
     /// The pipeline's settings, as given.
@@ -320,6 +327,7 @@ impl MissionPlan {
             }
         }
         h.site_map.validate()?;
+        h.freedom.validate(h.robot.footprint_radius_m)?;
         let mut previous = f64::NEG_INFINITY;
         for (index, s) in self.samples.iter().enumerate() {
             let numbers = [
@@ -434,6 +442,18 @@ mod tests {
             site_map: SiteMap {
                 segments: vec![[0.0, 0.0, 6.0, 0.0], [1.5, 1.5, 4.5, 1.5]],
                 boxes: vec![],
+            },
+            freedom: Freedom {
+                corridor: vec![CorridorStretch {
+                    from_m: 0.0,
+                    half_width_m: 0.5,
+                }],
+                keep_out: vec![KeepOutZone {
+                    name: "rock".into(),
+                    polygon: vec![[5.0, 5.0], [6.0, 5.0], [5.5, 6.0]],
+                }],
+                max_extra_time_s: 20.0,
+                max_extra_distance_m: 3.0,
             },
             source_log_sha256: sha256_hex(b"log"),
             settings: serde_json::json!({ "pinch_distance_m": 0.1 }),
@@ -550,6 +570,18 @@ mod tests {
                 index: 1
             })
         );
+        let mut f = plan();
+        f.header.freedom.keep_out[0].polygon.pop();
+        f.sha256 = f.content_hash();
+        assert!(
+            f.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("header.freedom.keep_out[0].polygon"),
+        );
+        let mut z = plan();
+        z.header.freedom.keep_out[0].polygon[0][1] += 1e-9;
+        assert!(z.validate().is_err(), "the zones are hashed");
         let mut c = plan();
         c.samples[5].t_s = c.samples[4].t_s;
         c.sha256 = c.content_hash();

@@ -118,6 +118,18 @@ impl World {
         World::new(segments, solids, self.grid.clone())
     }
 
+    /// This world with walls `[x0, y0, x1, y1]` added (the outlines of
+    /// zones a planner must keep out of, drawn as walls it cannot cross).
+    pub fn with_walls(&self, walls: &[[f64; 4]]) -> World {
+        let mut segments = self.segments.clone();
+        segments.extend(
+            walls
+                .iter()
+                .map(|w| Segment::new(Vector::new(w[0], w[1]), Vector::new(w[2], w[3]))),
+        );
+        World::new(segments, self.solids.clone(), self.grid.clone())
+    }
+
     /// The world as a log's `/map` topic draws it.
     pub fn log_map(&self) -> twindrive_log::WorldMap {
         twindrive_log::WorldMap {

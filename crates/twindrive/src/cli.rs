@@ -882,6 +882,15 @@ pub struct PlanArgs {
     /// re-timing of the filtered path) instead of at the mission's own pace.
     #[arg(long)]
     pub time_optimal: bool,
+    /// The robot's freedom on the plan (TOML): `max_half_width_m` (the
+    /// default corridor's widest half width, 1.5), `stretch_m` (0.5),
+    /// `max_extra_time_s` (60) and `max_extra_distance_m` (5) a detour may
+    /// cost, `[[corridor]]` regions (`region = [[x, y], ...]`,
+    /// `half_width_m`; the footprint radius holds the robot to its path)
+    /// and `[[keep_out]]` zones (`name`, `polygon = [[x, y], ...]`). Without
+    /// it the corridor follows the twin's clearance and there are no zones.
+    #[arg(long, value_name = "FREEDOM.toml")]
+    pub freedom: Option<PathBuf>,
     /// Output plan JSON; exports and figures go beside it.
     #[arg(long, default_value = "plan.json")]
     pub out: PathBuf,

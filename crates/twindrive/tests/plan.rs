@@ -462,3 +462,133 @@ fn a_plan_made_with_the_wrong_parameters_fails_verification_and_is_not_signed() 
         assert!(signed.exists());
     }
 }
+
+/// The plan's corridor follows the twin's clearance; a keep-out zone drawn
+/// on the route (anywhere along it, seeded) fails verification with its
+/// name, one drawn beside the route does not, and a freedom file that
+/// cannot be kept is refused by line or field, writing nothing.
+#[test]
+fn keep_out_zones_on_the_route_fail_verification_by_name_and_beside_it_pass() {
+    use rand::{RngExt, SeedableRng};
+    let tmp = tempfile::tempdir().unwrap();
+    let free = tmp.path().join("free/plan.json");
+    let out = plan(&free, &[]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("freedom: corridor of")
+            && text(&out.stdout).contains("0 keep-out zone(s)"),
+        "{}",
+        text(&out.stdout)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&free).unwrap()).unwrap();
+    let corridor = doc["header"]["freedom"]["corridor"].as_array().unwrap();
+    assert_eq!(corridor[0]["from_m"], 0.0);
+    for c in corridor {
+        let w = c["half_width_m"].as_f64().unwrap();
+        assert!((0.15..=1.5).contains(&w), "{c}");
+    }
+    let xy: Vec<[f64; 2]> = doc["samples"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| [s["x_m"].as_f64().unwrap(), s["y_m"].as_f64().unwrap()])
+        .collect();
+    let square = |c: [f64; 2], h: f64| {
+        format!(
+            "[[{}, {}], [{}, {}], [{}, {}], [{}, {}]]",
+            c[0] - h,
+            c[1] - h,
+            c[0] + h,
+            c[1] - h,
+            c[0] + h,
+            c[1] + h,
+            c[0] - h,
+            c[1] + h
+        )
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(40);
+    let on_route = xy[rng.random_range(xy.len() / 10..xy.len() * 9 / 10)];
+    // Beside the route: a 0.2 m square whose nearest edge is 0.5 m from
+    // every sample of the path (the footprint, 0.15 m, and the tolerance
+    // the replays keep, 0.15 m, fit between).
+    let beside = loop {
+        let k = rng.random_range(0..xy.len());
+        let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let c = [xy[k][0] + 0.8 * a.cos(), xy[k][1] + 0.8 * a.sin()];
+        if xy
+            .iter()
+            .all(|p| (p[0] - c[0]).hypot(p[1] - c[1]) > 0.5 + 0.1 * std::f64::consts::SQRT_2)
+        {
+            break c;
+        }
+    };
+    for (name, centre, fails) in [("rock", on_route, true), ("flowers", beside, false)] {
+        let dir = tmp.path().join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        let toml = dir.join("freedom.toml");
+        std::fs::write(
+            &toml,
+            format!(
+                "max_extra_time_s = 20.0\n[[keep_out]]\nname = \"{name}\"\npolygon = {}\n",
+                square(centre, 0.1)
+            ),
+        )
+        .unwrap();
+        let plan_path = dir.join("plan.json");
+        let out = plan(&plan_path, &["--freedom", s(&toml)]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        assert!(
+            text(&out.stdout).contains(&format!(
+                "1 keep-out zone(s) ({name}); a detour may add 20 s"
+            )),
+            "{}",
+            text(&out.stdout)
+        );
+        let doc: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&plan_path).unwrap()).unwrap();
+        assert_eq!(doc["header"]["freedom"]["keep_out"][0]["name"], name);
+        let out = twindrive(&["verify-plan", s(&plan_path), "--out", s(&dir.join("v"))]);
+        let said = text(&out.stdout);
+        if fails {
+            assert_eq!(out.status.code(), Some(3), "{said}");
+            assert!(
+                said.contains(&format!(
+                    "the plan's own path enters keep-out zone `{name}`"
+                )) && said.contains(&format!("closed loop: enters keep-out zone(s) `{name}`")),
+                "{said}"
+            );
+        } else {
+            assert!(out.status.success(), "{name} at {centre:?}: {said}");
+        }
+    }
+
+    // A freedom file that cannot be kept: its line, or its field.
+    let bad = tmp.path().join("bad");
+    for (content, want) in [
+        ("max_half_width = 1.0\n", "unknown field `max_half_width`"),
+        (
+            "[[corridor]]\nregion = [[0.0, 0.0], [9.0, 0.0], [9.0, 9.0]]\nhalf_width_m = 0.05\n",
+            "field `corridor[0].half_width_m`: 0.05 m is narrower than the robot's footprint radius 0.15 m",
+        ),
+        (
+            "[[keep_out]]\nname = \"x\"\npolygon = [[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]\n",
+            "field `keep_out[0].polygon`: zone `x`: edges 0 and 2 cross",
+        ),
+    ] {
+        std::fs::create_dir_all(&bad).unwrap();
+        let toml = bad.join("freedom.toml");
+        std::fs::write(&toml, content).unwrap();
+        let out = plan(&bad.join("out/plan.json"), &["--freedom", s(&toml)]);
+        assert!(!out.status.success());
+        let err = text(&out.stderr);
+        assert!(
+            err.contains("--freedom") && err.contains("freedom.toml"),
+            "{err}"
+        );
+        assert!(err.contains(want), "{want}: {err}");
+        if content.starts_with("max_half") {
+            assert!(err.contains("line 1"), "{err}");
+        }
+        assert!(!bad.join("out/plan.json").exists());
+    }
+}

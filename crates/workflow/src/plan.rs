@@ -213,6 +213,43 @@ pub fn print_summary(
         c.route_length_m,
         s.reversing_m
     )?;
+    let f = &plan.header.freedom;
+    let widths = f
+        .corridor
+        .iter()
+        .map(|c| c.half_width_m)
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), w| {
+            (lo.min(w), hi.max(w))
+        });
+    let corridor = if f.corridor.is_empty() {
+        "no corridor (the robot keeps to its path)".to_string()
+    } else {
+        format!(
+            "corridor of {} stretch(es), half width {:.2} to {:.2} m",
+            f.corridor.len(),
+            widths.0,
+            widths.1
+        )
+    };
+    writeln!(
+        o,
+        "freedom: {corridor}; {} keep-out zone(s){}; a detour may add {:.0} s and {:.1} m",
+        f.keep_out.len(),
+        if f.keep_out.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({})",
+                f.keep_out
+                    .iter()
+                    .map(|z| z.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        },
+        f.max_extra_time_s,
+        f.max_extra_distance_m
+    )?;
     writeln!(
         o,
         "plan {} ({} samples, sha256 {}) and its figures beside it",

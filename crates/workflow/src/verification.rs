@@ -35,9 +35,8 @@ pub fn check_before_sending(
     allow_failed: bool,
 ) -> anyhow::Result<Verdict> {
     let checked = verify::verify(
-        &plan.samples,
+        plan,
         twin,
-        &plan.header.calibrated,
         &twindrive_agent::executive::criteria(&Tolerances::default()),
     )?;
     let verdict = checked.verdict;

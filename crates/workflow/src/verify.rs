@@ -9,6 +9,7 @@ use serde::Serialize;
 use twindrive_files::Staging;
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::envelope::Tolerances;
+use twindrive_mission::freedom::FreedomMap;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::verify::{self, Replay, ReplayReport, Verdict};
 use twindrive_plot::{Series, WorldFigure, palette};
@@ -60,8 +61,15 @@ pub fn verify(plan: &MissionPlan, scenario: &Scenario) -> anyhow::Result<Verific
     let nominal = scenario.robot.nominal_params;
     let criteria = twindrive_agent::executive::criteria(&Tolerances::default());
     let (checked, open_loop_nominal) = std::thread::scope(|s| {
-        let nominal_run = s.spawn(|| verify::open_loop(samples, scenario.clone(), Some(&nominal)));
-        let checked = verify::verify(samples, scenario, &calibrated, &criteria);
+        let nominal_run = s.spawn(|| {
+            verify::open_loop(
+                samples,
+                scenario.clone(),
+                Some(&nominal),
+                &FreedomMap::of_plan(plan),
+            )
+        });
+        let checked = verify::verify(plan, scenario, &criteria);
         (checked, nominal_run.join())
     });
     let verify::PlanVerification {

@@ -35,6 +35,7 @@ pub fn plan_of(scenario: &Scenario, calibrated: &DiffDriveParams) -> MissionPlan
         planner: Default::default(),
         redundancy: RedundancyConfig::with_pinch_distance(0.15),
         filter: Default::default(),
+        freedom: Default::default(),
     };
     pipeline::plan_from_log(
         &log,

@@ -306,6 +306,7 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
             planner: Default::default(),
             redundancy: RedundancyConfig::with_pinch_distance(twin.robot.footprint_radius_m),
             filter: Default::default(),
+            freedom: Default::default(),
         },
         time_optimal: false,
     };

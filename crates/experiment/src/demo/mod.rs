@@ -142,6 +142,7 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
             planner: Default::default(),
             redundancy: RedundancyConfig::with_pinch_distance(pinch_distance_m),
             filter: Default::default(),
+            freedom: Default::default(),
         },
         time_optimal: false,
     };

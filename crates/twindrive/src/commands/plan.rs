@@ -3,6 +3,7 @@
 //! stage (the work is `twindrive-workflow`'s).
 
 use anyhow::Context;
+use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_workflow::plan::{
@@ -45,6 +46,19 @@ fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
     args.flags.apply(&mut redundancy);
     redundancy.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
     let scenario = scenario_for(&log, args.scenario.as_deref())?;
+    let freedom = match &args.freedom {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("--freedom: reading {}", path.display()))?;
+            let settings = toml::from_str::<FreedomSettings>(&text)
+                .with_context(|| format!("--freedom: {}", path.display()))?;
+            settings
+                .validate(log.header.footprint_radius_m)
+                .map_err(|e| anyhow::anyhow!("--freedom: {}: {e}", path.display()))?;
+            settings
+        }
+        None => FreedomSettings::default(),
+    };
     Ok(Job {
         log,
         log_sha256,
@@ -54,6 +68,7 @@ fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
             planner: Default::default(),
             redundancy,
             filter: Default::default(),
+            freedom,
         },
         time_optimal: args.time_optimal,
     })
