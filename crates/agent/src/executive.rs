@@ -37,6 +37,23 @@
 //! - when a supervised plan has heard nothing from the master for longer
 //!   than its dead-man timeout.
 //!
+//! **Bounded autonomy.** A robot with a lidar whose plan gives it a
+//! corridor wider than its footprint (and three standard deviations of its
+//! position) does not hand back on an obstacle ahead: it goes around it
+//! ([`crate::local_planner`]: its own occupancy grid of the plan's map and
+//! fresh scans, inside the corridor, out of the keep-out zones, the
+//! footprint clear by three standard deviations of its position), at a
+//! speed that falls near obstacles, replanning at every scan, and rejoins
+//! the plan past the obstacle, the plan's clock moved on by the time the
+//! detour took. On a detour it hands back when no way exists
+//! ([`Stop::Blocked`]), when the way would add more time or distance than
+//! the plan's freedom allows ([`Stop::DetourBound`]), on any unexpected
+//! bump, when its estimate leaves the corridor ([`Stop::LeftCorridor`]),
+//! or on a sensor fault or the dead man. After it, range readings that end
+//! on what it saw are explained (the twin learns it from the detour
+//! event). A robot with rangers alone cannot see ahead and behaves as
+//! before.
+//!
 //! None of these waits for a message: the link is never in the loop.
 
 use std::collections::VecDeque;
@@ -50,7 +67,10 @@ use twindrive_mission::verify::{Criteria, Tracker, TrackerSettings};
 use twindrive_sim::RangeModel;
 
 use crate::backend::Reading;
+use crate::local_planner::{Detour, LocalPlanner, LocalPlannerSettings, NoWay};
 use crate::localize::{Beam, beams};
+use twindrive_estimation::mapping::{CellState, LogOddsGrid};
+use twindrive_kinematics::{SensorKind, wheel_speeds, wrap_angle};
 pub use twindrive_link::envelope::Tolerances;
 
 /// What a plan must meet on the twin before it is sent to a robot that
@@ -82,15 +102,28 @@ pub enum Stop {
     /// Hand-back: the robot lost a sensor it steers by (a silent
     /// `/joint_states`); the backend has already stopped the wheels.
     SensorFault { what: String },
+    /// Hand-back: something the map lacks blocks the plan, and no way
+    /// around it exists inside the corridor and out of the keep-out zones
+    /// (`why`); it was last seen ending at (`x_m`, `y_m`).
+    Blocked { why: String, x_m: f64, y_m: f64 },
+    /// Hand-back: the way around would cost more than the operator
+    /// allowed (`why`: which bound, by how much).
+    DetourBound { why: String },
+    /// Hand-back: on a detour the robot's estimate left its corridor, at
+    /// (`x_m`, `y_m`).
+    LeftCorridor { x_m: f64, y_m: f64 },
 }
 
 /// The reasons (as [`Stop::reason`] names them) that hand control back.
-pub const HANDBACK_REASONS: [&str; 5] = [
+pub const HANDBACK_REASONS: [&str; 8] = [
     "unexpected_bump",
     "deviation",
     "range_residual",
     "obstacle_ahead",
     "sensor_fault",
+    "blocked",
+    "detour_bound",
+    "left_corridor",
 ];
 
 impl Stop {
@@ -110,9 +143,29 @@ impl Stop {
             Stop::ObstacleAhead { .. } => "obstacle_ahead",
             Stop::DeadMan { .. } => "dead_man",
             Stop::SensorFault { .. } => "sensor_fault",
+            Stop::Blocked { .. } => "blocked",
+            Stop::DetourBound { .. } => "detour_bound",
+            Stop::LeftCorridor { .. } => "left_corridor",
         }
     }
 }
+
+/// On a detour: a waypoint within this is reached (m).
+const WAYPOINT_REACHED_M: f64 = 0.05;
+/// Facing the rejoin sample's heading within this, the detour ends (rad).
+const ALIGNED_RAD: f64 = 0.05;
+/// Heading errors beyond this are turned in place (rad).
+const TURN_IN_PLACE_RAD: f64 = 0.4;
+const TURN_GAIN_PER_S: f64 = 2.5;
+const MAX_TURN_RAD_S: f64 = 1.5;
+/// Within this of its clearance limit the robot slows, to this fraction
+/// of its detour speed at the limit.
+const SLOW_WITHIN_M: f64 = 0.3;
+const MIN_SPEED_FRACTION: f64 = 0.3;
+/// A detour event carries at most this many points of what it saw, this
+/// far apart at least (m).
+const MAX_OBSTACLE_POINTS: usize = 200;
+const OBSTACLE_POINT_SPACING_M: f64 = 0.05;
 
 /// Where the robot believes it is, for one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -154,6 +207,67 @@ pub struct Executive {
     residuals: VecDeque<f64>,
     last_median: Option<f64>,
     stopped: Option<(f64, Stop)>,
+    /// The robot's beams that belong to a lidar (it can see ahead and
+    /// plan around what it sees).
+    lidar_beams: Vec<bool>,
+    /// The plan's clock runs this far behind the robot's (s): the time the
+    /// detours took.
+    time_shift_s: f64,
+    /// The detour in progress.
+    detour: Option<Going>,
+    /// What the lidar saw on earlier detours.
+    seen: Option<LogOddsGrid>,
+    planner_settings: LocalPlannerSettings,
+    max_wheel_rad_s: f64,
+    events: Vec<Event>,
+}
+
+/// What the executive did that the master hears of (besides stopping).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum Event {
+    /// It saw something the map lacks on the plan ahead and is going
+    /// around it: from `from` (x, y, heading), at plan sample `from_sample`,
+    /// along `waypoints`, back onto the plan at sample `rejoin`;
+    /// `obstacle` the readings that ended on it (x, y in the site's frame).
+    Detour {
+        t_s: f64,
+        plan_t_s: f64,
+        from: [f64; 3],
+        from_sample: usize,
+        rejoin: usize,
+        waypoints: Vec<[f64; 2]>,
+        length_m: f64,
+        obstacle: Vec<[f64; 2]>,
+    },
+    /// Back on the plan at sample `sample`, `extra_s` later and `extra_m`
+    /// further than the plan; `obstacle` what it saw on the way.
+    Rejoined {
+        t_s: f64,
+        sample: usize,
+        extra_s: f64,
+        extra_m: f64,
+        obstacle: Vec<[f64; 2]>,
+    },
+}
+
+/// A detour being driven.
+struct Going {
+    planner: LocalPlanner,
+    route: Detour,
+    /// The waypoint being driven to.
+    next: usize,
+    from_sample: usize,
+    /// The robot's time (since the plan started) and the plan's when it
+    /// began.
+    started_s: f64,
+    plan_t_s: f64,
+    driven_m: f64,
+    last: Pose,
+    /// Speed limit on the detour (m/s).
+    max_speed_m_s: f64,
+    /// Where readings ended on what the map lacks (x, y), for the twin.
+    obstacle: Vec<[f64; 2]>,
 }
 
 impl Executive {
@@ -173,10 +287,22 @@ impl Executive {
         )?;
         let model = plan.range_model();
         let behind = plan.range_model_without_boxes();
+        let beams = beams(&plan.header.robot.range_sensors);
+        let lidar_beams = beams
+            .iter()
+            .map(|b| plan.header.robot.range_sensors[b.sensor].kind == SensorKind::Lidar)
+            .collect();
         Ok(Self {
+            lidar_beams,
+            time_shift_s: 0.0,
+            detour: None,
+            seen: None,
+            planner_settings: LocalPlannerSettings::default(),
+            max_wheel_rad_s: max_wheel_rad_s.min(plan.header.limits.max_speed_rad_s),
+            events: Vec::new(),
             predicted: vec![0.0; model.beams()],
             nearest: vec![0.0; model.beams()],
-            beams: beams(&plan.header.robot.range_sensors),
+            beams,
             ahead_count: vec![0; plan.header.robot.range_sensors.len()],
             predicted_behind: vec![0.0; behind.as_ref().map_or(0, |m| m.beams())],
             behind,
@@ -228,6 +354,315 @@ impl Executive {
         self.last_median
     }
 
+    /// What happened since the last call (detours begun and ended).
+    pub fn take_events(&mut self) -> Vec<Event> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// Whether a detour is being driven.
+    pub fn on_a_detour(&self) -> bool {
+        self.detour.is_some()
+    }
+
+    /// How the robot plans its detours.
+    pub fn set_planner_settings(&mut self, settings: LocalPlannerSettings) {
+        self.planner_settings = settings;
+    }
+
+    /// Whether the robot may go around an obstacle here: it has a lidar,
+    /// and the corridor at its progress leaves room beside the path beyond
+    /// its footprint and three standard deviations of its position.
+    fn may_detour(&self, belief: &Belief) -> bool {
+        if !self.lidar_beams.iter().any(|&l| l) {
+            return false;
+        }
+        let k = self.tracker.progress().min(self.plan.samples.len() - 1);
+        let along: f64 = self.plan.samples[..=k]
+            .windows(2)
+            .map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m))
+            .sum();
+        let keep = 3.0 * belief.pose_std[0].max(belief.pose_std[1]);
+        let room = self.plan.header.robot.footprint_radius_m
+            + keep
+            + self.planner_settings.corridor_margin_m
+            + 2.0 * self.planner_settings.cell_m;
+        self.plan
+            .header
+            .freedom
+            .half_width_at(along)
+            .is_some_and(|hw| hw > room)
+    }
+
+    fn start_detour(&mut self, belief: &Belief, t: f64, plan_t: f64) {
+        let k = self.tracker.progress().min(self.plan.samples.len() - 1);
+        let pose = belief.pose;
+        let planner = LocalPlanner::new(
+            &self.plan,
+            k,
+            [pose.x_m, pose.y_m],
+            self.planner_settings,
+            self.seen.take(),
+        );
+        // As fast as the plan drives around here, a slow walk at least.
+        let ahead = planner.along_m(k) + self.planner_settings.look_ahead_m;
+        let max_speed_m_s = self.plan.samples[k..]
+            .iter()
+            .enumerate()
+            .take_while(|(i, _)| planner.along_m(k + i) <= ahead)
+            .map(|(_, s)| s.v_m_s.abs())
+            .fold(0.1f64, f64::max)
+            .min(0.5);
+        self.detour = Some(Going {
+            planner,
+            route: Detour {
+                waypoints: Vec::new(),
+                rejoin: k,
+                length_m: 0.0,
+            },
+            next: 0,
+            from_sample: k,
+            started_s: t,
+            plan_t_s: plan_t,
+            driven_m: 0.0,
+            last: pose,
+            max_speed_m_s,
+            obstacle: Vec::new(),
+        });
+    }
+
+    /// One tick on a detour: the wheel commands, or zero and a stop.
+    fn on_detour(&mut self, reading: &Reading, belief: &Belief, t: f64) -> [f64; 2] {
+        match self.detour_tick(reading, belief, t) {
+            Ok(wheels) => wheels,
+            Err(stop) => {
+                if let Some(g) = self.detour.take() {
+                    self.seen = Some(g.planner.into_seen());
+                }
+                self.stopped = Some((reading.t_s, stop));
+                [0.0, 0.0]
+            }
+        }
+    }
+
+    fn detour_tick(
+        &mut self,
+        reading: &Reading,
+        belief: &Belief,
+        t: f64,
+    ) -> Result<[f64; 2], Stop> {
+        if let Some(what) = &reading.fault {
+            return Err(Stop::SensorFault { what: what.clone() });
+        }
+        // A detour plans no contact: any bump hands back.
+        if reading.bump {
+            return Err(Stop::UnexpectedBump);
+        }
+        if let Some(timeout) = self.dead_man_timeout_s {
+            let silent = reading.t_s - self.last_heard_s;
+            if silent > timeout {
+                return Err(Stop::DeadMan { silent_s: silent });
+            }
+        }
+        let pose = belief.pose;
+        let keep = 3.0 * belief.pose_std[0].max(belief.pose_std[1]);
+        let fresh_scan = reading
+            .fresh_ranges_m
+            .iter()
+            .zip(&self.lidar_beams)
+            .any(|(m, &lidar)| lidar && m.is_finite());
+        if fresh_scan {
+            self.model.read(&pose, &mut self.predicted);
+        }
+        let plan = self.plan.clone();
+        let freedom = &plan.header.freedom;
+        let shorter_by = self.tolerances.obstacle_shorter_by_m;
+        let g = self.detour.as_mut().expect("on a detour");
+        g.driven_m += pose.distance_to(&g.last);
+        g.last = pose;
+        if !g.planner.in_corridor([pose.x_m, pose.y_m]) {
+            return Err(Stop::LeftCorridor {
+                x_m: pose.x_m,
+                y_m: pose.y_m,
+            });
+        }
+        if fresh_scan {
+            // The scan, sensor by sensor, into the robot's grid; where it
+            // ended short of the map, for the twin.
+            let mut first = 0;
+            for beams in self.beams.chunk_by(|a, b| a.sensor == b.sensor) {
+                let these = first..first + beams.len();
+                first = these.end;
+                if !self.lidar_beams[these.start] {
+                    continue;
+                }
+                let Some(ranges) = reading.fresh_ranges_m.get(these.clone()) else {
+                    break;
+                };
+                let origin = pose.transform_point(beams[0].origin[0], beams[0].origin[1]);
+                let mut scan = Vec::with_capacity(beams.len());
+                for ((m, beam), i) in ranges.iter().zip(beams).zip(these) {
+                    if !m.is_finite() || *m <= beam.min_m {
+                        continue;
+                    }
+                    let hit = *m < beam.max_m;
+                    let (bx, by) = beam.endpoint(m.min(beam.max_m));
+                    let end = pose.transform_point(bx, by);
+                    scan.push(([end.0, end.1], hit));
+                    let unexplained = self.predicted.get(i).is_some_and(|e| *m < e - shorter_by);
+                    if hit && unexplained && g.obstacle.len() < MAX_OBSTACLE_POINTS {
+                        let p = [end.0, end.1];
+                        if g.obstacle
+                            .iter()
+                            .all(|q| (q[0] - p[0]).hypot(q[1] - p[1]) >= OBSTACLE_POINT_SPACING_M)
+                        {
+                            g.obstacle.push(p);
+                        }
+                    }
+                }
+                g.planner.integrate([origin.0, origin.1], &scan);
+            }
+            let nearest_seen = || {
+                g.obstacle
+                    .iter()
+                    .min_by(|a, b| {
+                        let d = |p: &[f64; 2]| (p[0] - pose.x_m).hypot(p[1] - pose.y_m);
+                        d(a).total_cmp(&d(b))
+                    })
+                    .copied()
+                    .unwrap_or([pose.x_m, pose.y_m])
+            };
+            let announced = !g.route.waypoints.is_empty();
+            g.route = match g.planner.plan(&plan, g.from_sample, pose, keep) {
+                Ok(route) => route,
+                Err(no_way) => {
+                    let [x_m, y_m] = nearest_seen();
+                    let why = match no_way {
+                        NoWay::NoRejoin => format!(
+                            "the plan is blocked for {:.1} m ahead: nothing clear to rejoin it at",
+                            self.planner_settings.look_ahead_m
+                        ),
+                        NoWay::Enclosed { .. } => "no way around inside the corridor and out of the keep-out zones with the footprint clear".to_string(),
+                    };
+                    return Err(Stop::Blocked { why, x_m, y_m });
+                }
+            };
+            g.next = 1.min(g.route.waypoints.len() - 1);
+            // What the rest would cost, against the operator's bounds.
+            let samples = &plan.samples;
+            let gain_m = g.planner.along_m(g.route.rejoin) - g.planner.along_m(g.from_sample);
+            let extra_m = g.driven_m + g.route.length_m - gain_m;
+            if extra_m > freedom.max_extra_distance_m {
+                return Err(Stop::DetourBound {
+                    why: format!(
+                        "the way around adds {extra_m:.2} m, more than the {:.2} m allowed",
+                        freedom.max_extra_distance_m
+                    ),
+                });
+            }
+            let gain_s = samples[g.route.rejoin].t_s - samples[0].t_s - g.plan_t_s;
+            let extra_s =
+                self.time_shift_s + (t - g.started_s) + g.route.length_m / g.max_speed_m_s - gain_s;
+            if extra_s > freedom.max_extra_time_s {
+                return Err(Stop::DetourBound {
+                    why: format!(
+                        "the way around makes the mission {extra_s:.1} s later, more than the {:.1} s allowed",
+                        freedom.max_extra_time_s
+                    ),
+                });
+            }
+            if !announced {
+                self.events.push(Event::Detour {
+                    t_s: reading.t_s,
+                    plan_t_s: g.plan_t_s,
+                    from: [pose.x_m, pose.y_m, pose.heading_rad],
+                    from_sample: g.from_sample,
+                    rejoin: g.route.rejoin,
+                    waypoints: g.route.waypoints.clone(),
+                    length_m: g.route.length_m,
+                    obstacle: g.obstacle.clone(),
+                });
+            }
+        }
+        if g.route.waypoints.is_empty() {
+            // No scan yet since the obstacle was seen: stand.
+            return Ok([0.0, 0.0]);
+        }
+        // Drive the waypoints: turn towards the next, then go, slower as
+        // obstacles come near; at the last, turn to the plan's heading.
+        let wp = &g.route.waypoints;
+        while g.next + 1 < wp.len()
+            && (wp[g.next][0] - pose.x_m).hypot(wp[g.next][1] - pose.y_m) < WAYPOINT_REACHED_M
+        {
+            g.next += 1;
+        }
+        let target = wp[g.next];
+        let to_target = (target[0] - pose.x_m).hypot(target[1] - pose.y_m);
+        let (v, omega) = if g.next + 1 == wp.len() && to_target < WAYPOINT_REACHED_M {
+            let rejoin = &plan.samples[g.route.rejoin];
+            let e = wrap_angle(rejoin.heading_rad - pose.heading_rad);
+            if e.abs() < ALIGNED_RAD {
+                return Ok(self.rejoin(belief, t));
+            }
+            (
+                0.0,
+                (TURN_GAIN_PER_S * e).clamp(-MAX_TURN_RAD_S, MAX_TURN_RAD_S),
+            )
+        } else {
+            let e =
+                wrap_angle((target[1] - pose.y_m).atan2(target[0] - pose.x_m) - pose.heading_rad);
+            let omega = (TURN_GAIN_PER_S * e).clamp(-MAX_TURN_RAD_S, MAX_TURN_RAD_S);
+            if e.abs() > TURN_IN_PLACE_RAD {
+                (0.0, omega)
+            } else {
+                let clearance = g.planner.clearance_at([pose.x_m, pose.y_m]);
+                let slow = (clearance / SLOW_WITHIN_M).clamp(MIN_SPEED_FRACTION, 1.0);
+                let v = (g.max_speed_m_s * slow * e.cos()).min(to_target / 0.5);
+                (v.max(0.0), omega)
+            }
+        };
+        let (mut l, mut r) = wheel_speeds(&plan.header.calibrated, v, omega);
+        let peak = l.abs().max(r.abs());
+        if peak > self.max_wheel_rad_s {
+            (l, r) = (
+                l * self.max_wheel_rad_s / peak,
+                r * self.max_wheel_rad_s / peak,
+            );
+        }
+        Ok([l, r])
+    }
+
+    /// Back on the plan at the detour's rejoin sample: the plan's clock
+    /// moves on to it, the residual starts afresh, and tracking resumes.
+    fn rejoin(&mut self, belief: &Belief, t: f64) -> [f64; 2] {
+        let g = self.detour.take().expect("on a detour");
+        let samples = &self.plan.samples;
+        let plan_t = samples[g.route.rejoin].t_s - samples[0].t_s;
+        let gain_m = g.planner.along_m(g.route.rejoin) - g.planner.along_m(g.from_sample);
+        self.events.push(Event::Rejoined {
+            t_s: t + self.t0_s.unwrap_or(0.0),
+            sample: g.route.rejoin,
+            extra_s: (t - g.started_s) - (plan_t - g.plan_t_s),
+            extra_m: g.driven_m - gain_m,
+            obstacle: g.obstacle,
+        });
+        self.time_shift_s = t - plan_t;
+        self.seen = Some(g.planner.into_seen());
+        self.residuals.clear();
+        self.last_residual = None;
+        self.last_median = None;
+        self.ahead_count.fill(0);
+        match self
+            .tracker
+            .command_from(&self.plan.samples, plan_t, belief.pose)
+        {
+            Some(wheels) => wheels,
+            None => {
+                self.stopped = Some((t + self.t0_s.unwrap_or(0.0), Stop::Finished));
+                [0.0, 0.0]
+            }
+        }
+    }
+
     /// What the robot sensed at the start of this period and where it
     /// believes it is now in; the wheel commands for this period out (zero
     /// from the period that decides a stop on).
@@ -241,12 +676,23 @@ impl Executive {
             self.last_heard_s = reading.t_s;
         }
         let t = reading.t_s - t0;
+        if self.detour.is_some() {
+            return self.on_detour(reading, belief, t);
+        }
+        let plan_t = t - self.time_shift_s;
         let command = self
             .tracker
-            .command_from(&self.plan.samples, t, belief.pose);
-        if let Some(stop) = self.check(reading, t, belief) {
-            self.stopped = Some((reading.t_s, stop));
-            return [0.0, 0.0];
+            .command_from(&self.plan.samples, plan_t, belief.pose);
+        match self.check(reading, plan_t, belief) {
+            Some(Stop::ObstacleAhead { .. }) if self.may_detour(belief) => {
+                self.start_detour(belief, t, plan_t);
+                return self.on_detour(reading, belief, t);
+            }
+            Some(stop) => {
+                self.stopped = Some((reading.t_s, stop));
+                return [0.0, 0.0];
+            }
+            None => {}
         }
         match command {
             Some(wheels) => wheels,
@@ -324,6 +770,29 @@ impl Executive {
                     estimate.heading_rad + dh,
                 )
             });
+            // Readings that end on what a detour saw the map lacks are
+            // explained: the robot knows it is there.
+            let mut explained = vec![false; reading.fresh_ranges_m.len()];
+            if let Some(seen) = &self.seen {
+                for ((e, m), beam) in explained
+                    .iter_mut()
+                    .zip(&reading.fresh_ranges_m)
+                    .zip(&self.beams)
+                {
+                    if m.is_finite() && *m > beam.min_m && *m < beam.max_m {
+                        let (bx, by) = beam.endpoint(*m);
+                        let (x, y) = estimate.transform_point(bx, by);
+                        *e = seen.state_at([x, y]) == CellState::Occupied;
+                    }
+                }
+            }
+            // A localized robot that may go around what blocks its path
+            // takes a reading shorter than the map explains for something
+            // standing there: the obstacle-ahead check (and the detour)
+            // judges it where it matters, on the path; elsewhere it does
+            // not stop the mission. Readings longer than the map explains
+            // (a wall gone, a robot lost) still count.
+            let short_is_obstacle = belief.localizing && self.may_detour(belief);
             let mut best: Option<f64> = None;
             self.nearest.fill(f64::INFINITY);
             for pose in near_estimate.chain(along_plan) {
@@ -341,13 +810,17 @@ impl Executive {
                     .zip(&self.predicted)
                     .enumerate()
                 {
-                    if m.is_finite() && e.is_finite() {
+                    if explained[i] {
+                        count += 1;
+                    } else if m.is_finite() && e.is_finite() {
                         // A reading past a learnt block's face, but not past
                         // what stands behind it, says the block is smaller
                         // than the twin guessed: no departure.
                         let far = self.predicted_behind.get(i).copied().unwrap_or(*e);
                         sum += if *m > *e {
                             (m - far).max(0.0).min(m - e)
+                        } else if short_is_obstacle {
+                            0.0
                         } else {
                             e - m
                         };

@@ -19,6 +19,7 @@
 pub mod backend;
 pub mod direct;
 pub mod executive;
+pub mod local_planner;
 pub mod localize;
 pub mod master;
 pub mod narrate;

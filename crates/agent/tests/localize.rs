@@ -54,6 +54,11 @@ struct Trial {
     path_error_m: f64,
     collisions: u32,
     localized_fixes: u64,
+    /// The true pose at every step.
+    track: Vec<twindrive_kinematics::Pose>,
+    events: Vec<twindrive_agent::executive::Event>,
+    /// The robot's time when it stopped (s).
+    stopped_s: f64,
 }
 
 /// Largest distance of `p` to the polyline of the plan's positions.
@@ -102,10 +107,16 @@ fn drive_with(
     let mut nav = Navigator::new(plan, initial, plan.header.robot.ticks_per_rev, settings);
     let (mut path_error_m, mut collisions, mut k) = (0.0f64, 0, 0u64);
     let mut bumped = false;
+    let mut track = Vec::new();
+    let mut events = Vec::new();
+    let mut stopped_s = f64::NAN;
     while let Some(reading) = backend.step(&mut |reading| {
         let belief = nav.update(reading);
         exec.tick(reading, &belief)
     }) {
+        track.push(backend.true_pose());
+        events.extend(exec.take_events());
+        stopped_s = reading.t_s;
         if backend.blocked() {
             collisions += 1;
         }
@@ -125,7 +136,20 @@ fn drive_with(
         path_error_m,
         collisions,
         localized_fixes: nav.localizer().fixes,
+        track,
+        events,
+        stopped_s,
     }
+}
+
+/// `plan` with its freedom replaced by `change`'s, its hash renewed.
+fn with_freedom(
+    plan: &MissionPlan,
+    change: impl FnOnce(&mut twindrive_mission::plan::Freedom),
+) -> Arc<MissionPlan> {
+    let mut header = plan.header.clone();
+    change(&mut header.freedom);
+    Arc::new(MissionPlan::new(header, plan.samples.clone()))
 }
 
 #[test]
@@ -158,13 +182,14 @@ fn a_lidar_robot_with_up_to_two_percent_kinematic_error_stays_on_its_plan() {
 }
 
 /// A box the twin lacks, dropped on the plan's path at a random moment on
-/// sites with random kinematic errors: the lidar robot, localizing, hands
-/// back before it touches it (the range residual may see it first, a box
+/// sites with random kinematic errors, and a plan that gives the robot no
+/// corridor (directed driving): the lidar robot, localizing, hands back
+/// before it touches it (the range residual may see it first, a box
 /// shadowing far walls). With the residual out of the way, the
 /// obstacle-ahead stop alone does it and says where the box is.
 #[test]
-fn a_lidar_robot_stops_before_a_box_it_can_see_on_its_path() {
-    let plan = office_plan();
+fn a_lidar_robot_without_a_corridor_stops_before_a_box_it_can_see_on_its_path() {
+    let plan = &with_freedom(office_plan(), |f| f.corridor.clear());
     let twin = office();
     let mut rng = ChaCha8Rng::seed_from_u64(31);
     let footprint = twin.robot.footprint_radius_m;
@@ -210,6 +235,139 @@ fn a_lidar_robot_stops_before_a_box_it_can_see_on_its_path() {
             .max(y_m - block.1[1]);
         assert!(out < 0.05, "{block:?}: saw ({x_m}, {y_m})");
         assert!(range_m > footprint, "{range_m} m");
+        trials += 1;
+    }
+}
+
+/// A box the twin lacks on the plan's path, at a random place with room
+/// on both sides, on sites with random kinematic errors, and in half the
+/// trials a keep-out zone of random size beside it on a random side: the
+/// lidar robot goes around the box on its own (a detour event, then back
+/// on the plan) and finishes the plan without touching anything, its true
+/// footprint never in the zone and its centre inside the plan's corridor,
+/// within the plan's time and extra-time bound.
+#[test]
+fn a_lidar_robot_goes_around_a_box_inside_its_corridor_and_out_of_a_zone() {
+    use twindrive_agent::executive::Event;
+    use twindrive_mission::freedom::FreedomMap;
+    use twindrive_mission::plan::KeepOutZone;
+    let twin = office();
+    let base = office_plan();
+    let mut rng = ChaCha8Rng::seed_from_u64(40);
+    let footprint = twin.robot.footprint_radius_m;
+    let mut trials = 0;
+    while trials < 6 {
+        let k = rng.random_range(base.samples.len() / 5..4 * base.samples.len() / 5);
+        let s = base.samples[k].clone();
+        if twin.world.clearance_m(s.x_m, s.y_m, 2.0) < 1.0 || s.v_m_s < 0.05 {
+            continue;
+        }
+        let half = [rng.random_range(0.08..0.2), rng.random_range(0.08..0.2)];
+        let block = (
+            [s.x_m - half[0], s.y_m - half[1]],
+            [s.x_m + half[0], s.y_m + half[1]],
+        );
+        let zone = rng.random_bool(0.5).then(|| {
+            // Beside the path on one side: from 0.4 m out to 0.6-1.2 m,
+            // 0.3-0.8 m either way along it.
+            let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let (sn, cs) = s.heading_rad.sin_cos();
+            let (near, far) = (0.4, rng.random_range(0.6..1.2));
+            let along = rng.random_range(0.3..0.8);
+            let at = |a: f64, c: f64| {
+                [
+                    s.x_m + a * cs - side * c * sn,
+                    s.y_m + a * sn + side * c * cs,
+                ]
+            };
+            KeepOutZone {
+                name: "flowers".into(),
+                polygon: vec![
+                    at(-along, near),
+                    at(along, near),
+                    at(along, far),
+                    at(-along, far),
+                ],
+            }
+        });
+        let plan = with_freedom(base, |f| f.keep_out = zone.clone().into_iter().collect());
+        let mut site = site(&twin, rng.random_range(0.0..0.02), &mut rng);
+        site.world = site.world.with_blocks(&[block]);
+        let t = drive(&plan, site, true);
+        assert_eq!(t.stop, Some(Stop::Finished), "{block:?} {zone:?}");
+        assert!(!t.bumped && t.collisions == 0, "{block:?}: touched it");
+        assert!(
+            matches!(t.events.first(), Some(Event::Detour { .. }))
+                && matches!(t.events.last(), Some(Event::Rejoined { .. })),
+            "{block:?}: {:?}",
+            t.events
+        );
+        let map = FreedomMap::of_plan(&plan);
+        let along = twindrive_mission::freedom::arc_lengths(
+            &plan
+                .samples
+                .iter()
+                .map(|s| [s.x_m, s.y_m])
+                .collect::<Vec<_>>(),
+        );
+        for p in &t.track {
+            assert!(
+                map.zone_hit([p.x_m, p.y_m]).is_none(),
+                "{block:?}: in the zone at {p:?}"
+            );
+            let inside = plan.samples.iter().zip(&along).any(|(s, a)| {
+                let hw = plan.header.freedom.half_width_at(*a).unwrap();
+                (s.x_m - p.x_m).hypot(s.y_m - p.y_m) <= hw - footprint + 0.02
+            });
+            assert!(inside, "{block:?}: out of the corridor at {p:?}");
+        }
+        assert!(
+            t.stopped_s <= plan.duration_s() + plan.header.freedom.max_extra_time_s,
+            "{} s",
+            t.stopped_s
+        );
+        trials += 1;
+    }
+}
+
+/// A box that fills the corridor at a random place on the plan: no way
+/// around exists inside it, and the lidar robot hands back (`blocked`,
+/// where it saw the box) without touching anything.
+#[test]
+fn a_box_filling_the_corridor_is_one_hand_back_and_no_contact() {
+    let twin = office();
+    let plan = office_plan();
+    let along = twindrive_mission::freedom::arc_lengths(
+        &plan
+            .samples
+            .iter()
+            .map(|s| [s.x_m, s.y_m])
+            .collect::<Vec<_>>(),
+    );
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let mut trials = 0;
+    while trials < 3 {
+        let k = rng.random_range(plan.samples.len() / 5..4 * plan.samples.len() / 5);
+        let s = &plan.samples[k];
+        if twin.world.clearance_m(s.x_m, s.y_m, 1.0) < 0.6 {
+            continue;
+        }
+        let hw = plan.header.freedom.half_width_at(along[k]).unwrap();
+        let half = hw + 0.1;
+        let block = ([s.x_m - half, s.y_m - half], [s.x_m + half, s.y_m + half]);
+        let mut site = site(&twin, rng.random_range(0.0..0.02), &mut rng);
+        site.world = site.world.with_blocks(&[block]);
+        let t = drive(plan, site, true);
+        let Some(Stop::Blocked { x_m, y_m, .. }) = t.stop else {
+            panic!("{block:?}: stopped {:?}", t.stop);
+        };
+        assert!(t.stop.as_ref().unwrap().is_handback());
+        assert!(!t.bumped && t.collisions == 0, "{block:?}: touched it");
+        let out = (block.0[0] - x_m)
+            .max(x_m - block.1[0])
+            .max(block.0[1] - y_m)
+            .max(y_m - block.1[1]);
+        assert!(out < 0.05, "{block:?}: saw ({x_m}, {y_m})");
         trials += 1;
     }
 }

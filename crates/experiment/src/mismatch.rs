@@ -82,10 +82,31 @@ impl Sensors {
     }
 }
 
+/// What the robot may do about an obstacle the twin lacks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Autonomy {
+    /// The plan gives no corridor: the robot stops and hands back.
+    Handback,
+    /// The plan's corridor from the twin's clearance: a robot that can see
+    /// ahead goes around inside it.
+    Detour,
+}
+
+impl Autonomy {
+    pub fn name(self) -> &'static str {
+        match self {
+            Autonomy::Handback => "handback",
+            Autonomy::Detour => "detour",
+        }
+    }
+}
+
 /// One run's cell and seed.
 #[derive(Debug, Clone, Copy)]
 pub struct Job {
     pub sensors: Sensors,
+    pub autonomy: Autonomy,
     pub error: f64,
     pub obstacle: bool,
     pub localization: bool,
@@ -96,6 +117,7 @@ pub struct Job {
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
     pub sensors: &'static str,
+    pub autonomy: &'static str,
     pub kinematic_error: f64,
     pub obstacle: bool,
     pub localization: bool,
@@ -223,6 +245,7 @@ pub fn run_one(
         score(&mut RouteProgress::new(&mission.route(), 0.15), &rec.path);
     Ok(Row {
         sensors: job.sensors.name(),
+        autonomy: job.autonomy.name(),
         kinematic_error: job.error,
         obstacle: job.obstacle,
         localization: job.localization,
@@ -258,7 +281,7 @@ pub fn run_one(
 
 /// Every job, on every core, results in the jobs' order.
 fn run_all(
-    missions: &[(Sensors, Rehearsal)],
+    missions: &[((Sensors, Autonomy), Rehearsal)],
     jobs: &[Job],
     profile: &LinkProfile,
     max_duration_s: f64,
@@ -267,8 +290,8 @@ fn run_all(
     crate::pool::run_all(jobs, |job| {
         let mission = &missions
             .iter()
-            .find(|(s, _)| *s == job.sensors)
-            .expect("a mission per sensor set")
+            .find(|(s, _)| *s == (job.sensors, job.autonomy))
+            .expect("a mission per sensor set and autonomy")
             .1;
         run_one(mission, *job, profile, max_duration_s, &key).with_context(|| format!("{job:?}"))
     })
@@ -277,12 +300,13 @@ fn run_all(
 /// results.csv: one row per run.
 pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
-        "sensors,kinematic_error,obstacle,localization,seed,completed,completion_s,handbacks,handback_reasons,contacts_known,contacts_unknown,path_error_max_m,failure\n",
+        "sensors,autonomy,kinematic_error,obstacle,localization,seed,completed,completion_s,handbacks,handback_reasons,contacts_known,contacts_unknown,path_error_max_m,failure\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{:.4},\"{}\"\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{:.4},\"{}\"\n",
             r.sensors,
+            r.autonomy,
             r.kinematic_error,
             r.obstacle,
             r.localization,
@@ -307,31 +331,38 @@ pub fn markdown(rows: &[Row], profile: &str) -> String {
         "# Kinematic mismatch: decoupled operation over `{profile}`\n\n\
          The case study's plan on sites whose true wheel diameters and wheelbase each differ \
          from the twin's by the error (random signs), with no tracker; `box`: the demo's box \
-         the twin lacks on the route. Means over seeds; contacts are counted once each, by what \
-         was touched.\n\n\
-         | sensors | obstacle | localization | error % | completed | hand-backs per mission | contacts, known | contacts, unknown | completion s | path error max m |\n\
-         |---|---|---|---:|---:|---:|---:|---:|---:|---:|\n"
+         the twin lacks on the route. Autonomy `handback`: the plan gives the robot no corridor, \
+         it stops and hands back; `detour`: the plan's corridor from the twin's clearance, a \
+         robot that can see ahead (the lidar) goes around inside it. Means over seeds; contacts \
+         are counted once each, by what was touched; completion is the mission's end (upload, \
+         hand-backs and continuations included).\n\n\
+         | sensors | autonomy | obstacle | localization | error % | completed | hand-backs per mission | contacts, known | contacts, unknown | completion s | path error max m |\n\
+         |---|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n"
     );
-    let mut keys: Vec<(&str, bool, bool, f64)> = Vec::new();
+    type Key<'a> = (&'a str, &'a str, bool, bool, f64);
+    let key = |r: &Row| -> Key<'_> {
+        (
+            r.sensors,
+            r.autonomy,
+            r.obstacle,
+            r.localization,
+            r.kinematic_error,
+        )
+    };
+    let mut keys: Vec<Key<'_>> = Vec::new();
     for r in rows {
-        let k = (r.sensors, r.obstacle, r.localization, r.kinematic_error);
-        if !keys.contains(&k) {
-            keys.push(k);
+        if !keys.contains(&key(r)) {
+            keys.push(key(r));
         }
     }
-    for (sensors, obstacle, localization, error) in keys {
-        let cell: Vec<&Row> = rows
-            .iter()
-            .filter(|r| {
-                (r.sensors, r.obstacle, r.localization, r.kinematic_error)
-                    == (sensors, obstacle, localization, error)
-            })
-            .collect();
+    for k in keys {
+        let (sensors, autonomy, obstacle, localization, error) = k;
+        let cell: Vec<&Row> = rows.iter().filter(|r| key(r) == k).collect();
         let n = cell.len() as f64;
         let mean = |f: &dyn Fn(&Row) -> f64| cell.iter().map(|r| f(r)).sum::<f64>() / n;
         let done: Vec<f64> = cell.iter().filter_map(|r| r.completion_s).collect();
         out.push_str(&format!(
-            "| {sensors} | {} | {} | {:.1} | {}/{} | {:.1} | {:.1} | {:.1} | {} | {:.3} |\n",
+            "| {sensors} | {autonomy} | {} | {} | {:.1} | {}/{} | {:.1} | {:.1} | {:.1} | {} | {:.3} |\n",
             if obstacle { "box" } else { "none" },
             if localization { "on" } else { "off" },
             100.0 * error,
@@ -357,6 +388,8 @@ pub struct Config {
     /// Kinematic errors (fractions: 0.01 is 1 %).
     pub errors: Vec<f64>,
     pub sensors: Vec<Sensors>,
+    /// Hand back, go around inside the corridor, or both.
+    pub autonomy: Vec<Autonomy>,
     /// With the box on the route, without, or both.
     pub obstacle: Vec<bool>,
     /// Localization against the plan's map on, off, or both.
@@ -387,16 +420,26 @@ pub fn run(config: &Config, dir: &Path, out: &mut impl Write) -> anyhow::Result<
             sensors.name(),
             mission.plan.duration_s()
         )?;
-        missions.push((sensors, mission));
+        for &autonomy in &config.autonomy {
+            let plan = match autonomy {
+                Autonomy::Detour => mission.with_freedom(|_| {})?,
+                Autonomy::Handback => mission.with_freedom(|f| f.corridor.clear())?,
+            };
+            missions.push(((sensors, autonomy), plan));
+        }
     }
     let mut jobs = Vec::new();
-    for &sensors in &sensor_sets {
+    for (&sensors, &autonomy) in sensor_sets
+        .iter()
+        .flat_map(|s| config.autonomy.iter().map(move |a| (s, a)))
+    {
         for &obstacle in &config.obstacle {
             for &localization in &config.localization {
                 for &error in &config.errors {
                     for seed in 0..config.seeds {
                         jobs.push(Job {
                             sensors,
+                            autonomy,
                             error,
                             obstacle,
                             localization,

@@ -63,6 +63,27 @@ impl Rehearsal {
         })
     }
 
+    /// This rehearsal's plan with its freedom changed by `change` (its
+    /// hash and its JSON renewed).
+    pub fn with_freedom(
+        &self,
+        change: impl FnOnce(&mut twindrive_mission::plan::Freedom),
+    ) -> anyhow::Result<Self> {
+        let mut header = self.plan.header.clone();
+        change(&mut header.freedom);
+        let plan = MissionPlan::new(header, self.plan.samples.clone());
+        plan.validate()?;
+        let mut plan_json = serde_json::to_vec_pretty(&plan)?;
+        plan_json.push(b'\n');
+        Ok(Self {
+            twin: self.twin.clone(),
+            world_toml: self.world_toml.clone(),
+            site: self.site.clone(),
+            plan,
+            plan_json,
+        })
+    }
+
     pub fn route(&self) -> Vec<[f64; 2]> {
         self.plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect()
     }

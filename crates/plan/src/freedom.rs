@@ -227,7 +227,8 @@ mod tests {
 
     #[test]
     fn a_freedom_that_cannot_be_kept_is_refused_by_field() {
-        let cases: Vec<(Box<dyn Fn(&mut Freedom)>, &str)> = vec![
+        type Change = Box<dyn Fn(&mut Freedom)>;
+        let cases: Vec<(Change, &str)> = vec![
             (
                 Box::new(|f| f.corridor[1].half_width_m = 0.1),
                 "corridor[1].half_width_m: 0.1 m is narrower than the robot's footprint radius 0.15 m",

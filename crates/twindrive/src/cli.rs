@@ -353,7 +353,8 @@ pub enum ExperimentCommand {
     /// whose true wheel diameters and wheelbase each differ by --errors
     /// (random signs per seed) and that have no tracker, for the paper's
     /// one-IR robot and the same robot with a 181-beam 2D lidar, with and
-    /// without the demo's box the twin lacks, localizing against the plan's
+    /// without the demo's box the twin lacks, handing back on it or going
+    /// around it inside the plan's corridor, localizing against the plan's
     /// map or on dead reckoning, over a link profile in virtual time. Per
     /// run: completed, completion time, hand-backs, contacts with what the
     /// twin knew and with what it did not, the true path's largest distance
@@ -368,6 +369,16 @@ pub enum SensorsArg {
     Ir,
     /// The side IR and a 181-beam 2D lidar (4 m, 10 Hz).
     Lidar,
+}
+
+/// What the robot may do about an obstacle the twin lacks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum AutonomyArg {
+    /// The plan gives no corridor: the robot stops and hands back.
+    Handback,
+    /// The plan's corridor from the twin's clearance: a robot that can see
+    /// ahead (the lidar) goes around inside it.
+    Detour,
 }
 
 /// An unknown obstacle on the route, or none.
@@ -395,6 +406,10 @@ pub struct MismatchExperimentArgs {
     /// The robot's sensors, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "ir,lidar")]
     pub sensors: Vec<SensorsArg>,
+    /// What the robot may do about an obstacle the twin lacks,
+    /// comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "handback,detour")]
+    pub autonomy: Vec<AutonomyArg>,
     /// An unknown obstacle on the route, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "none,box")]
     pub obstacle: Vec<ObstacleArg>,

@@ -281,6 +281,9 @@ fn a_fleet_of_three_robot_processes_completes_through_a_router_with_every_log_ba
 /// against the plan's map completes with no hand-back and stays within
 /// 5 cm of its plan, where dead reckoning hands back; localizing, with or
 /// without the box the twin lacks, it never touches what the twin knew.
+/// With the box, a robot whose plan gives it no corridor hands back before
+/// it; one with the twin's corridor goes around it with no hand-back and
+/// no contact, finishing within 15 % of the time it takes without the box.
 #[test]
 fn the_mismatch_experiment_keeps_a_localizing_lidar_robot_on_its_plan() {
     let dir = tempfile::tempdir().unwrap();
@@ -296,8 +299,10 @@ fn the_mismatch_experiment_keeps_a_localizing_lidar_robot_on_its_plan() {
             &errors,
             "--sensors",
             "lidar",
+            "--autonomy",
+            "handback,detour",
             "--seeds",
-            "2",
+            "1",
         ],
         dir.path(),
     );
@@ -319,8 +324,25 @@ fn the_mismatch_experiment_keeps_a_localizing_lidar_robot_on_its_plan() {
         if r["obstacle"] == "true" && r["localization"] == "true" {
             assert_eq!(num(r, "contacts_unknown"), 0.0, "{r:?}");
             assert_eq!(r["completed"], "true", "{r:?}");
-            assert!(num(r, "handbacks") <= 2.0, "{r:?}");
-            assert!(r["handback_reasons"].starts_with("obstacle_ahead"), "{r:?}");
+            if r["autonomy"] == "handback" {
+                assert!(num(r, "handbacks") <= 2.0, "{r:?}");
+                assert!(r["handback_reasons"].starts_with("obstacle_ahead"), "{r:?}");
+            } else {
+                assert_eq!(num(r, "handbacks"), 0.0, "{r:?}");
+                let without = rows
+                    .iter()
+                    .find(|w| {
+                        w["obstacle"] == "false"
+                            && ["autonomy", "localization", "kinematic_error", "seed"]
+                                .iter()
+                                .all(|c| w[*c] == r[*c])
+                    })
+                    .unwrap();
+                assert!(
+                    num(r, "completion_s") <= 1.15 * num(without, "completion_s"),
+                    "{r:?} against {without:?}"
+                );
+            }
         }
     }
 }

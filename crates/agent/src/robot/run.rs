@@ -213,6 +213,21 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         }
         self.last_blocked = reading.blocked;
         let stopped = r.exec.stopped().cloned();
+        let transfer = hex(&r.transfer);
+        for event in r.exec.take_events() {
+            // Detours the robot decided on its own: the master hears them
+            // (and the twin learns what it saw) without a round trip.
+            let mut details = serde_json::to_value(&event).expect("events serialise");
+            let name = details
+                .as_object_mut()
+                .and_then(|m| m.remove("event"))
+                .and_then(|v| v.as_str().map(str::to_owned))
+                .unwrap_or_else(|| "detour".into());
+            if let Some(m) = details.as_object_mut() {
+                m.insert("transfer".into(), json!(transfer));
+            }
+            self.record(now_ns, &name, details);
+        }
         if let Some((transfer, fixes, failures)) = localization_changed {
             let event = if localized {
                 "localized"

@@ -1,9 +1,9 @@
 //! `twindrive experiment mismatch`: flags into the mismatch experiment's
 //! configuration.
 
-use twindrive_experiment::mismatch::{self, Config, Sensors};
+use twindrive_experiment::mismatch::{self, Autonomy, Config, Sensors};
 
-use crate::cli::{MismatchExperimentArgs, ObstacleArg, OnOff, SensorsArg};
+use crate::cli::{AutonomyArg, MismatchExperimentArgs, ObstacleArg, OnOff, SensorsArg};
 use crate::usage::usage;
 
 pub fn run(args: &MismatchExperimentArgs) -> anyhow::Result<()> {
@@ -15,6 +15,14 @@ pub fn run(args: &MismatchExperimentArgs) -> anyhow::Result<()> {
             .map(|s| match s {
                 SensorsArg::Ir => Sensors::Ir,
                 SensorsArg::Lidar => Sensors::Lidar,
+            })
+            .collect(),
+        autonomy: args
+            .autonomy
+            .iter()
+            .map(|a| match a {
+                AutonomyArg::Handback => Autonomy::Handback,
+                AutonomyArg::Detour => Autonomy::Detour,
             })
             .collect(),
         obstacle: args

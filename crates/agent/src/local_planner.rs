@@ -1,0 +1,501 @@
+//! The robot's local planner: a way around what the twin did not know,
+//! inside the corridor the operator approved, out of the keep-out zones,
+//! back onto the plan. No I/O, no clock: scans and poses come in, a path
+//! goes out.
+//!
+//! The robot plans on its own occupancy grid over a square window around
+//! where the detour starts: the plan's map (its walls, rasterized once)
+//! and what its lidar sees ([`LogOddsGrid`]: each beam clears the cells it
+//! crosses and marks the one it ends in, so a box that moves away is
+//! forgotten). An exact Euclidean distance transform (Felzenszwalb and
+//! Huttenlocher, 2012) gives each cell its distance to the nearest
+//! obstacle; a cell may hold the robot's centre when that distance keeps
+//! the footprint clear by three standard deviations of the robot's
+//! position, and the cell lies in the corridor (within the stretch's half
+//! width less the footprint of the plan's path near the detour, a margin
+//! inside so tracking noise does not leave it) and out of every keep-out
+//! zone. The way is [`ClearanceGrid::waypoints`]: A* at a cost that grows
+//! as the clearance falls below the wanted one, shortened by line of sight.
+//!
+//! Where it rejoins: the plan's samples ahead are each judged by the same
+//! clearances; past the last one that passes closer to an obstacle than
+//! the wanted clearance (the obstacle's stretch), the first sample
+//! `rejoin_beyond_m` further on that is clear.
+
+use twindrive_estimation::mapping::{Beam as GridBeam, CellState, LogOdds, LogOddsGrid};
+use twindrive_kinematics::Pose;
+use twindrive_mission::freedom::{FreedomMap, arc_lengths};
+use twindrive_mission::grid_search::{ClearanceGrid, Clearances};
+use twindrive_mission::plan::MissionPlan;
+
+/// How the robot plans around an obstacle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalPlannerSettings {
+    /// Cell size of its grid (m).
+    pub cell_m: f64,
+    /// Side of the square window it plans over (m), centred where the
+    /// detour starts.
+    pub window_m: f64,
+    /// Clearance it prefers beyond the footprint and three standard
+    /// deviations of its position (m): passing closer costs more.
+    pub want_clearance_m: f64,
+    /// Rejoin the plan this far past the obstacle's stretch (m).
+    pub rejoin_beyond_m: f64,
+    /// How far along the plan it looks for the obstacle's stretch and a
+    /// place to rejoin (m).
+    pub look_ahead_m: f64,
+    /// Planned inside the corridor by this much (m), so tracking noise
+    /// does not take the robot out of it.
+    pub corridor_margin_m: f64,
+}
+
+impl Default for LocalPlannerSettings {
+    fn default() -> Self {
+        Self {
+            cell_m: 0.05,
+            window_m: 8.0,
+            want_clearance_m: 0.15,
+            rejoin_beyond_m: 0.3,
+            look_ahead_m: 3.0,
+            corridor_margin_m: 0.05,
+        }
+    }
+}
+
+/// A way around: waypoints from the robot to the plan's sample `rejoin`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Detour {
+    pub waypoints: Vec<[f64; 2]>,
+    /// The plan sample it rejoins at.
+    pub rejoin: usize,
+    pub length_m: f64,
+}
+
+/// Why there is no way around.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NoWay {
+    /// No clear sample to rejoin at within the look-ahead (the obstacle
+    /// fills the plan's path that far, or the window ends).
+    NoRejoin,
+    /// No way inside the corridor and out of the zones to the rejoin
+    /// sample with the footprint clear.
+    Enclosed { rejoin: usize },
+}
+
+/// The robot's local planner over one window.
+pub struct LocalPlanner {
+    settings: LocalPlannerSettings,
+    footprint_m: f64,
+    /// The plane's cell index of the window's corner cell, and its size.
+    first: [i64; 2],
+    size: [usize; 2],
+    /// Cells the plan's map has a wall in.
+    walls: Vec<bool>,
+    /// Cells the robot's centre may plan through (corridor less its
+    /// margin, out of the zones), and may stand in (the whole corridor).
+    plannable: Vec<bool>,
+    inside: Vec<bool>,
+    /// What the lidar saw.
+    seen: LogOddsGrid,
+    /// Distance of each cell to the nearest obstacle (m), and scratch.
+    distance: Vec<f64>,
+    scratch: Scratch,
+    search: ClearanceGrid,
+    /// Arc length of each plan sample.
+    along_m: Vec<f64>,
+}
+
+#[derive(Default)]
+struct Scratch {
+    f: Vec<f64>,
+    d: Vec<f64>,
+    v: Vec<usize>,
+    z: Vec<f64>,
+}
+
+impl LocalPlanner {
+    /// A planner for `plan` around `centre` (where the robot is when it
+    /// first sees the obstacle), for the stretch of plan from sample `k`
+    /// (its progress) on; `seen` carries on what earlier detours saw.
+    pub fn new(
+        plan: &MissionPlan,
+        k: usize,
+        centre: [f64; 2],
+        settings: LocalPlannerSettings,
+        seen: Option<LogOddsGrid>,
+    ) -> Self {
+        let r = settings.cell_m;
+        let half = (0.5 * settings.window_m / r).ceil() as i64;
+        let c = [
+            (centre[0] / r).floor() as i64,
+            (centre[1] / r).floor() as i64,
+        ];
+        let first = [c[0] - half, c[1] - half];
+        let n = (2 * half + 1) as usize;
+        let size = [n, n];
+        let footprint_m = plan.header.robot.footprint_radius_m;
+        let path: Vec<[f64; 2]> = plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect();
+        let along_m = arc_lengths(&path);
+        let mut me = Self {
+            settings,
+            footprint_m,
+            first,
+            size,
+            walls: vec![false; n * n],
+            plannable: vec![false; n * n],
+            inside: vec![false; n * n],
+            seen: seen.unwrap_or_else(|| LogOddsGrid::new(r, LogOdds::default())),
+            distance: vec![0.0; n * n],
+            scratch: Scratch::default(),
+            search: ClearanceGrid::new(
+                [(first[0] as f64 + 0.5) * r, (first[1] as f64 + 0.5) * r],
+                r,
+                size,
+                vec![-1.0; n * n],
+            ),
+            along_m,
+        };
+        me.draw_walls(&plan.header.site_map.segments);
+        me.draw_corridor(plan, k);
+        me
+    }
+
+    /// The robot's footprint radius (m).
+    pub fn footprint_m(&self) -> f64 {
+        self.footprint_m
+    }
+
+    /// What the lidar has seen, to carry on to the next detour.
+    pub fn into_seen(self) -> LogOddsGrid {
+        self.seen
+    }
+
+    fn cell_index(&self, p: [f64; 2]) -> Option<usize> {
+        let r = self.settings.cell_m;
+        let (i, j) = (
+            (p[0] / r).floor() as i64 - self.first[0],
+            (p[1] / r).floor() as i64 - self.first[1],
+        );
+        (i >= 0 && j >= 0 && (i as usize) < self.size[0] && (j as usize) < self.size[1])
+            .then(|| i as usize + j as usize * self.size[0])
+    }
+
+    fn centre(&self, cell: usize) -> [f64; 2] {
+        self.search.centre(cell)
+    }
+
+    /// Marks every cell a wall of the plan's map passes through.
+    fn draw_walls(&mut self, segments: &[[f64; 4]]) {
+        let r = self.settings.cell_m;
+        let lo = [self.first[0] as f64 * r, self.first[1] as f64 * r];
+        let hi = [
+            lo[0] + self.size[0] as f64 * r,
+            lo[1] + self.size[1] as f64 * r,
+        ];
+        for w in segments {
+            if w[0].max(w[2]) < lo[0]
+                || w[0].min(w[2]) > hi[0]
+                || w[1].max(w[3]) < lo[1]
+                || w[1].min(w[3]) > hi[1]
+            {
+                continue;
+            }
+            let length = (w[2] - w[0]).hypot(w[3] - w[1]);
+            let steps = (length / (0.5 * r)).ceil().max(1.0) as usize;
+            for s in 0..=steps {
+                let f = s as f64 / steps as f64;
+                if let Some(c) =
+                    self.cell_index([w[0] + f * (w[2] - w[0]), w[1] + f * (w[3] - w[1])])
+                {
+                    self.walls[c] = true;
+                }
+            }
+        }
+    }
+
+    /// Marks the cells the robot's centre may be in: within the corridor's
+    /// half width less the footprint of the plan's samples from a metre
+    /// behind sample `k` to the look-ahead and a metre past it, and out of
+    /// every keep-out zone.
+    fn draw_corridor(&mut self, plan: &MissionPlan, k: usize) {
+        let f = &plan.header.freedom;
+        let zones = FreedomMap::new(&plan.samples, f, self.footprint_m);
+        let r = self.settings.cell_m;
+        let s0 = self.along_m.get(k).copied().unwrap_or(0.0);
+        let (from, to) = (s0 - 1.0, s0 + self.settings.look_ahead_m + 1.0);
+        let mut last_s = f64::NEG_INFINITY;
+        for (i, s) in plan.samples.iter().enumerate() {
+            let along = self.along_m[i];
+            let Some(hw) = f.half_width_at(along) else {
+                continue;
+            };
+            let reach = hw - self.footprint_m;
+            // Disks of radius `reach` a quarter of it apart cover the
+            // corridor but for reach / 128 at its edge (inside it, so the
+            // robot is held a little tighter, never looser), and every
+            // sample where the path turns sharply is within half a cell.
+            if along < from
+                || along > to
+                || reach < 0.0
+                || along - last_s < (0.25 * reach).max(0.5 * r)
+            {
+                continue;
+            }
+            last_s = along;
+            let span = (reach / r).ceil() as i64 + 1;
+            let ci = (s.x_m / r).floor() as i64 - self.first[0];
+            let cj = (s.y_m / r).floor() as i64 - self.first[1];
+            for j in (cj - span).max(0)..=(cj + span).min(self.size[1] as i64 - 1) {
+                for i in (ci - span).max(0)..=(ci + span).min(self.size[0] as i64 - 1) {
+                    let cell = i as usize + j as usize * self.size[0];
+                    let p = self.centre(cell);
+                    let d = (p[0] - s.x_m).hypot(p[1] - s.y_m);
+                    if d <= reach {
+                        self.inside[cell] = true;
+                        if d <= reach - self.settings.corridor_margin_m {
+                            self.plannable[cell] = true;
+                        }
+                    }
+                }
+            }
+        }
+        if !f.keep_out.is_empty() {
+            for cell in 0..self.inside.len() {
+                if (self.inside[cell] || self.plannable[cell])
+                    && zones.zone_hit(self.centre(cell)).is_some()
+                {
+                    self.inside[cell] = false;
+                    self.plannable[cell] = false;
+                }
+            }
+        }
+    }
+
+    /// Whether the robot's centre at `p` is inside its corridor and out of
+    /// the zones (as far as this window reaches).
+    pub fn in_corridor(&self, p: [f64; 2]) -> bool {
+        self.cell_index(p).is_some_and(|c| self.inside[c])
+    }
+
+    /// One scan of the lidar at `origin` (map frame): `ends[i]` where beam
+    /// `i` ended (map frame; `None` for no return, which clears up to
+    /// `max_ends[i]` without marking).
+    pub fn integrate(&mut self, origin: [f64; 2], beams: &[([f64; 2], bool)]) {
+        let beams: Vec<GridBeam> = beams
+            .iter()
+            .map(|&(end, hit)| GridBeam {
+                end: if hit { end } else { [f64::NAN, f64::NAN] },
+                free_to: end,
+            })
+            .collect();
+        self.seen.integrate_beams(origin, &beams);
+    }
+
+    /// Whether the lidar has marked the cell at `p` occupied (something
+    /// the map lacks, or a wall it has).
+    pub fn seen_occupied(&self, p: [f64; 2]) -> bool {
+        self.seen.state_at(p) == CellState::Occupied
+    }
+
+    /// The distance of every window cell to the nearest obstacle (walls of
+    /// the map, and what the lidar marked occupied), and the footprint
+    /// clearances the search uses: less the footprint and `keep_m` (three
+    /// standard deviations of the position), negative where the robot's
+    /// centre may not plan.
+    fn update_clearances(&mut self, keep_m: f64) {
+        let n = self.walls.len();
+        let big = 1e12;
+        for cell in 0..n {
+            let occupied = self.walls[cell] || self.seen_occupied(self.centre(cell));
+            self.distance[cell] = if occupied { 0.0 } else { big };
+        }
+        edt(&mut self.distance, self.size, &mut self.scratch);
+        let r = self.settings.cell_m;
+        let clearances = self.search.clearances_mut();
+        for ((c, d2), plannable) in clearances
+            .iter_mut()
+            .zip(&self.distance)
+            .zip(&self.plannable)
+        {
+            // Cells to metres; an obstacle cell's own half width counts.
+            let d = d2.sqrt() * r - 0.5 * r;
+            *c = if *plannable {
+                d - self.footprint_m - keep_m
+            } else {
+                -1.0
+            };
+        }
+    }
+
+    /// The footprint clearance at `p` beyond `keep_m` (m) as the last
+    /// [`plan`](Self::plan) saw it; negative outside the window.
+    pub fn clearance_at(&self, p: [f64; 2]) -> f64 {
+        match self.cell_index(p) {
+            Some(c) => {
+                self.distance[c].sqrt() * self.settings.cell_m
+                    - 0.5 * self.settings.cell_m
+                    - self.footprint_m
+            }
+            None => -1.0,
+        }
+    }
+
+    /// A way from `from` back onto `plan` past what blocks it from sample
+    /// `k` on, keeping `keep_m` (three standard deviations of the robot's
+    /// position) beyond the footprint.
+    pub fn plan(
+        &mut self,
+        plan: &MissionPlan,
+        k: usize,
+        from: Pose,
+        keep_m: f64,
+    ) -> Result<Detour, NoWay> {
+        self.update_clearances(keep_m);
+        let want = self.settings.want_clearance_m;
+        let samples = &plan.samples;
+        let s0 = self.along_m[k.min(samples.len() - 1)];
+        let within = |i: usize| self.along_m[i] <= s0 + self.settings.look_ahead_m;
+        let clear = |i: usize| {
+            let p = [samples[i].x_m, samples[i].y_m];
+            self.search.contains(p) && self.search.clearance(self.search.cell_of(p)) >= want
+        };
+        // The obstacle's stretch: the last sample ahead passing closer
+        // than wanted.
+        let last_blocked = (k..samples.len())
+            .take_while(|&i| within(i))
+            .filter(|&i| !clear(i))
+            .last()
+            .unwrap_or(k);
+        let beyond = self.along_m[last_blocked] + self.settings.rejoin_beyond_m;
+        let rejoin = (last_blocked..samples.len())
+            .take_while(|&i| self.search.contains([samples[i].x_m, samples[i].y_m]))
+            .find(|&i| self.along_m[i] >= beyond && clear(i))
+            .ok_or(NoWay::NoRejoin)?;
+        let goal = [samples[rejoin].x_m, samples[rejoin].y_m];
+        let keep = Clearances {
+            want_m: want,
+            floor_m: 0.0,
+            ends_m: self.footprint_m + want + self.settings.cell_m,
+        };
+        let grid = &self.search;
+        let lookup = |p: [f64; 2]| {
+            if grid.contains(p) {
+                grid.clearance(grid.cell_of(p))
+            } else {
+                -1.0
+            }
+        };
+        let waypoints = grid
+            .waypoints([from.x_m, from.y_m], goal, &keep, &lookup)
+            .ok_or(NoWay::Enclosed { rejoin })?;
+        let length_m = waypoints
+            .windows(2)
+            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+            .sum();
+        Ok(Detour {
+            waypoints,
+            rejoin,
+            length_m,
+        })
+    }
+
+    /// The plan's arc length at sample `i` (m).
+    pub fn along_m(&self, i: usize) -> f64 {
+        self.along_m[i.min(self.along_m.len() - 1)]
+    }
+}
+
+/// The exact squared Euclidean distance transform of `f` (0 on obstacles,
+/// a large number elsewhere), in cells², in place: one dimension at a
+/// time, each the lower envelope of parabolas (Felzenszwalb and
+/// Huttenlocher, "Distance Transforms of Sampled Functions", 2012).
+fn edt(f: &mut [f64], size: [usize; 2], s: &mut Scratch) {
+    let [w, h] = size;
+    let n = w.max(h);
+    s.f.resize(n, 0.0);
+    s.d.resize(n, 0.0);
+    s.v.resize(n, 0);
+    s.z.resize(n + 1, 0.0);
+    for j in 0..h {
+        for i in 0..w {
+            s.f[i] = f[i + j * w];
+        }
+        edt_1d(w, s);
+        for i in 0..w {
+            f[i + j * w] = s.d[i];
+        }
+    }
+    for i in 0..w {
+        for j in 0..h {
+            s.f[j] = f[i + j * w];
+        }
+        edt_1d(h, s);
+        for j in 0..h {
+            f[i + j * w] = s.d[j];
+        }
+    }
+}
+
+fn edt_1d(n: usize, s: &mut Scratch) {
+    let (f, d, v, z) = (&s.f, &mut s.d, &mut s.v, &mut s.z);
+    let mut k = 0usize;
+    v[0] = 0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    let meet = |q: usize, p: usize| {
+        let (qf, pf) = (q as f64, p as f64);
+        ((f[q] + qf * qf) - (f[p] + pf * pf)) / (2.0 * (qf - pf))
+    };
+    for q in 1..n {
+        let mut x = meet(q, v[k]);
+        while x <= z[k] {
+            k -= 1;
+            x = meet(q, v[k]);
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = x;
+        z[k + 1] = f64::INFINITY;
+    }
+    k = 0;
+    for (q, dq) in d.iter_mut().enumerate().take(n) {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let dx = q as f64 - v[k] as f64;
+        *dq = dx * dx + f[v[k]];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    #[test]
+    fn the_distance_transform_is_exact_on_random_obstacles() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..5 {
+            let size = [rng.random_range(5..40), rng.random_range(5..40)];
+            let n = size[0] * size[1];
+            let obstacles: Vec<usize> = (0..rng.random_range(1..8))
+                .map(|_| rng.random_range(0..n))
+                .collect();
+            let mut f: Vec<f64> = (0..n)
+                .map(|c| if obstacles.contains(&c) { 0.0 } else { 1e12 })
+                .collect();
+            edt(&mut f, size, &mut Scratch::default());
+            for (c, got) in f.iter().enumerate() {
+                let (i, j) = ((c % size[0]) as f64, (c / size[0]) as f64);
+                let want = obstacles
+                    .iter()
+                    .map(|&o| {
+                        let (oi, oj) = ((o % size[0]) as f64, (o / size[0]) as f64);
+                        (i - oi).powi(2) + (j - oj).powi(2)
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                assert_eq!(*got, want, "cell {c} of {size:?}");
+            }
+        }
+    }
+}
