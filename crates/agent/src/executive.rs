@@ -220,6 +220,8 @@ pub struct Executive {
     planner_settings: LocalPlannerSettings,
     max_wheel_rad_s: f64,
     events: Vec<Event>,
+    /// Arc length of the plan at each sample (m).
+    along_m: Vec<f64>,
 }
 
 /// What the executive did that the master hears of (besides stopping).
@@ -292,7 +294,9 @@ impl Executive {
             .iter()
             .map(|b| plan.header.robot.range_sensors[b.sensor].kind == SensorKind::Lidar)
             .collect();
+        let path: Vec<[f64; 2]> = plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect();
         Ok(Self {
+            along_m: twindrive_mission::freedom::arc_lengths(&path),
             lidar_beams,
             time_shift_s: 0.0,
             detour: None,
@@ -376,11 +380,8 @@ impl Executive {
         if !self.lidar_beams.iter().any(|&l| l) {
             return false;
         }
-        let k = self.tracker.progress().min(self.plan.samples.len() - 1);
-        let along: f64 = self.plan.samples[..=k]
-            .windows(2)
-            .map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m))
-            .sum();
+        let k = self.tracker.progress().min(self.along_m.len() - 1);
+        let along = self.along_m[k];
         let keep = 3.0 * belief.pose_std[0].max(belief.pose_std[1]);
         let room = self.plan.header.robot.footprint_radius_m
             + keep

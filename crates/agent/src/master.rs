@@ -10,7 +10,9 @@ use twindrive_link::emulator::LinkProfile;
 use twindrive_link::upload::{
     ChunkStore, Receiver, ReceiverConfig, ReceiverEvent, Sender, SenderConfig,
 };
-use twindrive_link::wire::{Body, Handback, Message, PlanPhase, Stamper, Status, TransferId};
+use twindrive_link::wire::{
+    Body, DetourReport, Handback, Message, PlanPhase, Stamper, Status, TransferId,
+};
 
 /// What the master reports to its owner.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,6 +37,9 @@ pub enum MasterEvent {
     },
     /// The robot handed control back (reported once per plan).
     Handback(Box<Handback>),
+    /// The robot went around something on its own (begun, or back on the
+    /// plan).
+    Detour(Box<DetourReport>),
     /// A robot log arrived whole (a digest, or a full-rate MCAP asked for
     /// with [`Master::request_log`]).
     RobotLog { transfer: TransferId, file: Vec<u8> },
@@ -125,6 +130,8 @@ pub struct Master<S: ChunkStore> {
     next_heartbeat_ns: u64,
     outbox: VecDeque<Body>,
     handbacks_seen: HashSet<TransferId>,
+    /// Detour reports heard: plan, index, whether back on the plan.
+    detours_seen: HashSet<(TransferId, u32, bool)>,
     phases: HashMap<TransferId, PlanPhase>,
     latest: Option<Status>,
     events: VecDeque<MasterEvent>,
@@ -154,6 +161,7 @@ impl<S: ChunkStore> Master<S> {
             next_heartbeat_ns: 0,
             outbox: VecDeque::new(),
             handbacks_seen: HashSet::new(),
+            detours_seen: HashSet::new(),
             phases: HashMap::new(),
             latest: None,
             events: VecDeque::new(),
@@ -305,6 +313,16 @@ impl<S: ChunkStore> Master<S> {
                     self.events.push_back(MasterEvent::Handback(h.clone()));
                 }
             }
+            Body::Detour(d) => {
+                self.outbox.push_back(Body::DetourAck {
+                    plan: d.plan,
+                    index: d.index,
+                    rejoined: d.rejoined,
+                });
+                if self.detours_seen.insert((d.plan, d.index, d.rejoined)) {
+                    self.events.push_back(MasterEvent::Detour(d.clone()));
+                }
+            }
             Body::Ping { nonce } => self.outbox.push_back(Body::Pong { nonce: *nonce }),
             Body::Pong { nonce } => {
                 if let Some(sent) = self.pings.remove(nonce) {
@@ -312,7 +330,10 @@ impl<S: ChunkStore> Master<S> {
                     self.rtt_s.push(rtt_s);
                 }
             }
-            Body::Heartbeat { .. } | Body::HandbackAck { .. } | Body::LogRequest { .. } => {}
+            Body::Heartbeat { .. }
+            | Body::HandbackAck { .. }
+            | Body::DetourAck { .. }
+            | Body::LogRequest { .. } => {}
         }
     }
 

@@ -128,6 +128,27 @@ pub struct HandbackEntry {
     pub params_std: [f64; 3],
 }
 
+/// The report's record of a detour the robot decided on its own.
+#[derive(Debug, Clone, Serialize)]
+pub struct DetourEntry {
+    pub plan_sha256: String,
+    pub index: u32,
+    /// When the report arrived (s of the master's clock), and how far into
+    /// its plan the robot was when it began (s).
+    pub t_s: f64,
+    pub plan_t_s: f64,
+    pub from: [f64; 3],
+    pub waypoints: Vec<[f32; 2]>,
+    /// Back on the plan, and what it added (s, m).
+    pub rejoined: bool,
+    pub extra_s: f64,
+    pub extra_m: f64,
+    /// Points where its readings ended on what the map lacks, and the
+    /// blocks the twin learnt from them (`(min, max)` corners, m).
+    pub obstacle_points: usize,
+    pub learnt: Vec<twindrive_mission::detour::Block>,
+}
+
 /// A robot log as it arrived, as an MCAP file.
 #[derive(Debug, Clone)]
 pub struct ArrivedLog {
@@ -158,6 +179,9 @@ pub struct Report {
     pub on_handback: OnHandback,
     pub uploads: Vec<UploadEntry>,
     pub handbacks: Vec<HandbackEntry>,
+    /// Detours the robot went on by itself (each reported when begun and
+    /// when back on the plan).
+    pub detours: Vec<DetourEntry>,
     pub twin_updates: Vec<TwinUpdate>,
     pub rejections: Vec<String>,
     pub failure: Option<String>,
@@ -234,6 +258,7 @@ impl<S: ChunkStore> Operator<S> {
                 on_handback: config.on_handback,
                 uploads: Vec::new(),
                 handbacks: Vec::new(),
+                detours: Vec::new(),
                 twin_updates: Vec::new(),
                 rejections: Vec::new(),
                 failure: None,
@@ -457,6 +482,7 @@ impl<S: ChunkStore> Operator<S> {
                 }
                 MasterEvent::Phase { transfer, phase } => self.phase(transfer, phase),
                 MasterEvent::Handback(h) => self.handback(&h),
+                MasterEvent::Detour(d) => self.detour(&d),
                 MasterEvent::RobotLog { file, .. } if twindrive_log::is_mcap(&file) => {
                     // A full-rate log: the one asked for (one at a time).
                     self.last_log_at_ns = Some(now_ns);
@@ -570,6 +596,61 @@ impl<S: ChunkStore> Operator<S> {
                 }
             }
         }
+    }
+
+    /// A detour report: said, recorded, and once the robot is back on the
+    /// plan the twin learns what it saw (no continuation: the robot went
+    /// on by itself).
+    fn detour(&mut self, d: &twindrive_link::wire::DetourReport) {
+        let sha = self
+            .plan_of(&d.plan)
+            .map(|p| p.plan.sha256.clone())
+            .unwrap_or_default();
+        let points: Vec<[f64; 2]> = d
+            .obstacle
+            .iter()
+            .map(|p| [f64::from(p[0]), f64::from(p[1])])
+            .collect();
+        let learnt = match (&mut self.twin, d.rejoined) {
+            (Some(twin), true) => {
+                twin.learn_seen(&points, [d.from[0], d.from[1]], &LearnSettings::default())
+            }
+            _ => Vec::new(),
+        };
+        if d.rejoined {
+            self.note(
+                "detour_done",
+                format!(
+                    "back on the plan at sample {}: {:.1} s and {:.2} m more than the plan; the twin learnt {} block(s) from {} point(s)",
+                    d.rejoin,
+                    d.extra_s,
+                    d.extra_m,
+                    learnt.len(),
+                    points.len()
+                ),
+            );
+        } else {
+            self.note(
+                "detour",
+                format!(
+                    "going around something the map lacks, {:.1} s into the plan at ({:.2}, {:.2}), back onto it at sample {}",
+                    d.plan_t_s, d.from[0], d.from[1], d.rejoin
+                ),
+            );
+        }
+        self.report.detours.push(DetourEntry {
+            plan_sha256: sha,
+            index: d.index,
+            t_s: self.now_ns as f64 * 1e-9,
+            plan_t_s: d.plan_t_s,
+            from: d.from,
+            waypoints: d.waypoints.clone(),
+            rejoined: d.rejoined,
+            extra_s: d.extra_s,
+            extra_m: d.extra_m,
+            obstacle_points: points.len(),
+            learnt,
+        });
     }
 
     fn mark_executed(&mut self, transfer: TransferId) {

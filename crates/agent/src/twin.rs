@@ -233,6 +233,41 @@ impl Twin {
         }
     }
 
+    /// Learns what the robot saw on a detour: `points` where its readings
+    /// ended on something the map lacks, seen from about `seen_from` (the
+    /// robot went around it on its own, so no round trip and no pose to
+    /// refine). Returns the blocks added. The same clustering as a
+    /// hand-back's; blocks stay clear of `clear_of` (where the robot was).
+    pub fn learn_seen(
+        &mut self,
+        points: &[[f64; 2]],
+        seen_from: [f64; 2],
+        settings: &LearnSettings,
+    ) -> Vec<Block> {
+        let finite = |p: &&[f64; 2]| p[0].is_finite() && p[1].is_finite();
+        self.evidence
+            .extend(points.iter().filter(finite).map(|&point| Evidence {
+                point,
+                seen_from,
+                contact: false,
+            }));
+        let clear = self.scenario.robot.footprint_radius_m;
+        let blocks: Vec<Block> = cluster(&self.evidence, &self.free, settings)
+            .into_iter()
+            .filter_map(|b| clip_clear_of(b, seen_from, clear))
+            .collect();
+        let added: Vec<Block> = blocks
+            .iter()
+            .filter(|b| !self.learnt.contains(b))
+            .copied()
+            .collect();
+        if blocks != self.learnt {
+            self.scenario.world = self.known.with_blocks(&blocks);
+            self.learnt = blocks;
+        }
+        added
+    }
+
     /// The hand-back window's readings against the twin's predictions:
     /// obstacle points (readings well short of what the world known before
     /// learning predicts, contacts the twin did not predict) and free rays (sensor to reading, for readings

@@ -127,6 +127,11 @@ pub struct Row {
     pub handbacks: usize,
     /// Why, in order, `;`-separated.
     pub handback_reasons: String,
+    /// Detours the robot went on by itself and came back from.
+    pub detours: usize,
+    /// Whether the twin learnt a block where the box is from what the
+    /// robot saw on its detours (no hand-back needed).
+    pub box_learnt_from_detours: bool,
     pub contacts_known: u32,
     pub contacts_unknown: u32,
     pub path_error_max_m: f64,
@@ -261,6 +266,11 @@ pub fn run_one(
             })
             .flatten(),
         handbacks: report.handbacks.len(),
+        detours: report.detours.iter().filter(|d| d.rejoined).count(),
+        box_learnt_from_detours: report.detours.iter().flat_map(|d| &d.learnt).any(|b| {
+            let (lo, hi) = SITE_BOX;
+            b.0[0] <= hi[0] && b.1[0] >= lo[0] && b.0[1] <= hi[1] && b.1[1] >= lo[1]
+        }),
         handback_reasons: report
             .handbacks
             .iter()
@@ -300,11 +310,11 @@ fn run_all(
 /// results.csv: one row per run.
 pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
-        "sensors,autonomy,kinematic_error,obstacle,localization,seed,completed,completion_s,handbacks,handback_reasons,contacts_known,contacts_unknown,path_error_max_m,failure\n",
+        "sensors,autonomy,kinematic_error,obstacle,localization,seed,completed,completion_s,handbacks,handback_reasons,detours,box_learnt_from_detours,contacts_known,contacts_unknown,path_error_max_m,failure\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{:.4},\"{}\"\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},\"{}\"\n",
             r.sensors,
             r.autonomy,
             r.kinematic_error,
@@ -315,6 +325,8 @@ pub fn csv(rows: &[Row]) -> String {
             r.completion_s.map_or(String::new(), |t| format!("{t:.1}")),
             r.handbacks,
             r.handback_reasons,
+            r.detours,
+            r.box_learnt_from_detours,
             r.contacts_known,
             r.contacts_unknown,
             r.path_error_max_m,

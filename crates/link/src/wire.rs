@@ -10,8 +10,9 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Version of this message set; a message of another version is refused.
-pub const PROTOCOL_VERSION: u16 = 3;
+/// Version of this message set; a message of another version is refused
+/// (4: the robot reports its detours).
+pub const PROTOCOL_VERSION: u16 = 4;
 /// Nothing longer is decoded.
 pub const MAX_MESSAGE_BYTES: usize = 64 * 1024;
 /// Longest robot id.
@@ -115,6 +116,39 @@ pub enum Body {
     LogRequest {
         plan_sha256: [u8; 32],
     },
+    /// Robot → master: the robot went around something the plan's map
+    /// lacks, on its own, inside the plan's corridor (when it began, and
+    /// when it was back on the plan). Repeated until acknowledged.
+    Detour(Box<DetourReport>),
+    /// Master → robot: this detour report arrived.
+    DetourAck {
+        plan: TransferId,
+        index: u32,
+        rejoined: bool,
+    },
+}
+
+/// A detour the robot decided on its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DetourReport {
+    pub plan: TransferId,
+    /// Which detour of the plan (0, 1, ...).
+    pub index: u32,
+    /// Time since the plan started when it began (s), the robot's pose
+    /// there (x, y m; heading rad) and the plan sample it left at.
+    pub plan_t_s: f64,
+    pub from: [f64; 3],
+    pub from_sample: u32,
+    /// The way it planned (x, y), back onto the plan at sample `rejoin`.
+    pub waypoints: Vec<[f32; 2]>,
+    pub rejoin: u32,
+    /// Where its readings ended on what the map lacks (x, y in the site's
+    /// frame), seen from `from` and along the way.
+    pub obstacle: Vec<[f32; 2]>,
+    /// Back on the plan: what the detour added (s, m).
+    pub rejoined: bool,
+    pub extra_s: f64,
+    pub extra_m: f64,
 }
 
 /// Where the robot stands with one plan file.

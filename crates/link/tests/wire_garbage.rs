@@ -6,7 +6,9 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use twindrive_link::secure::{key_from_seed, memory_pair};
-use twindrive_link::wire::{self, Body, Handback, Offer, PlanPhase, Stamper, Status, WindowSample};
+use twindrive_link::wire::{
+    self, Body, DetourReport, Handback, Offer, PlanPhase, Stamper, Status, WindowSample,
+};
 
 fn samples() -> Vec<Vec<u8>> {
     let mut s = Stamper::new("rover-7");
@@ -84,6 +86,24 @@ fn samples() -> Vec<Vec<u8>> {
             ],
         })),
         Body::HandbackAck { plan: t },
+        Body::Detour(Box::new(DetourReport {
+            plan: t,
+            index: 2,
+            plan_t_s: 31.5,
+            from: [1.2, 0.9, 3.1],
+            from_sample: 3150,
+            waypoints: vec![[1.2, 0.9], [1.6, 0.6], [2.4, 0.6]],
+            rejoin: 3600,
+            obstacle: vec![[1.9, 1.0]; 40],
+            rejoined: true,
+            extra_s: 7.5,
+            extra_m: 0.4,
+        })),
+        Body::DetourAck {
+            plan: t,
+            index: 2,
+            rejoined: true,
+        },
     ];
     bodies
         .into_iter()

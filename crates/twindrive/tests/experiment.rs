@@ -329,6 +329,10 @@ fn the_mismatch_experiment_keeps_a_localizing_lidar_robot_on_its_plan() {
                 assert!(r["handback_reasons"].starts_with("obstacle_ahead"), "{r:?}");
             } else {
                 assert_eq!(num(r, "handbacks"), 0.0, "{r:?}");
+                // The master heard of the detour and the twin learnt the
+                // box from what the robot saw, with no round trip.
+                assert!(num(r, "detours") >= 1.0, "{r:?}");
+                assert_eq!(r["box_learnt_from_detours"], "true", "{r:?}");
                 let without = rows
                     .iter()
                     .find(|w| {

@@ -38,7 +38,7 @@ use serde_json::json;
 use twindrive_link::envelope::PlanGate;
 use twindrive_link::upload::{Receiver, ReceiverConfig, ReceiverEvent, Sender};
 use twindrive_link::wire::{
-    Body, Handback, Message, PlanPhase, Stamper, Status, TransferId, WindowSample,
+    Body, DetourReport, Handback, Message, PlanPhase, Stamper, Status, TransferId, WindowSample,
 };
 use twindrive_log::MissionLog;
 use twindrive_mission::plan::hex;
@@ -120,6 +120,8 @@ pub const START_HEADING_RAD: f64 = 0.35;
 
 /// Sent this many times a second at most while a hand-back is unacknowledged.
 const HANDBACK_RESEND_S: f64 = 5.0;
+/// At most this many detour reports wait for their acknowledgement.
+const MAX_DETOUR_REPORTS: usize = 16;
 /// Ticks in the hand-back's sensor window, and a sample at most every this
 /// many ticks (and at every sweep of a sensor that reads less often).
 const WINDOW_TICKS: usize = 200;
@@ -147,6 +149,12 @@ pub struct RobotAgent<B: RobotBackend, S: RobotStore> {
     holding: bool,
     next_status_ns: u64,
     handback: Option<(Handback, u64)>,
+    /// Detour reports not yet acknowledged, each with when it was last
+    /// sent (0: not yet).
+    detours: VecDeque<(DetourReport, u64)>,
+    /// The latest detour report made, and the count of detours so far.
+    last_detour: Option<DetourReport>,
+    detour_index: u32,
     backfills: VecDeque<Backfill>,
     /// Logs of plans that just ended, written once the hand-back (if any)
     /// has gone: a log takes a while to encode and sync, the hand-back
@@ -222,6 +230,9 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             holding: true,
             next_status_ns: 0,
             handback: None,
+            detours: VecDeque::new(),
+            last_detour: None,
+            detour_index: 0,
             backfills: VecDeque::new(),
             unwritten: VecDeque::new(),
             outbox: VecDeque::new(),
@@ -369,10 +380,13 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         let silent_ns = self
             .last_heard_master_ns
             .map_or(u64::MAX, |t| now_ns.saturating_sub(t));
-        if silent_ns > (HANDBACK_RESEND_S * 1e9) as u64
-            && let Some((_, last)) = &mut self.handback
-        {
-            *last = 0;
+        if silent_ns > (HANDBACK_RESEND_S * 1e9) as u64 {
+            if let Some((_, last)) = &mut self.handback {
+                *last = 0;
+            }
+            for (_, last) in &mut self.detours {
+                *last = 0;
+            }
         }
         self.last_heard_master_ns = Some(now_ns);
         match &message.body {
@@ -435,7 +449,23 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             }
             Body::Ping { nonce } => self.outbox.push_back(Body::Pong { nonce: *nonce }),
             Body::LogRequest { plan_sha256 } => self.queue_full_log(plan_sha256, now_ns),
-            Body::Pong { .. } | Body::Status(_) | Body::Handback(_) => {}
+            Body::DetourAck {
+                plan,
+                index,
+                rejoined,
+            } => {
+                let before = self.detours.len();
+                self.detours
+                    .retain(|(d, _)| (d.plan, d.index, d.rejoined) != (*plan, *index, *rejoined));
+                if self.detours.len() < before {
+                    self.record(
+                        now_ns,
+                        "detour_acknowledged",
+                        json!({ "transfer": hex(plan), "index": index, "rejoined": rejoined }),
+                    );
+                }
+            }
+            Body::Pong { .. } | Body::Status(_) | Body::Handback(_) | Body::Detour(_) => {}
         }
         self.receiver_events(now_ns);
     }
@@ -534,6 +564,15 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             let body = Body::Handback(Box::new(h.clone()));
             return Some(self.stamper.stamp(body, now_ns));
         }
+        if let Some((d, last)) = self
+            .detours
+            .iter_mut()
+            .find(|(_, last)| *last == 0 || now_ns >= *last + (HANDBACK_RESEND_S * 1e9) as u64)
+        {
+            *last = now_ns.max(1);
+            let body = Body::Detour(Box::new(d.clone()));
+            return Some(self.stamper.stamp(body, now_ns));
+        }
         if now_ns >= self.next_status_ns {
             let message = self
                 .stamper
@@ -567,10 +606,22 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
                 last + (HANDBACK_RESEND_S * 1e9) as u64
             }
         });
+        let detour = self
+            .detours
+            .iter()
+            .map(|(_, last)| {
+                if *last == 0 {
+                    0
+                } else {
+                    last + (HANDBACK_RESEND_S * 1e9) as u64
+                }
+            })
+            .min();
         [
             (self.running.is_some() || self.holding).then_some(self.next_tick_ns),
             Some(self.next_status_ns),
             handback,
+            detour,
             self.receiver.poll_timeout(),
             self.backfill_timeout(),
         ]

@@ -6,13 +6,13 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use serde_json::json;
-use twindrive_link::wire::{Handback, PlanPhase, TransferId, WindowSample};
+use twindrive_link::wire::{DetourReport, Handback, PlanPhase, TransferId, WindowSample};
 use twindrive_log::{MissionLog, StepRecord};
 use twindrive_mission::plan::{MissionPlan, hex};
 
-use super::{RobotAgent, Running, WINDOW_EVERY, WINDOW_TICKS, pose3};
+use super::{MAX_DETOUR_REPORTS, RobotAgent, Running, WINDOW_EVERY, WINDOW_TICKS, pose3};
 use crate::backend::RobotBackend;
-use crate::executive::{Executive, Stop};
+use crate::executive::{Event, Executive, Stop};
 use crate::localize::Mode;
 use crate::navigator::{Navigator, initial_estimate, with_learnt_params};
 use crate::store::RobotStore;
@@ -213,8 +213,11 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         }
         self.last_blocked = reading.blocked;
         let stopped = r.exec.stopped().cloned();
-        let transfer = hex(&r.transfer);
-        for event in r.exec.take_events() {
+        let plan_id = r.transfer;
+        let transfer = hex(&plan_id);
+        let events = r.exec.take_events();
+        for event in events {
+            self.queue_detour_report(plan_id, &event);
             // Detours the robot decided on its own: the master hears them
             // (and the twin learns what it saw) without a round trip.
             let mut details = serde_json::to_value(&event).expect("events serialise");
@@ -248,6 +251,70 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         if let Some((_, stop)) = stopped {
             self.end(Some(stop), None, now_ns);
         }
+    }
+
+    /// A detour begun or ended goes to the master (repeated until
+    /// acknowledged; at most [`MAX_DETOUR_REPORTS`] wait, the oldest
+    /// dropped).
+    fn queue_detour_report(&mut self, plan: twindrive_link::wire::TransferId, event: &Event) {
+        let f32s = |v: &[[f64; 2]]| -> Vec<[f32; 2]> {
+            v.iter().map(|p| [p[0] as f32, p[1] as f32]).collect()
+        };
+        let report = match event {
+            Event::Detour {
+                plan_t_s,
+                from,
+                from_sample,
+                rejoin,
+                waypoints,
+                obstacle,
+                ..
+            } => {
+                self.detour_index = self.detour_index.wrapping_add(1);
+                DetourReport {
+                    plan,
+                    index: self.detour_index,
+                    plan_t_s: *plan_t_s,
+                    from: *from,
+                    from_sample: *from_sample as u32,
+                    waypoints: f32s(waypoints),
+                    rejoin: *rejoin as u32,
+                    obstacle: f32s(obstacle),
+                    rejoined: false,
+                    extra_s: 0.0,
+                    extra_m: 0.0,
+                }
+            }
+            Event::Rejoined {
+                sample,
+                extra_s,
+                extra_m,
+                obstacle,
+                ..
+            } => {
+                // The report of the same detour when it began.
+                let Some(begun) = self
+                    .last_detour
+                    .clone()
+                    .filter(|d| d.plan == plan && d.index == self.detour_index)
+                else {
+                    return;
+                };
+                DetourReport {
+                    rejoin: *sample as u32,
+                    obstacle: f32s(obstacle),
+                    rejoined: true,
+                    extra_s: *extra_s,
+                    extra_m: *extra_m,
+                    ..begun
+                }
+            }
+        };
+        self.last_detour = Some(report.clone());
+        if self.detours.len() == MAX_DETOUR_REPORTS {
+            self.detours.pop_front();
+        }
+        self.detours.push_back((report, 0));
     }
 
     /// The plan ended (or the backend did): record it, write the log, hand
