@@ -124,7 +124,9 @@ fn benches(c: &mut Criterion) {
     let settings = LocalPlannerSettings::default();
     let mut planner = LocalPlanner::new(&plan, k, [pose.x_m, pose.y_m], settings, None);
     planner.integrate([pose.x_m, pose.y_m], &scan);
-    let detour = planner.plan(&plan, k, pose, 0.03).expect("a way around");
+    let detour = planner
+        .plan(&plan, k, pose, 0.03, None)
+        .expect("a way around");
     assert!(detour.length_m > 1.0, "{detour:?}");
     c.bench_function(
         "local planner: set up over an 8 m window (once a detour)",
@@ -145,7 +147,7 @@ fn benches(c: &mut Criterion) {
         |b| {
             b.iter(|| {
                 planner.integrate(black_box([pose.x_m, pose.y_m]), black_box(&scan));
-                black_box(planner.plan(&plan, k, pose, 0.03).ok())
+                black_box(planner.plan(&plan, k, pose, 0.03, None).ok())
             })
         },
     );

@@ -70,7 +70,7 @@ use crate::backend::Reading;
 use crate::local_planner::{Detour, LocalPlanner, LocalPlannerSettings, NoWay};
 use crate::localize::{Beam, beams};
 use twindrive_estimation::mapping::{CellState, LogOddsGrid};
-use twindrive_kinematics::{SensorKind, wheel_speeds, wrap_angle};
+use twindrive_kinematics::{wheel_speeds, wrap_angle};
 pub use twindrive_link::envelope::Tolerances;
 
 /// What a plan must meet on the twin before it is sent to a robot that
@@ -166,6 +166,8 @@ const MIN_SPEED_FRACTION: f64 = 0.3;
 /// far apart at least (m).
 const MAX_OBSTACLE_POINTS: usize = 200;
 const OBSTACLE_POINT_SPACING_M: f64 = 0.05;
+/// On a detour, at most this long without a lidar scan (s).
+const MAX_DETOUR_SCAN_GAP_S: f64 = 1.0;
 
 /// Where the robot believes it is, for one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -222,6 +224,8 @@ pub struct Executive {
     events: Vec<Event>,
     /// Arc length of the plan at each sample (m).
     along_m: Vec<f64>,
+    /// Whether the last obstacle ahead was confirmed by a lidar.
+    ahead_by_lidar: bool,
 }
 
 /// What the executive did that the master hears of (besides stopping).
@@ -270,6 +274,8 @@ struct Going {
     max_speed_m_s: f64,
     /// Where readings ended on what the map lacks (x, y), for the twin.
     obstacle: Vec<[f64; 2]>,
+    /// The robot's time of the last lidar scan (s).
+    last_scan_s: f64,
 }
 
 impl Executive {
@@ -290,13 +296,16 @@ impl Executive {
         let model = plan.range_model();
         let behind = plan.range_model_without_boxes();
         let beams = beams(&plan.header.robot.range_sensors);
+        // Only a lidar with enough beams to plan with: a sparse fan would
+        // leave the grid nearly empty, and unknown cells count as free.
         let lidar_beams = beams
             .iter()
-            .map(|b| plan.header.robot.range_sensors[b.sensor].kind == SensorKind::Lidar)
+            .map(|b| plan.header.robot.range_sensors[b.sensor].is_scanning_lidar())
             .collect();
         let path: Vec<[f64; 2]> = plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect();
         Ok(Self {
             along_m: twindrive_mission::freedom::arc_lengths(&path),
+            ahead_by_lidar: false,
             lidar_beams,
             time_shift_s: 0.0,
             detour: None,
@@ -356,6 +365,17 @@ impl Executive {
     /// The latest median range residual (m), once the window is full.
     pub fn range_residual_m(&self) -> Option<f64> {
         self.last_median
+    }
+
+    /// How far the plan's clock is behind the robot's at backend time
+    /// `t_s` (s): the time detours took; on a detour the plan's clock
+    /// stands where it left the plan. A hand-back's plan time is the
+    /// robot's time since the plan started less this.
+    pub fn plan_lag_s(&self, t_s: f64) -> f64 {
+        match (&self.detour, self.t0_s) {
+            (Some(g), Some(t0)) => (t_s - t0) - g.plan_t_s,
+            _ => self.time_shift_s,
+        }
     }
 
     /// What happened since the last call (detours begun and ended).
@@ -428,6 +448,7 @@ impl Executive {
             last: pose,
             max_speed_m_s,
             obstacle: Vec::new(),
+            last_scan_s: t,
         });
     }
 
@@ -437,6 +458,9 @@ impl Executive {
             Ok(wheels) => wheels,
             Err(stop) => {
                 if let Some(g) = self.detour.take() {
+                    // The plan's clock stays where the detour left the
+                    // plan: a continuation starts from there.
+                    self.time_shift_s = t - g.plan_t_s;
                     self.seen = Some(g.planner.into_seen());
                 }
                 self.stopped = Some((reading.t_s, stop));
@@ -478,12 +502,25 @@ impl Executive {
         let freedom = &plan.header.freedom;
         let shorter_by = self.tolerances.obstacle_shorter_by_m;
         let g = self.detour.as_mut().expect("on a detour");
-        g.driven_m += pose.distance_to(&g.last);
-        g.last = pose;
+        // Distance driven, counted in steps of 2 cm so the estimate's
+        // jitter while turning in place adds nothing.
+        let step = pose.distance_to(&g.last);
+        if step >= 0.02 {
+            g.driven_m += step;
+            g.last = pose;
+        }
         if !g.planner.in_corridor([pose.x_m, pose.y_m]) {
             return Err(Stop::LeftCorridor {
                 x_m: pose.x_m,
                 y_m: pose.y_m,
+            });
+        }
+        // A detour drives on what the lidar sees: without scans it stops.
+        if fresh_scan {
+            g.last_scan_s = t;
+        } else if t - g.last_scan_s > MAX_DETOUR_SCAN_GAP_S {
+            return Err(Stop::SensorFault {
+                what: format!("no lidar scan for {:.1} s on a detour", t - g.last_scan_s),
             });
         }
         if fresh_scan {
@@ -533,7 +570,8 @@ impl Executive {
                     .unwrap_or([pose.x_m, pose.y_m])
             };
             let announced = !g.route.waypoints.is_empty();
-            g.route = match g.planner.plan(&plan, g.from_sample, pose, keep) {
+            let rejoined = announced.then_some(g.route.rejoin);
+            g.route = match g.planner.plan(&plan, g.from_sample, pose, keep, rejoined) {
                 Ok(route) => route,
                 Err(no_way) => {
                     let [x_m, y_m] = nearest_seen();
@@ -542,6 +580,7 @@ impl Executive {
                             "the plan is blocked for {:.1} m ahead: nothing clear to rejoin it at",
                             self.planner_settings.look_ahead_m
                         ),
+                        NoWay::NotSeen => "the lidar does not show what stopped the robot on the plan's path: it cannot plan around it".to_string(),
                         NoWay::Enclosed { .. } => "no way around inside the corridor and out of the keep-out zones with the footprint clear".to_string(),
                     };
                     return Err(Stop::Blocked { why, x_m, y_m });
@@ -685,7 +724,9 @@ impl Executive {
             .tracker
             .command_from(&self.plan.samples, plan_t, belief.pose);
         match self.check(reading, plan_t, belief) {
-            Some(Stop::ObstacleAhead { .. }) if self.may_detour(belief) => {
+            // What the lidar saw it can plan around; what only a ranger saw
+            // it cannot see on the way round.
+            Some(Stop::ObstacleAhead { .. }) if self.ahead_by_lidar && self.may_detour(belief) => {
                 self.start_detour(belief, t, plan_t);
                 return self.on_detour(reading, belief, t);
             }
@@ -901,10 +942,12 @@ impl Executive {
         };
         let mut nearest: Option<Stop> = None;
         let mut confirmed = false;
+        let mut by_lidar = false;
         // Sensor by sensor (a sensor's beams come together).
         let mut first = 0;
         for beams in self.beams.chunk_by(|a, b| a.sensor == b.sensor) {
             let these = first..first + beams.len();
+            let these_start = these.start;
             first = these.end;
             // A reading with fewer ranges than beams has none of the rest.
             let (Some(ranges), Some(nearest_predicted)) = (
@@ -942,8 +985,11 @@ impl Executive {
             if fresh {
                 *count = if seen { *count + 1 } else { 0 };
             }
-            confirmed |= *count >= tol.obstacle_confirm;
+            let this = *count >= tol.obstacle_confirm;
+            confirmed |= this;
+            by_lidar |= this && self.lidar_beams[these_start];
         }
+        self.ahead_by_lidar = by_lidar;
         if confirmed { nearest } else { None }
     }
 }

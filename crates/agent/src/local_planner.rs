@@ -24,7 +24,7 @@
 
 use twindrive_estimation::mapping::{Beam as GridBeam, CellState, LogOdds, LogOddsGrid};
 use twindrive_kinematics::Pose;
-use twindrive_mission::freedom::{FreedomMap, arc_lengths};
+use twindrive_mission::freedom::{arc_lengths, distance_to_boundary, inside};
 use twindrive_mission::grid_search::{ClearanceGrid, Clearances};
 use twindrive_mission::plan::MissionPlan;
 
@@ -77,6 +77,9 @@ pub enum NoWay {
     /// No clear sample to rejoin at within the look-ahead (the obstacle
     /// fills the plan's path that far, or the window ends).
     NoRejoin,
+    /// Nothing the robot's grid holds blocks the plan ahead: what stopped
+    /// it is not in what the lidar sees, and it cannot plan around it.
+    NotSeen,
     /// No way inside the corridor and out of the zones to the rejoin
     /// sample with the footprint clear.
     Enclosed { rejoin: usize },
@@ -213,61 +216,89 @@ impl LocalPlanner {
         }
     }
 
-    /// Marks the cells the robot's centre may be in: within the corridor's
-    /// half width less the footprint of the plan's samples from a metre
-    /// behind sample `k` to the look-ahead and a metre past it, and out of
-    /// every keep-out zone.
+    /// Marks the cells the robot's centre may be in: within the half width
+    /// (less the footprint) of the corridor's stretch at the nearest of the
+    /// plan's samples from a metre behind sample `k` to the look-ahead and
+    /// a metre past it (so a wide stretch does not spill into a narrow one
+    /// beside it), give or take `corridor_margin_m` and half a cell's
+    /// diagonal for tracking, and with the footprint out of every keep-out
+    /// zone. The cells it may plan through keep `corridor_margin_m` inside
+    /// the half width, and the footprint that margin and half a cell's
+    /// diagonal off every zone.
     fn draw_corridor(&mut self, plan: &MissionPlan, k: usize) {
         let f = &plan.header.freedom;
-        let zones = FreedomMap::new(&plan.samples, f, self.footprint_m);
         let r = self.settings.cell_m;
+        let margin = self.settings.corridor_margin_m;
         let s0 = self.along_m.get(k).copied().unwrap_or(0.0);
         let (from, to) = (s0 - 1.0, s0 + self.settings.look_ahead_m + 1.0);
+        // The samples a cell apart, with how far the centre may stray.
+        let mut kept: Vec<([f64; 2], f64)> = Vec::new();
         let mut last_s = f64::NEG_INFINITY;
         for (i, s) in plan.samples.iter().enumerate() {
             let along = self.along_m[i];
+            if along < from || along > to || along - last_s < r {
+                continue;
+            }
             let Some(hw) = f.half_width_at(along) else {
                 continue;
             };
-            let reach = hw - self.footprint_m;
-            // Disks of radius `reach` a quarter of it apart cover the
-            // corridor but for reach / 128 at its edge (inside it, so the
-            // robot is held a little tighter, never looser), and every
-            // sample where the path turns sharply is within half a cell.
-            if along < from
-                || along > to
-                || reach < 0.0
-                || along - last_s < (0.25 * reach).max(0.5 * r)
-            {
-                continue;
-            }
             last_s = along;
-            let span = (reach / r).ceil() as i64 + 1;
-            let ci = (s.x_m / r).floor() as i64 - self.first[0];
-            let cj = (s.y_m / r).floor() as i64 - self.first[1];
-            for j in (cj - span).max(0)..=(cj + span).min(self.size[1] as i64 - 1) {
-                for i in (ci - span).max(0)..=(ci + span).min(self.size[0] as i64 - 1) {
-                    let cell = i as usize + j as usize * self.size[0];
-                    let p = self.centre(cell);
-                    let d = (p[0] - s.x_m).hypot(p[1] - s.y_m);
-                    if d <= reach {
-                        self.inside[cell] = true;
-                        if d <= reach - self.settings.corridor_margin_m {
-                            self.plannable[cell] = true;
-                        }
+            kept.push(([s.x_m, s.y_m], hw - self.footprint_m));
+        }
+        let widest = kept.iter().map(|k| k.1).fold(0.0f64, f64::max);
+        let n = self.inside.len();
+        // Per cell, the squared distance to its nearest kept sample and
+        // that sample's reach.
+        let mut nearest_d2 = vec![f64::INFINITY; n];
+        let mut nearest_reach = vec![-1.0f64; n];
+        let span = (widest / r).ceil() as i64 + 2;
+        let (w, h) = (self.size[0] as i64, self.size[1] as i64);
+        let origin = [
+            (self.first[0] as f64 + 0.5) * r,
+            (self.first[1] as f64 + 0.5) * r,
+        ];
+        for &(p, reach) in &kept {
+            let ci = (p[0] / r).floor() as i64 - self.first[0];
+            let cj = (p[1] / r).floor() as i64 - self.first[1];
+            for j in (cj - span).max(0)..=(cj + span).min(h - 1) {
+                let dy = origin[1] + j as f64 * r - p[1];
+                let dy2 = dy * dy;
+                let row = (j * w) as usize;
+                for i in (ci - span).max(0)..=(ci + span).min(w - 1) {
+                    let dx = origin[0] + i as f64 * r - p[0];
+                    let d2 = dx * dx + dy2;
+                    let cell = row + i as usize;
+                    if d2 < nearest_d2[cell] {
+                        nearest_d2[cell] = d2;
+                        nearest_reach[cell] = reach;
                     }
                 }
             }
         }
-        if !f.keep_out.is_empty() {
-            for cell in 0..self.inside.len() {
-                if (self.inside[cell] || self.plannable[cell])
-                    && zones.zone_hit(self.centre(cell)).is_some()
-                {
-                    self.inside[cell] = false;
-                    self.plannable[cell] = false;
-                }
+        let half_diagonal = 0.5 * std::f64::consts::SQRT_2 * r;
+        let zone_reach = self.footprint_m + margin + half_diagonal;
+        let nearest = nearest_d2
+            .iter()
+            .zip(&nearest_reach)
+            .map(|(d2, reach)| (d2.sqrt(), *reach));
+        for (cell, (d, reach)) in nearest.enumerate() {
+            // It may stand up to the margin (and the cell's quantisation)
+            // outside what it plans in: tracking is not exact, and a
+            // directed stretch (no reach at all) is still its path.
+            if d > reach + margin + half_diagonal {
+                continue;
             }
+            let c = self.centre(cell);
+            let mut stand = true;
+            let mut pass = d <= reach - margin;
+            for z in &f.keep_out {
+                let into = inside(&z.polygon, c);
+                let edge = distance_to_boundary(&z.polygon, c);
+                stand &= !(into || edge < self.footprint_m);
+                pass &= !(into || edge < zone_reach);
+            }
+            self.inside[cell] = stand;
+            self.plannable[cell] = stand && pass;
         }
     }
 
@@ -327,7 +358,7 @@ impl LocalPlanner {
         }
     }
 
-    /// The footprint clearance at `p` beyond `keep_m` (m) as the last
+    /// The footprint's clearance at `p` (m) as the last
     /// [`plan`](Self::plan) saw it; negative outside the window.
     pub fn clearance_at(&self, p: [f64; 2]) -> f64 {
         match self.cell_index(p) {
@@ -342,13 +373,16 @@ impl LocalPlanner {
 
     /// A way from `from` back onto `plan` past what blocks it from sample
     /// `k` on, keeping `keep_m` (three standard deviations of the robot's
-    /// position) beyond the footprint.
+    /// position) beyond the footprint. When nothing blocks the plan any
+    /// more (what it went around moved away), the way leads to `rejoined`
+    /// (the sample an earlier plan of this detour rejoined at), if given.
     pub fn plan(
         &mut self,
         plan: &MissionPlan,
         k: usize,
         from: Pose,
         keep_m: f64,
+        rejoined: Option<usize>,
     ) -> Result<Detour, NoWay> {
         self.update_clearances(keep_m);
         let want = self.settings.want_clearance_m;
@@ -364,13 +398,18 @@ impl LocalPlanner {
         let last_blocked = (k..samples.len())
             .take_while(|&i| within(i))
             .filter(|&i| !clear(i))
-            .last()
-            .unwrap_or(k);
-        let beyond = self.along_m[last_blocked] + self.settings.rejoin_beyond_m;
-        let rejoin = (last_blocked..samples.len())
-            .take_while(|&i| self.search.contains([samples[i].x_m, samples[i].y_m]))
-            .find(|&i| self.along_m[i] >= beyond && clear(i))
-            .ok_or(NoWay::NoRejoin)?;
+            .last();
+        let rejoin = match (last_blocked, rejoined) {
+            (Some(last_blocked), _) => {
+                let beyond = self.along_m[last_blocked] + self.settings.rejoin_beyond_m;
+                (last_blocked..samples.len())
+                    .take_while(|&i| self.search.contains([samples[i].x_m, samples[i].y_m]))
+                    .find(|&i| self.along_m[i] >= beyond && clear(i))
+                    .ok_or(NoWay::NoRejoin)?
+            }
+            (None, Some(r)) => r,
+            (None, None) => return Err(NoWay::NotSeen),
+        };
         let goal = [samples[rejoin].x_m, samples[rejoin].y_m];
         let keep = Clearances {
             want_m: want,
@@ -471,6 +510,96 @@ fn edt_1d(n: usize, s: &mut Scratch) {
 mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
+
+    /// A straight plan along y = 0 from x = 0 to 10 in an empty site, with
+    /// the corridor `stretches` and `zones`.
+    fn straight_plan(
+        stretches: &[(f64, f64)],
+        zones: Vec<twindrive_mission::plan::KeepOutZone>,
+    ) -> MissionPlan {
+        use twindrive_mission::plan::*;
+        let samples = (0..=1000)
+            .map(|k| PlanSample {
+                t_s: k as f64 * 0.05,
+                x_m: k as f64 * 0.01,
+                y_m: 0.0,
+                heading_rad: 0.0,
+                v_m_s: 0.2,
+                omega_rad_s: 0.0,
+                left_rad_s: 6.0,
+                right_rad_s: 6.0,
+                expected_bump: false,
+            })
+            .collect();
+        let header = PlanHeader {
+            robot: RobotInfo {
+                scenario: "unit".into(),
+                footprint_radius_m: 0.15,
+                ticks_per_rev: 512,
+                range_sensors: Vec::new(),
+            },
+            calibrated: twindrive_kinematics::DiffDriveParams::new(0.065, 0.065, 0.27),
+            limits: WheelLimits {
+                max_speed_rad_s: 12.0,
+                max_accel_rad_s2: 30.0,
+            },
+            time_step_s: 0.05,
+            start: Pose::new(0.0, 0.0, 0.0),
+            start_covariance: None,
+            site_map: SiteMap::default(),
+            freedom: Freedom {
+                corridor: stretches
+                    .iter()
+                    .map(|&(from_m, half_width_m)| CorridorStretch {
+                        from_m,
+                        half_width_m,
+                    })
+                    .collect(),
+                keep_out: zones,
+                max_extra_time_s: 60.0,
+                max_extra_distance_m: 5.0,
+            },
+            source_log_sha256: "0".repeat(64),
+            settings: serde_json::json!({}),
+            summary: serde_json::json!({}),
+        };
+        MissionPlan::new(header, samples)
+    }
+
+    /// Beside a directed stretch (half width the footprint) that follows a
+    /// wide one, the robot may not stand, though the wide stretch's reach
+    /// would cover it; beside the wide one it may. A zone is kept off by
+    /// the footprint (to stand) and the margin more (to plan).
+    #[test]
+    fn the_corridor_is_the_nearest_stretchs_and_zones_keep_a_margin() {
+        let zone = twindrive_mission::plan::KeepOutZone {
+            name: "pit".into(),
+            polygon: vec![[2.0, 0.5], [3.0, 0.5], [3.0, 1.5], [2.0, 1.5]],
+        };
+        let plan = straight_plan(&[(0.0, 1.2), (5.0, 0.15)], vec![zone]);
+        plan.validate().unwrap();
+        let p = LocalPlanner::new(
+            &plan,
+            450,
+            [4.5, 0.0],
+            LocalPlannerSettings::default(),
+            None,
+        );
+        assert!(p.in_corridor([4.0, 0.8]));
+        assert!(!p.in_corridor([5.6, 0.5]), "beside the directed stretch");
+        assert!(p.in_corridor([5.6, 0.0]), "on the path");
+        assert!(p.in_corridor([5.6, 0.06]), "tracking the path");
+        let plannable = |q: [f64; 2]| p.cell_index(q).is_some_and(|c| p.plannable[c]);
+        assert!(
+            !plannable([5.6, 0.0]),
+            "no room to plan beside a directed stretch"
+        );
+        // The zone: its footprint reach is out; beyond it, in.
+        assert!(!p.in_corridor([2.5, 0.4]));
+        assert!(p.in_corridor([2.5, 0.3]));
+        assert!(!plannable([2.5, 0.3]), "too near the zone to plan through");
+        assert!(plannable([2.5, 0.1]));
+    }
 
     #[test]
     fn the_distance_transform_is_exact_on_random_obstacles() {

@@ -10,8 +10,7 @@ use twindrive_ros::extract::{self, Stamps, WheelSource};
 
 use crate::inputs;
 
-/// Fewest beams a lidar needs to be matched scan to scan.
-pub const MIN_SCAN_BEAMS: u32 = 30;
+pub use twindrive_kinematics::MIN_SCAN_BEAMS;
 
 /// What a self-calibration reads from a recording.
 #[derive(Debug, Clone)]
@@ -63,7 +62,7 @@ pub fn choose_lidar<'a>(
             have.join(", ")
         }
     };
-    let usable = |s: &RangeSensorInfo| s.kind == SensorKind::Lidar && s.beams >= MIN_SCAN_BEAMS;
+    let usable = |s: &RangeSensorInfo| s.is_scanning_lidar();
     let Some(name) = name else {
         if let Some(i) = sensors.iter().position(|s| usable(s)) {
             return Ok((i, sensors[i]));

@@ -22,7 +22,7 @@ pub use jacobian::{
     step_jacobians, step_with_jacobian, step_with_jacobians,
 };
 pub use params::{DiffDriveParams, EncoderSpec, ParamError};
-pub use sensor::{RangeSensorInfo, SensorKind};
+pub use sensor::{MIN_SCAN_BEAMS, RangeSensorInfo, SensorKind};
 
 use serde::{Deserialize, Serialize};
 

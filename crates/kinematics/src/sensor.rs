@@ -63,6 +63,10 @@ impl std::fmt::Display for SensorKind {
     }
 }
 
+/// Fewest beams a lidar needs to be matched scan to scan, or to map and
+/// plan with.
+pub const MIN_SCAN_BEAMS: u32 = 30;
+
 /// A range sensor as mounted on the robot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "LabelledOrNot")]
@@ -138,6 +142,12 @@ impl RangeSensorInfo {
             min_range_m,
             max_range_m,
         })
+    }
+
+    /// Whether this is a lidar with enough beams ([`MIN_SCAN_BEAMS`]) to
+    /// be matched scan to scan, mapped and planned with.
+    pub fn is_scanning_lidar(&self) -> bool {
+        self.kind == SensorKind::Lidar && self.beams >= MIN_SCAN_BEAMS
     }
 
     /// Beam angle relative to the mount heading. A full circle spreads the

@@ -132,7 +132,8 @@ pub enum Body {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DetourReport {
     pub plan: TransferId,
-    /// Which detour of the plan (0, 1, ...).
+    /// Which detour: the robot counts them from 1 since its agent started
+    /// (with `plan`, it names one).
     pub index: u32,
     /// Time since the plan started when it began (s), the robot's pose
     /// there (x, y m; heading rad) and the plan sample it left at.

@@ -29,6 +29,9 @@ use crate::plan::{CorridorStretch, Freedom, KeepOutZone, PlanSample, check_polyg
 /// few and its bytes stable under noise.
 pub const WIDTH_STEP_M: f64 = 0.05;
 
+/// The shortest default stretch, and the narrowest widest half width (m).
+pub const MIN_STRETCH_M: f64 = 0.01;
+
 /// How a plan's freedom is made: the operator's settings (a `freedom`
 /// TOML for `twindrive plan`, or the console), recorded with the plan.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -42,9 +45,10 @@ pub struct FreedomSettings {
     pub corridor: Vec<CorridorRegion>,
     /// Zones the robot never enters.
     pub keep_out: Vec<KeepOutZone>,
-    /// A detour may make the mission this much longer (s) at most.
+    /// The detours together may make the mission this much later (s) at
+    /// most.
     pub max_extra_time_s: f64,
-    /// A detour may add this much distance (m) at most.
+    /// One detour may add this much distance (m) at most.
     pub max_extra_distance_m: f64,
 }
 
@@ -78,9 +82,9 @@ impl FreedomSettings {
             ("max_half_width_m", self.max_half_width_m),
             ("stretch_m", self.stretch_m),
         ] {
-            if !(v.is_finite() && v > 0.0) {
+            if !(v.is_finite() && v >= MIN_STRETCH_M) {
                 return Err(format!(
-                    "field `{field}`: expected a finite number > 0, got {v}"
+                    "field `{field}`: expected a finite number of at least {MIN_STRETCH_M} m, got {v}"
                 ));
             }
         }

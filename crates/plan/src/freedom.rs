@@ -32,9 +32,10 @@ pub struct Freedom {
     pub corridor: Vec<CorridorStretch>,
     /// Polygons the robot's footprint never enters.
     pub keep_out: Vec<KeepOutZone>,
-    /// A detour may make the mission this much longer (s) at most.
+    /// The detours together may make the mission this much later (s) at
+    /// most.
     pub max_extra_time_s: f64,
-    /// A detour may add this much distance (m) at most.
+    /// One detour may add this much distance (m) at most.
     pub max_extra_distance_m: f64,
 }
 

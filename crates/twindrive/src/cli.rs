@@ -899,7 +899,8 @@ pub struct PlanArgs {
     pub time_optimal: bool,
     /// The robot's freedom on the plan (TOML): `max_half_width_m` (the
     /// default corridor's widest half width, 1.5), `stretch_m` (0.5),
-    /// `max_extra_time_s` (60) and `max_extra_distance_m` (5) a detour may
+    /// `max_extra_time_s` (60, the detours together) and
+    /// `max_extra_distance_m` (5, each detour) the robot's detours may
     /// cost, `[[corridor]]` regions (`region = [[x, y], ...]`,
     /// `half_width_m`; the footprint radius holds the robot to its path)
     /// and `[[keep_out]]` zones (`name`, `polygon = [[x, y], ...]`). Without

@@ -539,7 +539,7 @@ fn keep_out_zones_on_the_route_fail_verification_by_name_and_beside_it_pass() {
         assert!(out.status.success(), "{}", text(&out.stderr));
         assert!(
             text(&out.stdout).contains(&format!(
-                "1 keep-out zone(s) ({name}); a detour may add 20 s"
+                "1 keep-out zone(s) ({name}); detours may add 20 s in all"
             )),
             "{}",
             text(&out.stdout)
@@ -561,6 +561,30 @@ fn keep_out_zones_on_the_route_fail_verification_by_name_and_beside_it_pass() {
             assert!(out.status.success(), "{name} at {centre:?}: {said}");
         }
     }
+
+    // Directed driving everywhere (the corridor as narrow as the
+    // footprint) verifies: tracking is held to the deviation tolerance.
+    let directed = tmp.path().join("directed");
+    std::fs::create_dir_all(&directed).unwrap();
+    std::fs::write(directed.join("freedom.toml"), "max_half_width_m = 0.15\n").unwrap();
+    let plan_path = directed.join("plan.json");
+    let out = plan(
+        &plan_path,
+        &["--freedom", s(&directed.join("freedom.toml"))],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("corridor of 1 stretch(es), half width 0.15 to 0.15 m"),
+        "{}",
+        text(&out.stdout)
+    );
+    let out = twindrive(&[
+        "verify-plan",
+        s(&plan_path),
+        "--out",
+        s(&directed.join("v")),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stdout));
 
     // A freedom file that cannot be kept: its line, or its field.
     let bad = tmp.path().join("bad");

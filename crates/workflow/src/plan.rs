@@ -233,7 +233,7 @@ pub fn print_summary(
     };
     writeln!(
         o,
-        "freedom: {corridor}; {} keep-out zone(s){}; a detour may add {:.0} s and {:.1} m",
+        "freedom: {corridor}; {} keep-out zone(s){}; detours may add {:.0} s in all and {:.1} m each",
         f.keep_out.len(),
         if f.keep_out.is_empty() {
             String::new()

@@ -185,7 +185,8 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         let force = reading.bump || r.exec.stopped().is_some();
         if r.pace.take(r.tick, &reading.fresh_ranges_m, force) {
             r.window.push_back(WindowSample {
-                plan_t_s: reading.t_s - t0,
+                // On the plan's clock (detours move it on).
+                plan_t_s: reading.t_s - t0 - r.exec.plan_lag_s(reading.t_s),
                 pose,
                 ranges_m: reading.fresh_ranges_m.iter().map(|&v| v as f32).collect(),
                 bump: reading.bump,
