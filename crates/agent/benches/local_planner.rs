@@ -122,7 +122,16 @@ fn benches(c: &mut Criterion) {
         })
         .collect();
     let settings = LocalPlannerSettings::default();
-    let mut planner = LocalPlanner::new(&plan, k, [pose.x_m, pose.y_m], settings, None);
+    let along_m: std::sync::Arc<[f64]> =
+        twindrive_mission::freedom::sample_arc_lengths(&plan.samples).into();
+    let mut planner = LocalPlanner::new(
+        &plan,
+        along_m.clone(),
+        k,
+        [pose.x_m, pose.y_m],
+        settings,
+        None,
+    );
     planner.integrate([pose.x_m, pose.y_m], &scan);
     let detour = planner
         .plan(&plan, k, pose, 0.03, None)
@@ -134,6 +143,7 @@ fn benches(c: &mut Criterion) {
             b.iter(|| {
                 black_box(LocalPlanner::new(
                     black_box(&plan),
+                    along_m.clone(),
                     k,
                     [pose.x_m, pose.y_m],
                     settings,

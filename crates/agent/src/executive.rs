@@ -63,14 +63,14 @@ use serde::Serialize;
 use twindrive_kinematics::Pose;
 use twindrive_mission::PipelineError;
 use twindrive_mission::plan::{MissionPlan, PlanGeometry};
-use twindrive_mission::verify::{Criteria, Tracker, TrackerSettings};
+use twindrive_mission::verify::{Criteria, Tracker, TrackerSettings, capped_wheel_speeds};
 use twindrive_sim::RangeModel;
 
 use crate::backend::Reading;
 use crate::local_planner::{Detour, LocalPlanner, LocalPlannerSettings, NoWay};
 use crate::localize::{Beam, beams};
 use twindrive_estimation::mapping::{CellState, LogOddsGrid};
-use twindrive_kinematics::{wheel_speeds, wrap_angle};
+use twindrive_kinematics::wrap_angle;
 pub use twindrive_link::envelope::Tolerances;
 
 /// What a plan must meet on the twin before it is sent to a robot that
@@ -222,8 +222,9 @@ pub struct Executive {
     planner_settings: LocalPlannerSettings,
     max_wheel_rad_s: f64,
     events: Vec<Event>,
-    /// Arc length of the plan at each sample (m).
-    along_m: Vec<f64>,
+    /// Arc length of the plan at each sample (m), shared with each
+    /// detour's planner.
+    along_m: Arc<[f64]>,
     /// Whether the last obstacle ahead was confirmed by a lidar.
     ahead_by_lidar: bool,
 }
@@ -302,9 +303,8 @@ impl Executive {
             .iter()
             .map(|b| plan.header.robot.range_sensors[b.sensor].is_scanning_lidar())
             .collect();
-        let path: Vec<[f64; 2]> = plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect();
         Ok(Self {
-            along_m: twindrive_mission::freedom::arc_lengths(&path),
+            along_m: twindrive_mission::freedom::sample_arc_lengths(&plan.samples).into(),
             ahead_by_lidar: false,
             lidar_beams,
             time_shift_s: 0.0,
@@ -419,6 +419,7 @@ impl Executive {
         let pose = belief.pose;
         let planner = LocalPlanner::new(
             &self.plan,
+            self.along_m.clone(),
             k,
             [pose.x_m, pose.y_m],
             self.planner_settings,
@@ -660,15 +661,12 @@ impl Executive {
                 (v.max(0.0), omega)
             }
         };
-        let (mut l, mut r) = wheel_speeds(&plan.header.calibrated, v, omega);
-        let peak = l.abs().max(r.abs());
-        if peak > self.max_wheel_rad_s {
-            (l, r) = (
-                l * self.max_wheel_rad_s / peak,
-                r * self.max_wheel_rad_s / peak,
-            );
-        }
-        Ok([l, r])
+        Ok(capped_wheel_speeds(
+            &plan.header.calibrated,
+            v,
+            omega,
+            self.max_wheel_rad_s,
+        ))
     }
 
     /// Back on the plan at the detour's rejoin sample: the plan's clock
@@ -814,20 +812,22 @@ impl Executive {
             });
             // Readings that end on what a detour saw the map lacks are
             // explained: the robot knows it is there.
-            let mut explained = vec![false; reading.fresh_ranges_m.len()];
-            if let Some(seen) = &self.seen {
-                for ((e, m), beam) in explained
-                    .iter_mut()
-                    .zip(&reading.fresh_ranges_m)
+            // (Built only once a detour has seen something.)
+            let explained: Vec<bool> = match &self.seen {
+                None => Vec::new(),
+                Some(seen) => reading
+                    .fresh_ranges_m
+                    .iter()
                     .zip(&self.beams)
-                {
-                    if m.is_finite() && *m > beam.min_m && *m < beam.max_m {
-                        let (bx, by) = beam.endpoint(*m);
-                        let (x, y) = estimate.transform_point(bx, by);
-                        *e = seen.state_at([x, y]) == CellState::Occupied;
-                    }
-                }
-            }
+                    .map(|(m, beam)| {
+                        m.is_finite() && *m > beam.min_m && *m < beam.max_m && {
+                            let (bx, by) = beam.endpoint(*m);
+                            let (x, y) = estimate.transform_point(bx, by);
+                            seen.state_at([x, y]) == CellState::Occupied
+                        }
+                    })
+                    .collect(),
+            };
             // A localized robot that may go around what blocks its path
             // takes a reading shorter than the map explains for something
             // standing there: the obstacle-ahead check (and the detour)
@@ -852,7 +852,7 @@ impl Executive {
                     .zip(&self.predicted)
                     .enumerate()
                 {
-                    if explained[i] {
+                    if explained.get(i).copied().unwrap_or(false) {
                         count += 1;
                     } else if m.is_finite() && e.is_finite() {
                         // A reading past a learnt block's face, but not past

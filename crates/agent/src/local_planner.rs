@@ -22,9 +22,11 @@
 //! the wanted clearance (the obstacle's stretch), the first sample
 //! `rejoin_beyond_m` further on that is clear.
 
+use std::sync::Arc;
 use twindrive_estimation::mapping::{Beam as GridBeam, CellState, LogOdds, LogOddsGrid};
 use twindrive_kinematics::Pose;
-use twindrive_mission::freedom::{arc_lengths, distance_to_boundary, inside};
+
+use twindrive_mission::freedom::{distance_to_boundary, inside};
 use twindrive_mission::grid_search::{ClearanceGrid, Clearances};
 use twindrive_mission::plan::MissionPlan;
 
@@ -105,7 +107,7 @@ pub struct LocalPlanner {
     scratch: Scratch,
     search: ClearanceGrid,
     /// Arc length of each plan sample.
-    along_m: Vec<f64>,
+    along_m: Arc<[f64]>,
 }
 
 #[derive(Default)]
@@ -117,11 +119,13 @@ struct Scratch {
 }
 
 impl LocalPlanner {
-    /// A planner for `plan` around `centre` (where the robot is when it
-    /// first sees the obstacle), for the stretch of plan from sample `k`
+    /// A planner for `plan` (`along_m`: its arc length at each sample, as
+    /// [`twindrive_mission::freedom::sample_arc_lengths`] gives it) around `centre` (where the robot is when
+    /// it first sees the obstacle), for the stretch of plan from sample `k`
     /// (its progress) on; `seen` carries on what earlier detours saw.
     pub fn new(
         plan: &MissionPlan,
+        along_m: Arc<[f64]>,
         k: usize,
         centre: [f64; 2],
         settings: LocalPlannerSettings,
@@ -136,9 +140,8 @@ impl LocalPlanner {
         let first = [c[0] - half, c[1] - half];
         let n = (2 * half + 1) as usize;
         let size = [n, n];
+        assert_eq!(along_m.len(), plan.samples.len(), "an arc length a sample");
         let footprint_m = plan.header.robot.footprint_radius_m;
-        let path: Vec<[f64; 2]> = plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect();
-        let along_m = arc_lengths(&path);
         let mut me = Self {
             settings,
             footprint_m,
@@ -580,6 +583,7 @@ mod tests {
         plan.validate().unwrap();
         let p = LocalPlanner::new(
             &plan,
+            twindrive_mission::freedom::sample_arc_lengths(&plan.samples).into(),
             450,
             [4.5, 0.0],
             LocalPlannerSettings::default(),

@@ -303,13 +303,7 @@ fn a_lidar_robot_goes_around_a_box_inside_its_corridor_and_out_of_a_zone() {
             t.events
         );
         let map = FreedomMap::of_plan(&plan);
-        let along = twindrive_mission::freedom::arc_lengths(
-            &plan
-                .samples
-                .iter()
-                .map(|s| [s.x_m, s.y_m])
-                .collect::<Vec<_>>(),
-        );
+        let along = twindrive_mission::freedom::sample_arc_lengths(&plan.samples);
         for p in &t.track {
             assert!(
                 map.zone_hit([p.x_m, p.y_m]).is_none(),
@@ -337,13 +331,7 @@ fn a_lidar_robot_goes_around_a_box_inside_its_corridor_and_out_of_a_zone() {
 fn a_box_filling_the_corridor_is_one_hand_back_and_no_contact() {
     let twin = office();
     let plan = office_plan();
-    let along = twindrive_mission::freedom::arc_lengths(
-        &plan
-            .samples
-            .iter()
-            .map(|s| [s.x_m, s.y_m])
-            .collect::<Vec<_>>(),
-    );
+    let along = twindrive_mission::freedom::sample_arc_lengths(&plan.samples);
     let mut rng = ChaCha8Rng::seed_from_u64(41);
     let mut trials = 0;
     while trials < 3 {

@@ -206,6 +206,12 @@ pub fn with_zones_as_walls(world: &World, zones: &[KeepOutZone]) -> World {
     world.with_walls(&walls)
 }
 
+/// Cumulative distance along the positions of plan `samples` at each.
+pub fn sample_arc_lengths(samples: &[PlanSample]) -> Vec<f64> {
+    let path: Vec<[f64; 2]> = samples.iter().map(|s| [s.x_m, s.y_m]).collect();
+    arc_lengths(&path)
+}
+
 /// Cumulative distance along `path` at each of its points.
 pub fn arc_lengths(path: &[[f64; 2]]) -> Vec<f64> {
     let mut s = 0.0;
@@ -311,11 +317,10 @@ impl<'a> FreedomMap<'a> {
 
     /// `freedom` on the plan `samples` for a robot of `footprint_radius_m`.
     pub fn new(samples: &[PlanSample], freedom: &'a Freedom, footprint_radius_m: f64) -> Self {
-        let path: Vec<[f64; 2]> = samples.iter().map(|s| [s.x_m, s.y_m]).collect();
         Self {
             freedom,
             footprint_radius_m,
-            along_m: arc_lengths(&path),
+            along_m: sample_arc_lengths(samples),
         }
     }
 

@@ -426,15 +426,30 @@ impl Tracker {
         let omega = omega_r
             + v_r * (g.gain_cross_per_m2 * e_y + g.gain_heading_per_m * e_theta.sin())
             + g.gain_heading_still_per_s * e_theta.sin();
-        let (mut l, mut rw) = wheel_speeds(&self.params, v, omega);
-        let peak = l.abs().max(rw.abs());
-        if peak > self.max_wheel_rad_s {
-            (l, rw) = (
-                l * self.max_wheel_rad_s / peak,
-                rw * self.max_wheel_rad_s / peak,
-            );
-        }
-        Some([l, rw])
+        Some(capped_wheel_speeds(
+            &self.params,
+            v,
+            omega,
+            self.max_wheel_rad_s,
+        ))
+    }
+}
+
+/// The wheel speeds (left, right; rad/s) for body velocities `v_m_s` and
+/// `omega_rad_s` through `params`, both scaled together so neither wheel
+/// exceeds `max_wheel_rad_s` (the path's curvature kept).
+pub fn capped_wheel_speeds(
+    params: &DiffDriveParams,
+    v_m_s: f64,
+    omega_rad_s: f64,
+    max_wheel_rad_s: f64,
+) -> [f64; 2] {
+    let (l, r) = wheel_speeds(params, v_m_s, omega_rad_s);
+    let peak = l.abs().max(r.abs());
+    if peak > max_wheel_rad_s {
+        [l * max_wheel_rad_s / peak, r * max_wheel_rad_s / peak]
+    } else {
+        [l, r]
     }
 }
 
