@@ -150,8 +150,17 @@ impl Stop {
     }
 }
 
-/// On a detour: a waypoint within this is reached (m).
+/// On a detour: a waypoint within this is reached (m), as is one the
+/// robot has gone past (beyond the line through it square to the way).
 const WAYPOINT_REACHED_M: f64 = 0.05;
+/// The detour's last point (on the plan) within this is reached: from
+/// there the robot turns to the plan's heading and the tracker takes the
+/// rest up (a bearing to a point a few centimetres off swings with every
+/// fix, and a robot chasing it circles).
+const REJOIN_REACHED_M: f64 = 0.1;
+/// Driving to a waypoint, at least this fast (m/s): slower, a real
+/// robot's motors may not turn the wheels against friction at all.
+const MIN_APPROACH_M_S: f64 = 0.03;
 /// Facing the rejoin sample's heading within this, the detour ends (rad).
 const ALIGNED_RAD: f64 = 0.05;
 /// Heading errors beyond this are turned in place (rad).
@@ -277,6 +286,8 @@ struct Going {
     obstacle: Vec<[f64; 2]>,
     /// The robot's time of the last lidar scan (s).
     last_scan_s: f64,
+    /// At the rejoin point, turning to the plan's heading.
+    aligning: bool,
 }
 
 impl Executive {
@@ -450,6 +461,7 @@ impl Executive {
             max_speed_m_s,
             obstacle: Vec::new(),
             last_scan_s: t,
+            aligning: false,
         });
     }
 
@@ -631,14 +643,29 @@ impl Executive {
         // Drive the waypoints: turn towards the next, then go, slower as
         // obstacles come near; at the last, turn to the plan's heading.
         let wp = &g.route.waypoints;
-        while g.next + 1 < wp.len()
-            && (wp[g.next][0] - pose.x_m).hypot(wp[g.next][1] - pose.y_m) < WAYPOINT_REACHED_M
-        {
+        let here = [pose.x_m, pose.y_m];
+        let reached = |k: usize, within_m: f64| {
+            let (a, b) = (wp[k.saturating_sub(1)], wp[k]);
+            let d = (b[0] - here[0]).hypot(b[1] - here[1]);
+            let past =
+                k > 0 && (here[0] - b[0]) * (b[0] - a[0]) + (here[1] - b[1]) * (b[1] - a[1]) > 0.0;
+            d < within_m || past
+        };
+        while g.next + 1 < wp.len() && reached(g.next, WAYPOINT_REACHED_M) {
             g.next += 1;
         }
         let target = wp[g.next];
         let to_target = (target[0] - pose.x_m).hypot(target[1] - pose.y_m);
-        let (v, omega) = if g.next + 1 == wp.len() && to_target < WAYPOINT_REACHED_M {
+        let last = g.next + 1 == wp.len();
+        // Once at the rejoin point the robot turns there, unless it has
+        // drifted well off it.
+        g.aligning = last
+            && if g.aligning {
+                to_target < 2.0 * REJOIN_REACHED_M
+            } else {
+                reached(g.next, REJOIN_REACHED_M)
+            };
+        let (v, omega) = if g.aligning {
             let rejoin = &plan.samples[g.route.rejoin];
             let e = wrap_angle(rejoin.heading_rad - pose.heading_rad);
             if e.abs() < ALIGNED_RAD {
@@ -657,8 +684,10 @@ impl Executive {
             } else {
                 let clearance = g.planner.clearance_at([pose.x_m, pose.y_m]);
                 let slow = (clearance / SLOW_WITHIN_M).clamp(MIN_SPEED_FRACTION, 1.0);
-                let v = (g.max_speed_m_s * slow * e.cos()).min(to_target / 0.5);
-                (v.max(0.0), omega)
+                let v = (g.max_speed_m_s * slow * e.cos())
+                    .min(to_target / 0.5)
+                    .max(MIN_APPROACH_M_S);
+                (v, omega)
             }
         };
         Ok(capped_wheel_speeds(

@@ -43,9 +43,6 @@ fn default_joint_states() -> String {
 fn default_timeout() -> f64 {
     0.5
 }
-fn default_range() -> String {
-    "sensor_msgs/msg/Range".into()
-}
 
 /// The `[ros]` section of a site file.
 #[derive(Debug, Clone, Deserialize)]
@@ -117,9 +114,10 @@ pub struct JointStatesConfig {
 #[serde(deny_unknown_fields)]
 pub struct RangeConfig {
     pub topic: String,
-    /// `sensor_msgs/msg/Range` or `sensor_msgs/msg/LaserScan`.
-    #[serde(rename = "type", default = "default_range")]
-    pub type_name: String,
+    /// `sensor_msgs/msg/Range` or `sensor_msgs/msg/LaserScan`; unsaid,
+    /// the one of the sensor's kind (a scan for a lidar).
+    #[serde(rename = "type", default)]
+    pub type_name: Option<String>,
     /// The `[[range_sensors]]` entry of the site file it is.
     pub sensor: String,
 }
@@ -231,26 +229,26 @@ impl RosBridge {
             let kind = header.range_sensors[k].kind;
             let beams = header.range_sensors[k].beams as usize;
             let ranger = kind == twindrive_log::SensorKind::Ranger;
-            if ranger != (r.type_name == "sensor_msgs/msg/Range") {
+            let expected = if ranger {
+                "sensor_msgs/msg/Range"
+            } else {
+                "sensor_msgs/msg/LaserScan"
+            };
+            let type_name = r.type_name.as_deref().unwrap_or(expected);
+            if type_name != expected {
                 return Err(format!(
-                    "ros.ranges[{i}]: sensor `{}` is a {kind}, so its type is {}",
-                    r.sensor,
-                    if ranger {
-                        "sensor_msgs/msg/Range"
-                    } else {
-                        "sensor_msgs/msg/LaserScan"
-                    }
+                    "ros.ranges[{i}]: sensor `{}` is a {kind}, so its type is {expected}",
+                    r.sensor
                 ));
             }
             subscriptions.push(Subscription {
                 topic: fully_qualified(ns, &r.topic),
-                type_name: r.type_name.clone(),
+                type_name: type_name.to_owned(),
                 role: Role::Range {
                     offset: offsets[k],
                     beams,
                 },
-                decoder: Decoder::range(&r.type_name)
-                    .map_err(|e| format!("ros.ranges[{i}]: {e}"))?,
+                decoder: Decoder::range(type_name).map_err(|e| format!("ros.ranges[{i}]: {e}"))?,
             });
         }
         for (name, t, role) in [

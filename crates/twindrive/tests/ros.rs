@@ -539,6 +539,8 @@ struct RosRobot {
     driver: Option<common::Proc>,
     robot: common::Proc,
     robot_port: u16,
+    /// The plan its master sends.
+    plan: PathBuf,
 }
 
 const ROS_SECTION: &str = r#"
@@ -573,12 +575,27 @@ impl RosRobot {
     /// The robot on the twin's site, its driver's site with `world_extra`
     /// added to the world (what the twin does not know).
     fn start_at(world_extra: &str, driver_extra: &[&str]) -> Self {
+        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
+        Self::start_site(
+            &site,
+            world_extra,
+            driver_extra,
+            &fixture().path("plan/plan.json"),
+        )
+    }
+
+    /// The robot at `site` (a site file without its `[ros]` section) with
+    /// `plan` for its master.
+    fn start_site(site: &str, world_extra: &str, driver_extra: &[&str], plan: &Path) -> Self {
         use std::process::Stdio;
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
         let ros_port = common::port();
-        let site = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap()
-            + &ROS_SECTION.replace("PORT", &ros_port.to_string());
+        let mut ros = ROS_SECTION.replace("PORT", &ros_port.to_string());
+        if site.contains("name = \"lidar\"") {
+            ros.push_str("\n[[ros.ranges]]\ntopic = \"lidar\"\nsensor = \"lidar\"\n");
+        }
+        let site = site.to_owned() + &ros;
         std::fs::write(d.join("site.toml"), &site).unwrap();
         std::fs::write(
             d.join("driver_site.toml"),
@@ -652,6 +669,7 @@ impl RosRobot {
             driver: Some(driver),
             robot,
             robot_port,
+            plan: plan.to_owned(),
         }
     }
 
@@ -681,7 +699,7 @@ impl RosRobot {
                 .args([
                     "master",
                     "--plan",
-                    s(&fixture().path("plan/plan.json")),
+                    s(&self.plan),
                     "--key",
                     s(&fixture().path("keys/master.key")),
                     "--trust-robot",
@@ -1000,6 +1018,162 @@ fn a_hand_back_halts_a_physics_engines_robot_within_its_braking_distance() {
         seen.travelled_m
     );
     assert_eq!(seen.last_wheels, (0.0, 0.0), "the wheels still turn");
+}
+
+/// An LDS-like scanner on the paper's robot: 360 beams at 5 Hz.
+const LIDAR: &str = r#"
+[[range_sensors]]
+name = "lidar"
+kind = "lidar"
+mount = { x_m = 0.0, y_m = 0.0, heading_rad = 0.0 }
+beams = 360
+fov_rad = 6.283185307179586
+min_range_m = 0.12
+max_range_m = 3.5
+noise_std_m = 0.01
+rate_hz = 5.0
+"#;
+
+/// The paper's site with the lidar robot, and a wall-following rehearsal
+/// of 30 s on it (its directory).
+fn lidar_rehearsal() -> &'static (tempfile::TempDir, String) {
+    static R: std::sync::OnceLock<(tempfile::TempDir, String)> = std::sync::OnceLock::new();
+    R.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let site =
+            std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap() + LIDAR;
+        std::fs::write(dir.path().join("site.toml"), &site).unwrap();
+        let out = twindrive(&[
+            "simulate",
+            s(&dir.path().join("site.toml")),
+            "--duration-s",
+            "30",
+            "--out",
+            s(&dir.path().join("wf")),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        (dir, site)
+    })
+}
+
+/// Distance from `p` to the rectangle `r` (`[min, max]` corners), 0 inside.
+fn to_rect(p: [f64; 2], r: [[f64; 2]; 2]) -> f64 {
+    let dx = (r[0][0] - p[0]).max(p[0] - r[1][0]).max(0.0);
+    let dy = (r[0][1] - p[1]).max(p[1] - r[1][1]).max(0.0);
+    dx.hypot(dy)
+}
+
+/// The lidar robot in MuJoCo (motor torque limits, inertia, friction) with
+/// a box the twin lacks on its route, at a random place and of a random
+/// size, and a keep-out zone the operator drew at random beside the route:
+/// the robot goes around the box on its own (a detour, back on the plan)
+/// and completes, with no contact in the physics engine and its true
+/// footprint never in the zone. `TWINDRIVE_TRIALS=N` runs N random sites
+/// (CI runs one).
+#[test]
+fn a_lidar_robot_on_a_physics_engine_goes_around_a_box_and_keeps_out_of_a_zone() {
+    use rand::{RngExt, SeedableRng};
+    let trials: u64 = std::env::var("TWINDRIVE_TRIALS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    let (rehearsal, site) = lidar_rehearsal();
+    let footprint_m = 0.15;
+    for seed in 0..trials {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(400 + seed);
+        // The box on the first leg (the route runs west at y = 1.05-1.1).
+        let (bx, by) = (
+            rng.random_range(1.9..2.5),
+            1.07 + rng.random_range(-0.08..0.08),
+        );
+        let half = [rng.random_range(0.05..0.12), rng.random_range(0.05..0.12)];
+        let block = [[bx - half[0], by - half[1]], [bx + half[0], by + half[1]]];
+        // The zone south of the route, from the room's wall up.
+        let (zx, zl) = (rng.random_range(1.2..3.2), rng.random_range(0.15..0.4));
+        let zone = [[zx - zl, 0.0], [zx + zl, rng.random_range(0.2..0.45)]];
+        let trial = tempfile::tempdir().unwrap();
+        let freedom = trial.path().join("freedom.toml");
+        std::fs::write(
+            &freedom,
+            format!(
+                "[[keep_out]]\nname = \"flowers\"\npolygon = [[{a}, {b}], [{c}, {b}], [{c}, {d}], [{a}, {d}]]\n",
+                a = zone[0][0],
+                b = zone[0][1],
+                c = zone[1][0],
+                d = zone[1][1]
+            ),
+        )
+        .unwrap();
+        let plan = trial.path().join("plan.json");
+        let out = twindrive(&[
+            "plan",
+            s(&rehearsal.path().join("wf")),
+            "--calibration",
+            s(&fixture().path("calib.json")),
+            "--scenario",
+            s(&rehearsal.path().join("site.toml")),
+            "--freedom",
+            s(&freedom),
+            "--out",
+            s(&plan),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let world = format!(
+            "rectangles = [{{ min = [{}, {}], max = [{}, {}] }}]",
+            block[0][0], block[0][1], block[1][0], block[1][1]
+        );
+        let mut r = RosRobot::start_site(site, &world, &["--physics", "mujoco"], &plan);
+        let (code, report) = r.master();
+        let journal = r.log("robot/journal.jsonl");
+        assert_eq!(
+            code,
+            Some(0),
+            "box {block:?}, zone {zone:?}: {report}\nrobot: {}\njournal: {journal}",
+            r.log("robot.log")
+        );
+        assert_eq!(report["outcome"], "completed", "{report}");
+        assert!(
+            report["handbacks"].as_array().unwrap().is_empty(),
+            "{report}"
+        );
+        assert_eq!(
+            (&report["collisions"], &report["bumps"]),
+            (&0.into(), &0.into())
+        );
+        let detours = report["detours"].as_array().unwrap();
+        let done = detours.iter().find(|d| d["rejoined"] == true);
+        let done = done.unwrap_or_else(|| panic!("no detour back on the plan: {report}"));
+        let stats = r.driver_stats();
+        assert_eq!(stats["physics"], "mujoco");
+        assert_eq!(
+            stats["contact_ticks"], 0,
+            "MuJoCo saw a contact: box {block:?}"
+        );
+        // The driver's ticks carry MuJoCo's true position (x, y last).
+        let track: Vec<[f64; 2]> = stats["ticks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| [t[3].as_f64().unwrap(), t[4].as_f64().unwrap()])
+            .collect();
+        let nearest = |r: [[f64; 2]; 2]| {
+            track
+                .iter()
+                .map(|p| to_rect(*p, r))
+                .fold(f64::INFINITY, f64::min)
+        };
+        let (to_zone, to_box) = (nearest(zone), nearest(block));
+        eprintln!(
+            "trial {seed}: box {block:?}, zone {zone:?}: detour +{:.1} s, +{:.2} m; closest to the box {to_box:.3} m, to the zone {to_zone:.3} m (centre; footprint {footprint_m} m)",
+            done["extra_s"].as_f64().unwrap(),
+            done["extra_m"].as_f64().unwrap()
+        );
+        assert!(to_box > footprint_m, "{to_box} m from the box");
+        assert!(
+            to_zone > footprint_m,
+            "the footprint entered the zone: {to_zone} m"
+        );
+    }
 }
 
 /// `twindrive bag info`'s message count and per-topic (type, count).
