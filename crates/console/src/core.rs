@@ -10,6 +10,7 @@ use serde_json::{Value, json};
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::envelope::{SigningKey, Supervision};
 use twindrive_log::MissionLog;
+use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_sim::Scenario;
@@ -26,6 +27,7 @@ pub enum Job {
         scenario: Box<Scenario>,
         params: DiffDriveParams,
         redundancy: RedundancyConfig,
+        freedom: Box<FreedomSettings>,
     },
     Verify {
         plan: Arc<MissionPlan>,
@@ -47,8 +49,9 @@ impl Job {
                 scenario,
                 params,
                 redundancy,
+                freedom,
             } => JobResult::Plan(
-                planning::make_plan(&log, &scenario, &params, redundancy).and_then(|p| {
+                planning::make_plan(&log, &scenario, &params, redundancy, *freedom).and_then(|p| {
                     let v = planning::verify(&p.plan, &scenario)?;
                     Ok((p, v))
                 }),
@@ -102,6 +105,7 @@ pub struct Core {
     pub robots: Vec<SharedSlot>,
     settings: Settings,
     redundancy: RedundancyConfig,
+    freedom: FreedomSettings,
     plan: Option<PlanResult>,
     plan_rev: u64,
     verification: Option<(Verification, Value)>,
@@ -167,6 +171,7 @@ impl Core {
             robots,
             settings,
             redundancy,
+            freedom: FreedomSettings::default(),
             plan: None,
             plan_rev: 0,
             verification: None,
@@ -267,7 +272,10 @@ impl Core {
                     "twin: rehearsal of {secs:.1} s recorded"
                 ))))
             }
-            Command::Plan { redundancy } => {
+            Command::Plan {
+                redundancy,
+                freedom,
+            } => {
                 if let Some(job) = self.job {
                     return Err(format!("busy {job}; wait for it"));
                 }
@@ -279,6 +287,11 @@ impl Core {
                     .rehearsal()
                     .ok_or("plan: record a rehearsal first")?
                     .clone();
+                if let Some(f) = freedom {
+                    f.validate(self.ws.scenario().robot.footprint_radius_m)
+                        .map_err(|e| format!("plan: the robot's freedom, {e}"))?;
+                    self.freedom = f;
+                }
                 if let Some(r) = redundancy {
                     self.redundancy = r;
                 }
@@ -288,6 +301,7 @@ impl Core {
                     scenario: Box::new(self.ws.scenario().clone()),
                     params: self.settings.params,
                     redundancy: self.redundancy.clone(),
+                    freedom: Box::new(self.freedom.clone()),
                 }))
             }
             Command::Verify => {
@@ -500,6 +514,7 @@ impl Core {
             "verify_rev": self.verify_rev,
             "verdict": verdict,
             "redundancy": self.redundancy,
+            "freedom": self.freedom,
             "can_sign": self.settings.key.is_some(),
             "params": {
                 "left_diameter_m": self.settings.params.left_diameter_m,
@@ -697,6 +712,40 @@ mod tests {
             .expect("refused");
         assert!(e.contains("--calibration"), "{e}");
         assert_eq!(state(&mut c, s)["job"], Value::Null);
+    }
+
+    #[test]
+    fn the_robots_freedom_goes_with_the_plan_and_a_zone_on_its_path_fails_it() {
+        let mut c = core(true);
+        let s = rehearse(&mut c, 1);
+        // A corridor narrower than the robot is refused at once, naming it.
+        let e = apply(
+            &mut c,
+            r#"{"cmd":"plan","freedom":{"corridor":[{"region":[[0,0],[1,0],[1,1]],"half_width_m":0.01}]}}"#,
+            s,
+        )
+        .err()
+        .unwrap();
+        assert!(e.contains("corridor[0].half_width_m"), "{e}");
+        assert_eq!(state(&mut c, s)["job"], Value::Null);
+        // A zone over where the robot starts: the plan is made and signed
+        // with it, and verification names it.
+        let Ok(Applied::Job(job)) = apply(
+            &mut c,
+            r#"{"cmd":"plan","freedom":{"keep_out":[{"name":"pond","polygon":[[2.5,0.8],[3.5,0.8],[3.5,1.3],[2.5,1.3]]}]}}"#,
+            s,
+        ) else {
+            panic!("a planning job")
+        };
+        c.finish(job.run()).unwrap();
+        let st = state(&mut c, s);
+        assert_eq!(st["freedom"]["keep_out"][0]["name"], "pond");
+        assert_eq!(st["verdict"]["passed"], false, "{st}");
+        let reasons = st["verdict"]["reasons"].to_string();
+        assert!(reasons.contains("pond"), "{reasons}");
+        let frame = c.frame(s);
+        let plan: Value = serde_json::from_str(&frame.plan.unwrap().1).unwrap();
+        assert_eq!(plan["freedom"]["keep_out"][0]["name"], "pond");
     }
 
     #[test]

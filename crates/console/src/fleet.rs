@@ -24,7 +24,7 @@ use twindrive_mission::plan::{MissionPlan, PlanGeometry, hex};
 use twindrive_sim::Scenario;
 use twindrive_store::{DirStore, MasterArchive};
 
-use crate::planning::columns;
+use crate::planning::{columns, freedom_view};
 
 /// Statuses kept for the page's time series (an hour at one a second).
 const SERIES_LEN: usize = 3600;
@@ -225,9 +225,13 @@ impl RobotSlot {
                 }
             }
             Link::Operating(op) => {
-                let before = (op.report.handbacks.len(), op.report.twin_updates.len());
+                let counts = |op: &Operator<DirStore>| {
+                    let r = &op.report;
+                    (r.handbacks.len(), r.twin_updates.len(), r.detours.len())
+                };
+                let before = counts(op);
                 op.handle(message, now_ns);
-                let after = (op.report.handbacks.len(), op.report.twin_updates.len());
+                let after = counts(op);
                 if before != after {
                     self.mission_rev += 1;
                 }
@@ -662,6 +666,8 @@ impl RobotSlot {
             "series": series,
             "plan": plan.map(|p| columns(p.samples.iter().map(|s| (s.t_s - p.samples[0].t_s, s.x_m, s.y_m)))),
             "plan_sha256": plan.map(|p| p.sha256.clone()),
+            "freedom": plan.map(|p| freedom_view(p)),
+            "detours": op.map(|o| &o.report.detours),
             "window": window,
             "twin_updates": op.map(|o| &o.report.twin_updates),
             "handbacks": op.map(|o| &o.report.handbacks),
@@ -725,6 +731,8 @@ fn event_line(
             )
         }
         "twin_updated" => ("info", format!("the twin updated from the hand-back: {d}")),
+        "detour" => ("info", format!("detour: {d}")),
+        "detour_done" => ("info", format!("detour done: {d}")),
         "awaiting_operator" => (
             "warn",
             "waiting for you: continue or end the mission".into(),
@@ -926,6 +934,88 @@ mod tests {
         assert!(slot.take_events().is_empty(), "taken once");
     }
 
+    /// A detour the robot reports (begun, then back on the plan) reaches
+    /// the page: the detail lists both with the plan's corridor, the
+    /// mission's revision moves on, the event list tells each.
+    #[test]
+    fn a_detour_the_robot_reports_reaches_the_page() {
+        use twindrive_link::wire::DetourReport;
+        let scenario = twindrive_sim::builtin::load("wall_following")
+            .unwrap()
+            .unwrap();
+        let mut w = crate::workspace::Workspace::new(scenario.clone());
+        w.wall_follow(0);
+        w.set_speed(32.0, 0).unwrap();
+        w.record_start(0);
+        w.advance(1_000_000_000);
+        let log = w.record_stop(1_000_000_000).unwrap().clone();
+        let made = crate::planning::make_plan(
+            &log,
+            &scenario,
+            &scenario.robot.nominal_params,
+            crate::planning::default_redundancy(&scenario),
+            Default::default(),
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let mut slot = RobotSlot::new("r1", dir.path(), MasterConfig::default());
+        let key = SigningKey::from_bytes(&[7; 32]);
+        let world = "00".repeat(32);
+        let signing = Signing {
+            key: &key,
+            world_sha256: &world,
+            unix_now_s: 1.8e9,
+            unix_at_zero_s: 1.8e9,
+            expires_in_s: 60,
+            supervision: Supervision {
+                dead_man_timeout_s: None,
+            },
+        };
+        slot.upload(made.plan.clone(), &made.plan_json, &scenario, &signing, 0)
+            .unwrap();
+        let transfer = slot.master().uploading().unwrap();
+        let rev = slot.mission_rev();
+        let mut robot = Stamper::new("r1");
+        for (k, rejoined) in [false, true].into_iter().enumerate() {
+            let body = Body::Detour(Box::new(DetourReport {
+                plan: transfer,
+                index: 1,
+                plan_t_s: 3.0,
+                from: [1.0, 1.0, 0.0],
+                from_sample: 300,
+                waypoints: vec![[1.0, 1.0], [1.5, 0.7], [2.0, 1.0]],
+                rejoin: 500,
+                obstacle: vec![[1.4, 1.0], [1.45, 1.05]],
+                rejoined,
+                extra_s: if rejoined { 2.5 } else { 0.0 },
+                extra_m: if rejoined { 0.4 } else { 0.0 },
+            }));
+            let now = (k as u64 + 1) * 1_000_000_000;
+            let m = robot.stamp(body, now);
+            slot.handle(&m, now);
+        }
+        assert!(slot.mission_rev() > rev);
+        let d = slot.detail();
+        let detours = d["detours"].as_array().unwrap();
+        assert_eq!(detours.len(), 2, "{d}");
+        assert_eq!(detours[1]["rejoined"], true);
+        assert_eq!(detours[1]["waypoints"].as_array().unwrap().len(), 3);
+        assert_eq!(
+            d["freedom"]["corridor_half_width_m"]
+                .as_array()
+                .unwrap()
+                .len(),
+            made.plan.samples.len()
+        );
+        let events = slot.take_events();
+        let told = |s: &str| events.iter().any(|(_, t)| t.contains(s));
+        assert!(told("robot r1: detour: going around"), "{events:?}");
+        assert!(
+            told("robot r1: detour done: back on the plan at sample 500"),
+            "{events:?}"
+        );
+    }
+
     fn entry(event: &str, detail: &str) -> TimelineEntry {
         TimelineEntry {
             t_s: 1.0,
@@ -976,5 +1066,14 @@ mod tests {
                 .contains("mission ended by the operator")
         );
         assert_eq!(line("upload_started", "plan x (10 bytes signed)"), None);
+        let (level, text) = line("detour", "going around something the map lacks").unwrap();
+        assert_eq!(level, "info");
+        assert!(text.starts_with("robot r1: detour: going around"), "{text}");
+        assert!(
+            line("detour_done", "back on the plan at sample 40")
+                .unwrap()
+                .1
+                .contains("detour done: back on the plan")
+        );
     }
 }

@@ -7,6 +7,7 @@ use serde::Serialize;
 use serde_json::{Value, json};
 use twindrive_link::envelope::Tolerances;
 use twindrive_log::MissionLog;
+use twindrive_mission::freedom::{FreedomSettings, sample_arc_lengths};
 use twindrive_mission::path::PathSample;
 use twindrive_mission::pipeline::{PipelineSettings, plan_from_log};
 use twindrive_mission::plan::{MissionPlan, sha256_hex};
@@ -55,6 +56,26 @@ pub fn mcap_bytes(log: &MissionLog, scenario: &Scenario) -> Result<Vec<u8>, Stri
     Ok(cursor.into_inner())
 }
 
+/// What the page draws of a plan's freedom: the corridor's half width at
+/// each sample (m; `null` without a corridor), the keep-out zones and the
+/// detour bounds, as signed in the plan.
+pub fn freedom_view(plan: &MissionPlan) -> Value {
+    let f = &plan.header.freedom;
+    let corridor = (!f.corridor.is_empty()).then(|| {
+        sample_arc_lengths(&plan.samples)
+            .iter()
+            .map(|&s| f.half_width_at(s).map_or(0.0, r4))
+            .collect::<Vec<_>>()
+    });
+    json!({
+        "corridor_half_width_m": corridor,
+        "stretches": f.corridor.len(),
+        "keep_out": f.keep_out,
+        "max_extra_time_s": f.max_extra_time_s,
+        "max_extra_distance_m": f.max_extra_distance_m,
+    })
+}
+
 /// The redundancy settings the console starts with: pinch at the robot's
 /// footprint, as `twindrive plan` does.
 pub fn default_redundancy(scenario: &Scenario) -> RedundancyConfig {
@@ -69,13 +90,14 @@ pub fn make_plan(
     scenario: &Scenario,
     params: &twindrive_kinematics::DiffDriveParams,
     redundancy: RedundancyConfig,
+    freedom: FreedomSettings,
 ) -> Result<PlanResult, String> {
     let rehearsal_mcap = mcap_bytes(log, scenario)?;
     let settings = PipelineSettings {
         planner: Default::default(),
         redundancy,
         filter: Default::default(),
-        freedom: Default::default(),
+        freedom,
     };
     let (plan, stages) = plan_from_log(
         log,
@@ -146,6 +168,8 @@ pub fn make_plan(
             "reversing_m": r4(summary.reversing_m),
         },
         "settings": settings.redundancy,
+        "freedom_settings": settings.freedom,
+        "freedom": freedom_view(&plan),
         "sha256": plan.sha256,
         "samples": plan.samples.len(),
     });
@@ -229,6 +253,7 @@ mod tests {
             w.scenario(),
             &scenario.robot.nominal_params,
             default_redundancy(&scenario),
+            FreedomSettings::default(),
         )
         .unwrap();
         let plan = &result.plan;
@@ -257,5 +282,47 @@ mod tests {
             "{failed:?}"
         );
         assert!(view["closed_loop"]["x"].as_array().unwrap().len() > 10);
+        // The corridor is drawn at every sample, no narrower than the
+        // robot's body.
+        let corridor = result.view["freedom"]["corridor_half_width_m"]
+            .as_array()
+            .unwrap();
+        assert_eq!(corridor.len(), plan.samples.len());
+        let footprint = scenario.robot.footprint_radius_m;
+        assert!(
+            corridor
+                .iter()
+                .all(|w| w.as_f64().unwrap() >= footprint - 1e-4),
+            "{corridor:?}"
+        );
+        // The operator's zones and corridor regions are the plan's: a
+        // region over the whole site sets the corridor everywhere, a zone
+        // away from the route is signed with the plan.
+        let freedom: FreedomSettings = serde_json::from_value(json!({
+            "corridor": [{"region": [[-100, -100], [100, -100], [100, 100], [-100, 100]], "half_width_m": 0.45}],
+            "keep_out": [{"name": "far", "polygon": [[500, 500], [501, 500], [501, 501]]}],
+            "max_extra_time_s": 12.5,
+        }))
+        .unwrap();
+        let zoned = make_plan(
+            &log,
+            w.scenario(),
+            &scenario.robot.nominal_params,
+            default_redundancy(&scenario),
+            freedom,
+        )
+        .unwrap();
+        let f = &zoned.view["freedom"];
+        assert!(
+            f["corridor_half_width_m"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|w| w == 0.45),
+            "{f}"
+        );
+        assert_eq!(f["keep_out"][0]["name"], "far");
+        assert_eq!(f["max_extra_time_s"], 12.5);
+        assert_eq!(zoned.plan.header.freedom.keep_out.len(), 1);
     }
 }

@@ -2,6 +2,7 @@
 //! how a bad one is answered.
 
 use serde::Deserialize;
+use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::redundancy::RedundancyConfig;
 
 /// A command from the page.
@@ -33,10 +34,14 @@ pub enum Command {
     RecordStart,
     RecordStop,
     /// Run the pipeline on the rehearsal, with these redundancy settings
-    /// (keep regions and time windows included) or the last ones.
+    /// (keep regions and time windows included) and this freedom for the
+    /// robot (keep-out zones, corridor regions, detour bounds), or the last
+    /// ones.
     Plan {
         #[serde(default)]
         redundancy: Option<RedundancyConfig>,
+        #[serde(default)]
+        freedom: Option<FreedomSettings>,
     },
     /// Replay the plan open and closed loop on the twin.
     Verify,
@@ -96,7 +101,29 @@ mod tests {
         assert_eq!(parse(r#"{"cmd":"stop"}"#), Ok(Command::Stop));
         assert_eq!(
             parse(r#"{"cmd":"plan"}"#),
-            Ok(Command::Plan { redundancy: None })
+            Ok(Command::Plan {
+                redundancy: None,
+                freedom: None
+            })
+        );
+        let zoned = parse(
+            r#"{"cmd":"plan","freedom":{"max_extra_time_s":30,
+                "keep_out":[{"name":"pond","polygon":[[0,0],[1,0],[1,1]]}],
+                "corridor":[{"region":[[0,0],[2,0],[2,2]],"half_width_m":0.4}]}}"#,
+        )
+        .unwrap();
+        let Command::Plan {
+            freedom: Some(f), ..
+        } = zoned
+        else {
+            panic!("{zoned:?}")
+        };
+        assert_eq!(f.keep_out[0].name, "pond");
+        assert_eq!(f.corridor[0].half_width_m, 0.4);
+        assert_eq!(f.max_extra_time_s, 30.0);
+        assert_eq!(
+            f.max_extra_distance_m, 5.0,
+            "unsaid fields keep their defaults"
         );
         let with = parse(
             r#"{"cmd":"plan","redundancy":{"pinch_distance_m":0.15,
@@ -105,6 +132,7 @@ mod tests {
         .unwrap();
         let Command::Plan {
             redundancy: Some(r),
+            ..
         } = with
         else {
             panic!("{with:?}")
@@ -130,6 +158,8 @@ mod tests {
             r#"{"cmd":"drive","forward":1}"#,
             r#"{"cmd":"drive","forward":1,"turn":0,"extra":1}"#,
             r#"{"cmd":"plan","redundancy":{"pinch_distance_m":"x"}}"#,
+            r#"{"cmd":"plan","freedom":{"keep_out":[{"name":"a","polygon":"here"}]}}"#,
+            r#"{"cmd":"plan","freedom":{"max_extra_time":3}}"#,
         ] {
             let e = parse(bad).unwrap_err();
             assert!(e.contains("not a console command"), "{bad}: {e}");

@@ -1,6 +1,6 @@
 // The twindrive console page: one WebSocket to the master, reconnecting by
 // itself; the map; the twin's controls; the plan's stages; the robots.
-import { MapView, LodPath, at } from './map.js';
+import { MapView, LodPath, Band, at } from './map.js';
 
 const $ = (id) => document.getElementById(id);
 const map = new MapView($('map'));
@@ -12,16 +12,22 @@ const COLORS = {
   openLoop: '#38a169', closedLoop: '#319795', rehearsal: '#718096',
   twin: '#2b6cb0', bumped: '#e53e3e', robot: '#dd6b20', prediction: '#90cdf4',
   robotPlan: '#3182ce', pinch: '#e53e3e', spike: '#d69e2e', region: '#805ad5',
+  corridor: '#d6ebfa', keepOut: '#c53030', corridorRegion: '#2c7a7b', detour: '#9c4221',
 };
 const LEGEND = [['executed', 'executed'], ['deleted', 'deleted'], ['uncovered', 'uncovered'],
   ['plan', 'plan / twin'], ['openLoop', 'open-loop replay'], ['closedLoop', 'closed-loop replay'],
-  ['rehearsal', 'rehearsal'], ['robot', 'robot (reported) / its logs'], ['prediction', 'prediction']];
+  ['rehearsal', 'rehearsal'], ['robot', 'robot (reported) / its logs'], ['prediction', 'prediction'],
+  ['corridor', 'corridor'], ['keepOut', 'keep-out zone'], ['detour', 'detour (robot)']];
 
 // Everything the page knows (tests read it through window.twindrive).
 const S = {
   ws: null, connected: false, everConnected: false, instance: null, reconnects: 0,
   world: null, state: null, plan: null, verify: null, rehearsal: null,
   focus: null, detail: null, regions: [], acked: new Set(), errors: [],
+  // The robot's freedom as the operator draws it: keep-out zones and
+  // corridor regions ({ kind, name, polygon, half_width_m }), and the
+  // polygon being drawn (its vertices).
+  zones: [], draft: null,
   // What the last map frame drew of the robots: { id, pose, color }.
   drawn: { robots: [] },
   // Bytes and milliseconds (parse and build) of the heavy messages.
@@ -109,6 +115,7 @@ function onState(m) {
     addEvent({ seq: `restart${m.instance}`, level: 'info', text: 'the console restarted; reconnected to the new one' });
   }
   S.instance = m.instance;
+  if (!S.state && m.freedom && !S.zones.length) loadFreedom(m.freedom);
   S.state = m;
   const t = m.twin;
   $('twin-readout').textContent =
@@ -236,6 +243,13 @@ function renderRobot(r) {
     };
     notes.push(`discrepancy over ${d.series.t.length} statuses: deviation ${stat(d.series.deviation)}; range residual ${stat(d.series.residual)}`);
   }
+  const detours = (d && d.detours) || [];
+  const done = detours.filter((x) => x.rejoined);
+  if (detours.length) {
+    const s = (k) => done.reduce((a, x) => a + x[k], 0);
+    notes.push(`${done.length} detour(s) on its own, back on the plan (${fmt(s('extra_s'), 1)} s, ${fmt(s('extra_m'))} m more than the plan)` +
+      (detours.length > done.length ? '; going around something now' : ''));
+  }
   if (r.learnt.length) notes.push(`the twin learnt ${r.learnt.length} block(s) from the robot`);
   for (const u of (d && d.twin_updates) || []) {
     if (u.params) {
@@ -306,6 +320,10 @@ function onDetail(d) {
   if (key !== S.detailLayers) {
     S.detailLayers = key;
     map.setLayer('robot:plan', d.plan ? new LodPath(d.plan) : null, { color: COLORS.robotPlan, width: 1, dash: [6, 4], alpha: 0.8 });
+    const widths = d.freedom?.corridor_half_width_m;
+    const own = d.plan_sha256 && d.plan_sha256 !== S.plan?.sha256;
+    map.setLayer('corridor:robot', own && widths ? new Band(d.plan, widths) : null, { color: COLORS.corridor });
+    map.setVisible('corridor', map.isVisible('corridor'));
     for (const n of [...map.layers.keys()]) if (n.startsWith('robot:log')) map.setLayer(n, null);
     d.logs.forEach((l, i) => map.setLayer(`robot:log${i}`, new LodPath(l), { color: COLORS.robot, width: 2 }));
   }
@@ -322,18 +340,30 @@ function onPlan(p) {
   map.setLayer('deleted', deleted.length ? new LodPath(ex, deleted) : null, { color: COLORS.deleted, width: 2.5, alpha: 0.8 });
   map.setLayer('uncovered', uncovered.length ? new LodPath(ex, uncovered) : null, { color: COLORS.uncovered, width: 4 });
   map.setLayer('plan', new LodPath(p.plan), { color: COLORS.plan, width: 2 });
-  for (const g of ['executed', 'deleted', 'uncovered', 'plan']) map.setVisible(g, map.isVisible(g));
+  const widths = p.freedom.corridor_half_width_m;
+  map.setLayer('corridor', widths ? new Band(p.plan, widths) : null, { color: COLORS.corridor });
+  for (const g of ['executed', 'deleted', 'uncovered', 'plan', 'corridor']) map.setVisible(g, map.isVisible(g));
   const s = p.summary;
   $('plan-summary').innerHTML =
     `plan <code>${p.sha256.slice(0, 12)}</code>: <b>${fmt(s.plan_length_m)} m in ${fmt(s.plan_duration_s, 1)} s</b> ` +
     `from ${fmt(s.executed_length_m)} m in ${fmt(s.executed_duration_s, 1)} s rehearsed · ` +
     `<b>${fmt(s.coverage_percent, 2)} %</b> of the route within ${fmt(s.coverage_radius_m)} m (${fmt(s.uncovered_m, 3)} m uncovered) · ` +
     `${s.loops_removed} loop(s), ${s.kinks_removed} kink(s), ${fmt(s.trailing_retrace_m)} m trailing retrace cut · ` +
-    `${s.refused_cuts} cut(s) refused (they would drop ground) · ${s.spikes_found} spike(s) filtered in ${s.filter_windows} window(s) · ${p.samples} samples`;
+    `${s.refused_cuts} cut(s) refused (they would drop ground) · ${s.spikes_found} spike(s) filtered in ${s.filter_windows} window(s) · ${p.samples} samples · ` +
+    freedomLine(p.freedom);
   $('verdict').textContent = '';
   map.setLayer('replays:open', null);
   map.setLayer('replays:closed', null);
   updateCursorRange();
+}
+
+// The freedom a plan was signed with, in words.
+function freedomLine(f) {
+  const w = f.corridor_half_width_m;
+  const corridor = w && w.length
+    ? `corridor ${fmt(Math.min(...w))}–${fmt(Math.max(...w))} m each side in ${f.stretches} stretch(es)`
+    : 'no corridor (the robot hands back on anything unexpected)';
+  return `${corridor}, ${f.keep_out.length} keep-out zone(s); detours may add ${fmt(f.max_extra_time_s, 0)} s in all, ${fmt(f.max_extra_distance_m, 1)} m each`;
 }
 
 function onVerify(v) {
@@ -396,25 +426,180 @@ $('regions').addEventListener('click', (e) => {
   if (i !== undefined) { S.regions.splice(Number(i), 1); renderRegions(); }
 });
 
+// ---------------------------------------------------------------- freedom
+// Keep-out zones (the robot never enters them) and corridor regions (the
+// corridor's half width where the plan's path runs inside one), signed
+// with the plan. Drawing: a drag makes a rectangle; clicks make a polygon,
+// closed by a click on its first or last vertex or by Enter (Escape drops
+// it). Outside a drawing mode a vertex can be dragged.
+const CLOSE_PX = 10;
+
+function pickVertex(mode, a, b) {
+  const px = 1 / map.scale;
+  const kind = mode === 'zone' ? 'keep_out' : 'corridor';
+  if (!S.draft && Math.hypot(b[0] - a[0], b[1] - a[1]) > CLOSE_PX * px) {
+    addZone(kind, [[a[0], a[1]], [b[0], a[1]], [b[0], b[1]], [a[0], b[1]]]);
+    setMode(null);
+    return;
+  }
+  if (!S.draft) S.draft = { kind, polygon: [] };
+  const v = S.draft.polygon;
+  const near = (p) => p && Math.hypot(p[0] - b[0], p[1] - b[1]) <= CLOSE_PX * px;
+  if (v.length >= 3 && (near(v[0]) || near(v[v.length - 1]))) {
+    finishDraft();
+    setMode(null);
+    return;
+  }
+  if (!near(v[v.length - 1])) v.push([b[0], b[1]]);
+  map.dirty = true;
+}
+
+// Closes the polygon being drawn (dropped with fewer than three vertices).
+function finishDraft() {
+  const d = S.draft;
+  S.draft = null;
+  if (d && d.polygon.length >= 3) addZone(d.kind, d.polygon);
+  map.dirty = true;
+}
+
+function addZone(kind, polygon) {
+  const word = kind === 'keep_out' ? 'zone' : 'corridor';
+  let k = 1;
+  while (S.zones.some((z) => z.name === `${word} ${k}`)) k++;
+  const half = parseFloat($('corridor-width').value);
+  S.zones.push({ kind, name: `${word} ${k}`, polygon, half_width_m: Number.isFinite(half) ? half : 0.5 });
+  renderZones();
+}
+
+// Shoelace area (m^2).
+function area(poly) {
+  let a = 0;
+  for (let i = 0; i < poly.length; i++) {
+    const [x0, y0] = poly[i], [x1, y1] = poly[(i + 1) % poly.length];
+    a += x0 * y1 - x1 * y0;
+  }
+  return Math.abs(a) / 2;
+}
+
+function renderZones() {
+  $('zones').innerHTML = S.zones.map((z, i) => {
+    const what = z.kind === 'keep_out' ? 'keep out' : 'corridor';
+    const width = z.kind === 'corridor'
+      ? ` half width <input data-i="${i}" data-f="half_width_m" type="number" step="0.05" min="0.05" value="${z.half_width_m}"> m` : '';
+    return `<li data-kind="${z.kind}"><input data-i="${i}" data-f="name" value="${esc(z.name)}" size="10"> ${what}, ` +
+      `${z.polygon.length} vertices, ${fmt(area(z.polygon))} m²${width} <button data-remove="${i}">remove</button></li>`;
+  }).join('');
+  map.dirty = true;
+}
+$('zones').addEventListener('click', (e) => {
+  const i = e.target.dataset.remove;
+  if (i !== undefined) { S.zones.splice(Number(i), 1); renderZones(); }
+});
+$('zones').addEventListener('change', (e) => {
+  const { i, f } = e.target.dataset;
+  if (i === undefined) return;
+  const z = S.zones[Number(i)];
+  z[f] = f === 'name' ? e.target.value.trim() : parseFloat(e.target.value);
+  renderZones();
+});
+
+// A press within a few pixels of a vertex drags it.
+map.grab = (w, px) => {
+  for (const z of S.zones) {
+    for (let j = 0; j < z.polygon.length; j++) {
+      const [x, y] = z.polygon[j];
+      if (Math.hypot(x - w[0], y - w[1]) <= CLOSE_PX * px) {
+        return (to) => { z.polygon[j] = [to[0], to[1]]; renderZones(); };
+      }
+    }
+  }
+  return null;
+};
+
+// What the plan command carries; a bound left empty keeps its default.
+function freedomSettings() {
+  const f = {
+    keep_out: S.zones.filter((z) => z.kind === 'keep_out').map((z) => ({ name: z.name, polygon: z.polygon })),
+    corridor: S.zones.filter((z) => z.kind === 'corridor').map((z) => ({ region: z.polygon, half_width_m: z.half_width_m })),
+  };
+  const time = parseFloat($('max-extra-time').value), dist = parseFloat($('max-extra-distance').value);
+  if (Number.isFinite(time)) f.max_extra_time_s = time;
+  if (Number.isFinite(dist)) f.max_extra_distance_m = dist;
+  return f;
+}
+
+// The console's last freedom settings (a page opened later takes them up).
+function loadFreedom(f) {
+  S.zones = [
+    ...f.keep_out.map((z) => ({ kind: 'keep_out', name: z.name, polygon: z.polygon, half_width_m: 0.5 })),
+    ...f.corridor.map((c, i) => ({ kind: 'corridor', name: `corridor ${i + 1}`, polygon: c.region, half_width_m: c.half_width_m })),
+  ];
+  $('max-extra-time').value = String(f.max_extra_time_s);
+  $('max-extra-distance').value = String(f.max_extra_distance_m);
+  renderZones();
+}
+
+function drawZones(ctx, px, zones, dashed) {
+  ctx.lineWidth = 2 * px;
+  ctx.setLineDash(dashed ? [6 * px, 4 * px] : []);
+  for (const z of zones) {
+    const keep = z.kind === 'keep_out';
+    ctx.beginPath();
+    z.polygon.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+    ctx.closePath();
+    ctx.fillStyle = keep ? 'rgba(197, 48, 48, 0.18)' : 'rgba(44, 122, 123, 0.10)';
+    ctx.strokeStyle = keep ? COLORS.keepOut : COLORS.corridorRegion;
+    ctx.fill();
+    ctx.stroke();
+    if (!dashed) for (const [x, y] of z.polygon) ctx.strokeRect(x - 3 * px, y - 3 * px, 6 * px, 6 * px);
+  }
+  ctx.setLineDash([]);
+}
+
+// A robot's detours: the way it planned from where it left the plan, and
+// the points where its readings ended on what the map lacked.
+function drawDetours(ctx, px, detours) {
+  for (const d of detours) {
+    ctx.strokeStyle = COLORS.detour;
+    ctx.lineWidth = 2.5 * px;
+    ctx.setLineDash(d.rejoined ? [] : [5 * px, 3 * px]);
+    ctx.beginPath();
+    ctx.moveTo(d.from[0], d.from[1]);
+    for (const [x, y] of d.waypoints) ctx.lineTo(x, y);
+    ctx.stroke();
+    ctx.setLineDash([]);
+    ctx.fillStyle = COLORS.detour;
+    ctx.beginPath(); ctx.arc(d.from[0], d.from[1], 4 * px, 0, 2 * Math.PI); ctx.fill();
+  }
+}
+
 // ---------------------------------------------------------------- controls
 $('btn-wall').onclick = () => send({ cmd: 'wall_follow' });
 $('btn-stop').onclick = () => send({ cmd: 'stop' });
 $('btn-reset').onclick = () => send({ cmd: 'reset' });
 $('speed').onchange = () => send({ cmd: 'speed', factor: parseFloat($('speed').value) });
 $('btn-record').onclick = () => send({ cmd: S.state?.twin.recording_s !== null && S.state ? 'record_stop' : 'record_start' });
-$('btn-plan').onclick = () => send({ cmd: 'plan', redundancy: redundancySettings() });
+$('btn-plan').onclick = () => {
+  if (S.draft) finishDraft();
+  send({ cmd: 'plan', redundancy: redundancySettings(), freedom: freedomSettings() });
+};
 $('btn-verify').onclick = () => send({ cmd: 'verify' });
 $('btn-upload').onclick = () => {
   if (S.focus) send({ cmd: 'upload', robot: S.focus, force: $('force-upload').checked });
 };
 function setMode(mode) {
+  if (S.draft) finishDraft();
   map.mode = map.mode === mode ? null : mode;
   $('btn-place').classList.toggle('on', map.mode === 'place');
   $('btn-region').classList.toggle('on', map.mode === 'region');
+  $('btn-zone').classList.toggle('on', map.mode === 'zone');
+  $('btn-corridor').classList.toggle('on', map.mode === 'corridor');
   $('map').className = map.mode || '';
 }
 $('btn-place').onclick = () => setMode('place');
 $('btn-region').onclick = () => setMode('region');
+$('btn-zone').onclick = () => setMode('zone');
+$('btn-corridor').onclick = () => setMode('corridor');
 map.onPick = (mode, a, b) => {
   if (mode === 'place') {
     const heading = Math.hypot(b[0] - a[0], b[1] - a[1]) > 0.05 ? Math.atan2(b[1] - a[1], b[0] - a[0]) : 0;
@@ -423,6 +608,9 @@ map.onPick = (mode, a, b) => {
     const r = Math.hypot(b[0] - a[0], b[1] - a[1]);
     if (r > 0.02) S.regions.push({ kind: 'circle', x_m: a[0], y_m: a[1], radius_m: r });
     renderRegions();
+  } else if (mode === 'zone' || mode === 'corridor') {
+    pickVertex(mode, a, b);
+    return; // the mode stays until the polygon is closed
   }
   setMode(null);
 };
@@ -433,6 +621,12 @@ const held = new Set();
 const KEYS = { ArrowUp: 'f', KeyW: 'f', ArrowDown: 'b', KeyS: 'b', ArrowLeft: 'l', KeyA: 'l', ArrowRight: 'r', KeyD: 'r' };
 function typing(e) { return ['INPUT', 'SELECT', 'TEXTAREA'].includes(e.target.tagName); }
 window.addEventListener('keydown', (e) => {
+  if (!typing(e) && (e.key === 'Enter' || e.key === 'Escape') && (S.draft || map.mode)) {
+    if (e.key === 'Escape') S.draft = null;
+    setMode(null); // closes a polygon being drawn
+    e.preventDefault();
+    return;
+  }
   const k = KEYS[e.code];
   if (!k || typing(e)) return;
   e.preventDefault();
@@ -494,6 +688,22 @@ map.overlay = (ctx, px) => {
   ctx.strokeStyle = COLORS.region;
   ctx.lineWidth = 1.5 * px;
   for (const r of S.regions) { ctx.beginPath(); ctx.arc(r.x_m, r.y_m, r.radius_m, 0, 2 * Math.PI); ctx.fill(); ctx.stroke(); }
+  // The robot's freedom: the zones being drawn, the one in progress, and
+  // (dashed) those the focused robot's plan was signed with.
+  if (map.isVisible('zones')) {
+    drawZones(ctx, px, S.zones, false);
+    if (S.draft) {
+      ctx.strokeStyle = S.draft.kind === 'keep_out' ? COLORS.keepOut : COLORS.corridorRegion;
+      ctx.lineWidth = 2 * px;
+      ctx.beginPath();
+      S.draft.polygon.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+      ctx.stroke();
+      for (const [x, y] of S.draft.polygon) ctx.strokeRect(x - 3 * px, y - 3 * px, 6 * px, 6 * px);
+    }
+    const signed = S.detail?.freedom?.keep_out || [];
+    drawZones(ctx, px, signed.map((z) => ({ kind: 'keep_out', polygon: z.polygon })), true);
+  }
+  if (S.detail?.detours && map.isVisible('detours')) drawDetours(ctx, px, S.detail.detours);
   if (S.plan && map.isVisible('pinches')) {
     ctx.strokeStyle = COLORS.pinch;
     ctx.lineWidth = 1.5 * px;

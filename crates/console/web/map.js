@@ -44,6 +44,30 @@ function buildPath(xs, ys, ranges, tol) {
   return p;
 }
 
+// A band along a path (columns x, y) as wide as `halfWidths` (m, one per
+// point) each side: a plan's corridor. Points of one width make one stroke
+// (flat ends, so a narrow stretch shows narrow between wide ones; round
+// joins; a disc at the path's two ends); the map draws bands opaque, under
+// the walls and paths, so where two strokes overlap nothing darkens.
+export class Band {
+  constructor(cols, halfWidths) {
+    this.strokes = [];
+    this.ends = [];
+    const n = Math.min(cols.x.length, halfWidths.length);
+    let start = 0;
+    for (let i = 1; i <= n; i++) {
+      if (i < n && halfWidths[i] === halfWidths[start]) continue;
+      const p = new Path2D();
+      const a = Math.max(0, start - 1); // from the last point of the one before
+      p.moveTo(cols.x[a], cols.y[a]);
+      for (let k = a + 1; k < i; k++) p.lineTo(cols.x[k], cols.y[k]);
+      this.strokes.push({ path: p, half: halfWidths[start] });
+      start = i;
+    }
+    if (n) this.ends = [[cols.x[0], cols.y[0], halfWidths[0]], [cols.x[n - 1], cols.y[n - 1], halfWidths[n - 1]]];
+  }
+}
+
 // The sample of `cols` at time `t` (columns t, x, y; t increasing), or null.
 export function at(cols, t) {
   const ts = cols.t;
@@ -72,8 +96,12 @@ export class MapView {
     this.staticKey = 0; // changes with the world, the layers and their visibility
     this.cache = null;
     this.pointers = new Map();
-    this.mode = null; // null | 'place' | 'region'
+    this.mode = null; // null | 'place' | 'region' | 'zone' | 'corridor'
     this.onPick = null; // (mode, startWorld, endWorld) => void
+    // Outside a mode, a press the page claims (a zone's vertex): returns a
+    // function that takes the pointer's world position as it moves, or null
+    // to pan as usual. (world, pxInMetres) => ((world) => void) | null
+    this.grab = null;
     this.drag = null;
     this.fitted = false;
     this.installInput();
@@ -182,6 +210,7 @@ export class MapView {
         ctx.drawImage(this.grid, 0, -g.height);
         ctx.restore();
       }
+      this.drawBands(ctx);
       ctx.fillStyle = '#555';
       for (const [x0, y0, x1, y1] of w.solids) ctx.fillRect(x0, y0, x1 - x0, y1 - y0);
       ctx.strokeStyle = '#222';
@@ -190,8 +219,9 @@ export class MapView {
       for (const [x0, y0, x1, y1] of w.segments) { ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); }
       ctx.stroke();
     }
+    if (!w) this.drawBands(ctx);
     for (const [, l] of this.layers) {
-      if (!l.visible) continue;
+      if (!l.visible || l.path instanceof Band) continue;
       ctx.strokeStyle = l.style.color;
       ctx.lineWidth = (l.style.width || 1.5) * px;
       ctx.setLineDash(l.style.dash ? l.style.dash.map((d) => d * px) : []);
@@ -200,6 +230,27 @@ export class MapView {
     }
     ctx.setLineDash([]);
     ctx.globalAlpha = 1;
+  }
+
+  // Band layers (corridors), in their colour, opaque.
+  drawBands(ctx) {
+    ctx.save();
+    ctx.lineCap = 'butt';
+    ctx.lineJoin = 'round';
+    for (const [, l] of this.layers) {
+      if (!l.visible || !(l.path instanceof Band)) continue;
+      ctx.strokeStyle = ctx.fillStyle = l.style.color;
+      for (const { path, half } of l.path.strokes) {
+        ctx.lineWidth = 2 * half;
+        ctx.stroke(path);
+      }
+      for (const [x, y, half] of l.path.ends) {
+        ctx.beginPath();
+        ctx.arc(x, y, half, 0, 2 * Math.PI);
+        ctx.fill();
+      }
+    }
+    ctx.restore();
   }
 
   // The static picture is drawn once into an offscreen canvas twice the
@@ -288,6 +339,7 @@ export class MapView {
       ctx.lineWidth = 2 * px;
       ctx.beginPath();
       if (this.drag.mode === 'region') ctx.arc(a[0], a[1], Math.hypot(b[0] - a[0], b[1] - a[1]), 0, 2 * Math.PI);
+      else if (this.drag.mode === 'zone' || this.drag.mode === 'corridor') ctx.rect(a[0], a[1], b[0] - a[0], b[1] - a[1]);
       else { ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); }
       ctx.stroke();
     }
@@ -311,8 +363,11 @@ export class MapView {
       const r = c.getBoundingClientRect();
       const p = [e.clientX - r.left, e.clientY - r.top];
       this.pointers.set(e.pointerId, p);
-      if (this.mode && this.pointers.size === 1) {
-        const wpt = this.toWorld(...p);
+      const wpt = this.toWorld(...p);
+      const held = !this.mode && this.pointers.size === 1 && this.grab ? this.grab(wpt, 1 / this.scale) : null;
+      if (held) {
+        this.drag = { held };
+      } else if (this.mode && this.pointers.size === 1) {
         this.drag = { mode: this.mode, start: wpt, now: wpt };
       } else {
         this.drag = null;
@@ -323,7 +378,10 @@ export class MapView {
       const r = c.getBoundingClientRect();
       const p = [e.clientX - r.left, e.clientY - r.top];
       const old = this.pointers.get(e.pointerId);
-      if (this.drag && this.drag.mode) {
+      if (this.drag && this.drag.held) {
+        this.drag.held(this.toWorld(...p));
+        this.dirty = true;
+      } else if (this.drag && this.drag.mode) {
         this.drag.now = this.toWorld(...p);
         this.dirty = true;
       } else if (this.pointers.size === 1) {

@@ -450,6 +450,42 @@ async fn keys_and_the_joystick_drive_the_twin_and_it_stops_on_release() {
     c.clone().close().await.unwrap();
 }
 
+/// Where the map shows world point (`x`, `y`), in the viewport's pixels.
+async fn screen(c: &Client, x: f64, y: f64) -> (f64, f64) {
+    let v = c
+        .execute(
+            "const m = window.twindrive.map; const r = m.canvas.getBoundingClientRect(); \
+             const w = m.canvas.width / m.dpr, h = m.canvas.height / m.dpr; \
+             return [r.left + w / 2 + (arguments[0] - m.cx) * m.scale, r.top + h / 2 - (arguments[1] - m.cy) * m.scale];",
+            vec![json!(x), json!(y)],
+        )
+        .await
+        .unwrap();
+    let [px, py]: [f64; 2] = serde_json::from_value(v).unwrap();
+    (px.round(), py.round())
+}
+
+/// Presses the mouse at world point `from` on the map, moves it to `to`
+/// and releases it there (a click when they are the same).
+async fn drag_on_map(c: &Client, from: (f64, f64), to: (f64, f64)) {
+    let a = screen(c, from.0, from.1).await;
+    let b = screen(c, to.0, to.1).await;
+    let mouse = MouseActions::new("mouse".into())
+        .then(PointerAction::MoveTo {
+            duration: None,
+            x: a.0,
+            y: a.1,
+        })
+        .then(PointerAction::Down { button: 0 })
+        .then(PointerAction::MoveTo {
+            duration: Some(Duration::from_millis(100)),
+            x: b.0,
+            y: b.1,
+        })
+        .then(PointerAction::Up { button: 0 });
+    c.perform_actions(mouse).await.unwrap();
+}
+
 /// Records a wall-following rehearsal on the page, makes a plan, verifies it.
 async fn rehearse_and_plan(c: &Client) {
     click(c, "btn-wall").await;
@@ -493,10 +529,86 @@ async fn a_rehearsal_becomes_a_plan_with_its_stages_drawn_and_verified() {
     loaded(c, &con.url).await;
     rehearse_and_plan(c).await;
     click(c, "btn-stop").await;
+    // The operator draws the robot's freedom on the map: a keep-out zone
+    // dragged as a rectangle in a corner the route keeps away from, a
+    // corridor region of 0.45 m clicked corner by corner around where the
+    // rehearsal was 10 s in (closed on its first corner), then one of the
+    // zone's corners dragged on.
+    click(c, "btn-zone").await;
+    drag_on_map(c, (0.3, 4.0), (0.9, 4.6)).await;
+    let width = c.find(Locator::Id("corridor-width")).await.unwrap();
+    width.clear().await.unwrap();
+    width.send_keys("0.45").await.unwrap();
+    click(c, "btn-corridor").await;
+    let mid: [f64; 2] = serde_json::from_value(
+        js(c, "const r = window.twindrive.S.rehearsal.track; const i = r.t.findIndex((t) => t >= r.t[0] + 10); return [r.x[i], r.y[i]]").await,
+    )
+    .unwrap();
+    let square = [[mid[0] - 0.3, mid[1] - 0.3], [mid[0] + 0.3, mid[1] + 0.3]];
+    for p in [
+        (square[0][0], square[0][1]),
+        (square[1][0], square[0][1]),
+        (square[1][0], square[1][1]),
+        (square[0][0], square[1][1]),
+        (square[0][0], square[0][1]),
+    ] {
+        drag_on_map(c, p, p).await;
+    }
+    drag_on_map(c, (0.9, 4.6), (1.0, 4.7)).await;
+    let zones = js(c, "return window.twindrive.S.zones").await;
+    let zones = zones.as_array().unwrap();
+    assert_eq!(zones.len(), 2, "{zones:?}");
+    assert_eq!(zones[0]["kind"], "keep_out");
+    assert_eq!(zones[1]["kind"], "corridor");
+    assert_eq!(
+        zones[1]["polygon"].as_array().unwrap().len(),
+        4,
+        "{zones:?}"
+    );
+    let near = |v: &Value, x: f64, y: f64| {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .any(|p| (p[0].as_f64().unwrap() - x).hypot(p[1].as_f64().unwrap() - y) < 0.03)
+    };
+    assert!(
+        near(&zones[0]["polygon"], 1.0, 4.7),
+        "the corner moved: {zones:?}"
+    );
+    assert!(!near(&zones[0]["polygon"], 0.9, 4.6), "{zones:?}");
+    shot(c, "05a_freedom_drawn").await;
     click(c, "btn-plan").await;
     wait_js(c, "return !!window.twindrive.S.plan", 60.0, "the plan").await;
+    // The plan is signed with them: the zone as drawn, the corridor set by
+    // the region where the path starts.
+    let freedom = js(c, "return window.twindrive.S.plan.freedom").await;
+    let zone = &freedom["keep_out"][0];
+    assert_eq!(zone["name"], "zone 1", "{zone}");
+    assert!(near(&zone["polygon"], 1.0, 4.7), "{zone}");
+    let widths = freedom["corridor_half_width_m"].as_array().unwrap();
+    assert_eq!(
+        widths.len() as u64,
+        js(c, "return window.twindrive.S.plan.samples")
+            .await
+            .as_u64()
+            .unwrap()
+    );
+    let path = js(c, "return window.twindrive.S.plan.plan").await;
+    let (xs, ys) = (path["x"].as_array().unwrap(), path["y"].as_array().unwrap());
+    let mut inside = 0;
+    for ((x, y), w) in xs.iter().zip(ys).zip(widths) {
+        let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+        // Clear of the square's edges by more than a pixel's worth.
+        let within = |v: f64, lo: f64, hi: f64| v > lo + 0.02 && v < hi - 0.02;
+        if within(x, square[0][0], square[1][0]) && within(y, square[0][1], square[1][1]) {
+            assert_eq!(w.as_f64().unwrap(), 0.45, "at ({x}, {y})");
+            inside += 1;
+        }
+    }
+    assert!(inside > 10, "{inside} plan samples in the region");
+    assert!(widths.iter().any(|w| w.as_f64().unwrap() > 0.45));
     let layers = js(c, "return [...window.twindrive.map.layers.keys()]").await;
-    for l in ["executed", "plan", "rehearsal"] {
+    for l in ["executed", "plan", "rehearsal", "corridor"] {
         assert!(
             layers.as_array().unwrap().iter().any(|v| v == l),
             "{l} in {layers}"
@@ -515,6 +627,7 @@ async fn a_rehearsal_becomes_a_plan_with_its_stages_drawn_and_verified() {
     let doc = tmp.path().join(format!("plans/{sha}.json"));
     let plan: Value = serde_json::from_slice(&std::fs::read(&doc).unwrap()).unwrap();
     assert_eq!(plan["sha256"], sha);
+    assert_eq!(plan["header"]["freedom"]["keep_out"], freedom["keep_out"]);
     shot(c, "05_plan_stages").await;
     click(c, "btn-verify").await;
     wait_js(
