@@ -26,6 +26,7 @@ use std::sync::Arc;
 use twindrive_estimation::mapping::{Beam as GridBeam, CellState, LogOdds, LogOddsGrid};
 use twindrive_kinematics::Pose;
 
+use twindrive_mission::distance_transform;
 use twindrive_mission::freedom::{distance_to_boundary, inside};
 use twindrive_mission::grid_search::{ClearanceGrid, Clearances};
 use twindrive_mission::plan::MissionPlan;
@@ -104,18 +105,10 @@ pub struct LocalPlanner {
     seen: LogOddsGrid,
     /// Distance of each cell to the nearest obstacle (m), and scratch.
     distance: Vec<f64>,
-    scratch: Scratch,
+    scratch: distance_transform::Scratch,
     search: ClearanceGrid,
     /// Arc length of each plan sample.
     along_m: Arc<[f64]>,
-}
-
-#[derive(Default)]
-struct Scratch {
-    f: Vec<f64>,
-    d: Vec<f64>,
-    v: Vec<usize>,
-    z: Vec<f64>,
 }
 
 impl LocalPlanner {
@@ -152,7 +145,7 @@ impl LocalPlanner {
             inside: vec![false; n * n],
             seen: seen.unwrap_or_else(|| LogOddsGrid::new(r, LogOdds::default())),
             distance: vec![0.0; n * n],
-            scratch: Scratch::default(),
+            scratch: distance_transform::Scratch::default(),
             search: ClearanceGrid::new(
                 [(first[0] as f64 + 0.5) * r, (first[1] as f64 + 0.5) * r],
                 r,
@@ -343,7 +336,7 @@ impl LocalPlanner {
             let occupied = self.walls[cell] || self.seen_occupied(self.centre(cell));
             self.distance[cell] = if occupied { 0.0 } else { big };
         }
-        edt(&mut self.distance, self.size, &mut self.scratch);
+        distance_transform::edt(&mut self.distance, self.size, &mut self.scratch);
         let r = self.settings.cell_m;
         let clearances = self.search.clearances_mut();
         for ((c, d2), plannable) in clearances
@@ -447,72 +440,9 @@ impl LocalPlanner {
     }
 }
 
-/// The exact squared Euclidean distance transform of `f` (0 on obstacles,
-/// a large number elsewhere), in cells², in place: one dimension at a
-/// time, each the lower envelope of parabolas (Felzenszwalb and
-/// Huttenlocher, "Distance Transforms of Sampled Functions", 2012).
-fn edt(f: &mut [f64], size: [usize; 2], s: &mut Scratch) {
-    let [w, h] = size;
-    let n = w.max(h);
-    s.f.resize(n, 0.0);
-    s.d.resize(n, 0.0);
-    s.v.resize(n, 0);
-    s.z.resize(n + 1, 0.0);
-    for j in 0..h {
-        for i in 0..w {
-            s.f[i] = f[i + j * w];
-        }
-        edt_1d(w, s);
-        for i in 0..w {
-            f[i + j * w] = s.d[i];
-        }
-    }
-    for i in 0..w {
-        for j in 0..h {
-            s.f[j] = f[i + j * w];
-        }
-        edt_1d(h, s);
-        for j in 0..h {
-            f[i + j * w] = s.d[j];
-        }
-    }
-}
-
-fn edt_1d(n: usize, s: &mut Scratch) {
-    let (f, d, v, z) = (&s.f, &mut s.d, &mut s.v, &mut s.z);
-    let mut k = 0usize;
-    v[0] = 0;
-    z[0] = f64::NEG_INFINITY;
-    z[1] = f64::INFINITY;
-    let meet = |q: usize, p: usize| {
-        let (qf, pf) = (q as f64, p as f64);
-        ((f[q] + qf * qf) - (f[p] + pf * pf)) / (2.0 * (qf - pf))
-    };
-    for q in 1..n {
-        let mut x = meet(q, v[k]);
-        while x <= z[k] {
-            k -= 1;
-            x = meet(q, v[k]);
-        }
-        k += 1;
-        v[k] = q;
-        z[k] = x;
-        z[k + 1] = f64::INFINITY;
-    }
-    k = 0;
-    for (q, dq) in d.iter_mut().enumerate().take(n) {
-        while z[k + 1] < q as f64 {
-            k += 1;
-        }
-        let dx = q as f64 - v[k] as f64;
-        *dq = dx * dx + f[v[k]];
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{RngExt, SeedableRng};
 
     /// A straight plan along y = 0 from x = 0 to 10 in an empty site, with
     /// the corridor `stretches` and `zones`.
@@ -603,32 +533,5 @@ mod tests {
         assert!(p.in_corridor([2.5, 0.3]));
         assert!(!plannable([2.5, 0.3]), "too near the zone to plan through");
         assert!(plannable([2.5, 0.1]));
-    }
-
-    #[test]
-    fn the_distance_transform_is_exact_on_random_obstacles() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        for _ in 0..5 {
-            let size = [rng.random_range(5..40), rng.random_range(5..40)];
-            let n = size[0] * size[1];
-            let obstacles: Vec<usize> = (0..rng.random_range(1..8))
-                .map(|_| rng.random_range(0..n))
-                .collect();
-            let mut f: Vec<f64> = (0..n)
-                .map(|c| if obstacles.contains(&c) { 0.0 } else { 1e12 })
-                .collect();
-            edt(&mut f, size, &mut Scratch::default());
-            for (c, got) in f.iter().enumerate() {
-                let (i, j) = ((c % size[0]) as f64, (c / size[0]) as f64);
-                let want = obstacles
-                    .iter()
-                    .map(|&o| {
-                        let (oi, oj) = ((o % size[0]) as f64, (o / size[0]) as f64);
-                        (i - oi).powi(2) + (j - oj).powi(2)
-                    })
-                    .fold(f64::INFINITY, f64::min);
-                assert_eq!(*got, want, "cell {c} of {size:?}");
-            }
-        }
     }
 }

@@ -10,9 +10,13 @@ use serde_json::{Value, json};
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::envelope::{SigningKey, Supervision};
 use twindrive_log::MissionLog;
+use twindrive_mission::coverage::with_sweeps;
+use twindrive_mission::follower::{Follower, FollowerSettings};
 use twindrive_mission::freedom::FreedomSettings;
+use twindrive_mission::goals::Goals;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_mission::route::{RoutePlanner, RouteSettings};
 use twindrive_sim::Scenario;
 
 use crate::fleet::{SharedSlot, Signing};
@@ -110,6 +114,9 @@ pub struct Core {
     plan_rev: u64,
     verification: Option<(Verification, Value)>,
     verify_rev: u64,
+    /// The way to the operator's goals (or why there is none), as the
+    /// page draws it.
+    route: Option<Value>,
     job: Option<&'static str>,
     events: VecDeque<Value>,
     event_seq: u64,
@@ -176,6 +183,7 @@ impl Core {
             plan_rev: 0,
             verification: None,
             verify_rev: 0,
+            route: None,
             job: None,
             events: VecDeque::new(),
             event_seq: 0,
@@ -228,6 +236,95 @@ impl Core {
     }
 
     /// Carries out a command from a page at console time `now_ns`.
+    /// Plans the way to `goals` from where the twin's robot stands, out of
+    /// the keep-out zones of the freedom last set; with `drive`, sends the
+    /// robot along it recording a rehearsal.
+    fn goals(&mut self, goals: &Goals, drive: bool, now_ns: u64) -> Result<Applied, String> {
+        goals.validate().map_err(|e| format!("goals: {e}"))?;
+        if drive && let Some(job) = self.job {
+            return Err(format!("busy {job}; wait for it"));
+        }
+        self.ws.advance(now_ns);
+        let pose = self.ws.pose();
+        let scenario = self.ws.scenario();
+        let settings = RouteSettings {
+            clearance_m: goals.clearance_m,
+            ..RouteSettings::default()
+        };
+        let planner = RoutePlanner::new(
+            &scenario.world,
+            &self.freedom.keep_out,
+            scenario.robot.footprint_radius_m,
+            settings,
+        )
+        .ok_or("goals: the twin's site has no walls or map to plan on")?;
+        // The areas' sweeps after the waypoints.
+        let (goals, sweeps) = with_sweeps(
+            &planner,
+            goals,
+            [pose.x_m, pose.y_m],
+            scenario.robot.footprint_radius_m,
+        )
+        .map_err(|e| format!("goals: {e}"))?;
+        let goals = &goals;
+        let areas: Vec<Value> = sweeps
+            .iter()
+            .map(|(_, s)| {
+                json!({
+                    "lanes": s.lanes,
+                    "touch_ups": s.touch_ups,
+                    "free_m2": s.free_m2,
+                    "planned_percent": s.planned_percent,
+                })
+            })
+            .collect();
+        let waypoints: Vec<[f64; 2]> = goals.waypoints.iter().map(|w| w.at()).collect();
+        let route = match planner.route([pose.x_m, pose.y_m], &waypoints) {
+            Ok(route) => route,
+            Err(why) => {
+                self.route = Some(json!({
+                    "waypoints": waypoints,
+                    "unreachable": why,
+                    "reason": why.to_string(),
+                }));
+                return Err(format!("goals: {why}"));
+            }
+        };
+        let slowest = (0..goals.waypoints.len())
+            .map(|k| goals.leg_speed_m_s(k))
+            .fold(goals.speed_m_s, f64::min);
+        let settings = FollowerSettings::default();
+        let duration_s = route.duration_s(slowest, settings.max_turn_rad_s)
+            + goals.waypoints.iter().map(|w| w.dwell_s).sum::<f64>();
+        let line = format!(
+            "twin: a way of {:.2} m to {} waypoint(s), about {duration_s:.0} s, the footprint at least {:.3} m clear",
+            route.length_m,
+            goals.waypoints.len(),
+            route.min_clearance_m
+        );
+        self.route = Some(json!({
+            "waypoints": waypoints,
+            "points": route.points,
+            "stops": route.stops,
+            "length_m": route.length_m,
+            "min_clearance_m": route.min_clearance_m,
+            "duration_s": duration_s,
+            "areas": areas,
+            "unreachable": Value::Null,
+        }));
+        if drive {
+            if self.ws.recording_s().is_none() {
+                self.ws.record_start(now_ns);
+            }
+            self.ws
+                .follow(Follower::new(&route, goals, settings), now_ns);
+            return Ok(Applied::Done(Some(format!(
+                "{line}: driving it, recording the rehearsal"
+            ))));
+        }
+        Ok(Applied::Done(Some(line)))
+    }
+
     pub fn apply(&mut self, cmd: Command, now_ns: u64) -> Result<Applied, String> {
         let done = |s: &str| Ok(Applied::Done(Some(s.to_owned())));
         match cmd {
@@ -243,6 +340,7 @@ impl Core {
                 self.ws.wall_follow(now_ns);
                 done("twin: wall follower on")
             }
+            Command::Goals { goals, drive } => self.goals(&goals, drive, now_ns),
             Command::Speed { factor } => {
                 self.ws.set_speed(factor, now_ns)?;
                 Ok(Applied::Done(Some(format!("twin: {factor}x real time"))))
@@ -512,6 +610,7 @@ impl Core {
                 "duration_s": p.plan.duration_s(),
             })),
             "verify_rev": self.verify_rev,
+            "route": self.route,
             "verdict": verdict,
             "redundancy": self.redundancy,
             "freedom": self.freedom,
@@ -701,6 +800,77 @@ mod tests {
         c.tick(s);
         assert!(apply(c, r#"{"cmd":"record_stop"}"#, s).is_ok());
         s
+    }
+
+    /// Goals clicked on the page: an unreachable one says why (and the
+    /// state carries it for the map); reachable ones give the way, and
+    /// driven, the twin follows it and the drive becomes the rehearsal,
+    /// ending at the last waypoint, which the pipeline plans from.
+    #[test]
+    fn goals_give_a_way_and_a_rehearsal_and_an_unreachable_one_says_why() {
+        let mut c = core(true);
+        let e = apply(
+            &mut c,
+            r#"{"cmd":"goals","goals":{"waypoints":[{"x_m":4.5,"y_m":1.5}]}}"#,
+            0,
+        )
+        .err()
+        .unwrap();
+        assert!(e.contains("waypoint 1 at (4.50, 1.50)"), "{e}");
+        let st = state(&mut c, 0);
+        assert_eq!(st["route"]["unreachable"]["why"], "too_close", "{st}");
+        assert!(apply(&mut c, r#"{"cmd":"speed","factor":64}"#, 0).is_ok());
+        let goals = r#"{"cmd":"goals","drive":true,"goals":{"speed_m_s":0.25,"waypoints":[{"x_m":1.5,"y_m":1.0},{"x_m":1.1,"y_m":2.2,"heading_rad":1.57}]}}"#;
+        let Ok(Applied::Done(Some(line))) = apply(&mut c, goals, 0) else {
+            panic!("a way")
+        };
+        assert!(line.contains("driving it"), "{line}");
+        let st = state(&mut c, 0);
+        assert_eq!(st["twin"]["drive"], "route");
+        assert!(st["route"]["length_m"].as_f64().unwrap() > 2.5, "{st}");
+        assert!(st["twin"]["recording_s"].is_number());
+        let mut t = 0;
+        while c.ws.rehearsal().is_none() {
+            t += 100_000_000;
+            assert!(t < 10_000_000_000, "the twin did not get there");
+            c.tick(t);
+        }
+        let st = state(&mut c, t);
+        assert_eq!(st["twin"]["drive"], "idle");
+        assert!(st["twin"]["bumps"].as_array().unwrap().is_empty(), "{st}");
+        let end = c.ws.pose();
+        assert!((end.x_m - 1.1).hypot(end.y_m - 2.2) < 0.03, "{end:?}");
+        let Ok(Applied::Job(job)) = apply(&mut c, r#"{"cmd":"plan"}"#, t) else {
+            panic!("a planning job")
+        };
+        let line = c.finish(job.run()).unwrap();
+        assert!(line.contains("verification passed"), "{line}");
+    }
+
+    /// An area drawn on the page is swept: the way's stops are its lanes
+    /// and touch-ups, and the drive becomes the rehearsal.
+    #[test]
+    fn an_area_is_swept_into_a_rehearsal() {
+        let mut c = core(true);
+        assert!(apply(&mut c, r#"{"cmd":"speed","factor":64}"#, 0).is_ok());
+        let goals = r#"{"cmd":"goals","drive":true,"goals":{"clearance_m":0.02,"speed_m_s":0.3,"areas":[{"polygon":[[0.3,2.0],[1.3,2.0],[1.3,3.0],[0.3,3.0]]}]}}"#;
+        assert!(apply(&mut c, goals, 0).is_ok());
+        let st = state(&mut c, 0);
+        let area = &st["route"]["areas"][0];
+        assert!(area["lanes"].as_u64().unwrap() >= 3, "{area}");
+        assert!(area["planned_percent"].as_f64().unwrap() >= 95.0, "{area}");
+        let mut t = 0;
+        while c.ws.rehearsal().is_none() {
+            t += 100_000_000;
+            assert!(t < 20_000_000_000, "the twin did not finish the sweep");
+            c.tick(t);
+        }
+        assert!(
+            state(&mut c, t)["twin"]["bumps"]
+                .as_array()
+                .unwrap()
+                .is_empty()
+        );
     }
 
     #[test]

@@ -3,6 +3,7 @@
 
 use serde::Deserialize;
 use twindrive_mission::freedom::FreedomSettings;
+use twindrive_mission::goals::Goals;
 use twindrive_mission::redundancy::RedundancyConfig;
 
 /// A command from the page.
@@ -19,6 +20,14 @@ pub enum Command {
     Stop,
     /// Hand the twin's robot to the wall follower.
     WallFollow,
+    /// Plan the way from where the twin's robot stands through the goals'
+    /// waypoints (out of the keep-out zones); with `drive`, send the robot
+    /// along it, recording a rehearsal that ends at the last waypoint.
+    Goals {
+        goals: Goals,
+        #[serde(default)]
+        drive: bool,
+    },
     /// Simulated time per real time.
     Speed {
         factor: f64,
@@ -79,7 +88,7 @@ pub fn parse(text: &str) -> Result<Command, String> {
     serde_json::from_str(text).map_err(|e| {
         format!(
             "not a console command ({e}); expected a JSON object with `cmd` one of drive, stop, \
-             wall_follow, speed, reset, place, record_start, record_stop, plan, verify, upload, \
+             wall_follow, goals, speed, reset, place, record_start, record_stop, plan, verify, upload, \
              replan, end_mission, focus"
         )
     })
@@ -99,6 +108,17 @@ mod tests {
             })
         );
         assert_eq!(parse(r#"{"cmd":"stop"}"#), Ok(Command::Stop));
+        let goals = parse(
+            r#"{"cmd":"goals","drive":true,"goals":{"clearance_m":0.05,
+                "waypoints":[{"x_m":1,"y_m":2},{"x_m":3,"y_m":4,"heading_rad":1.5}]}}"#,
+        )
+        .unwrap();
+        let Command::Goals { goals, drive } = goals else {
+            panic!("{goals:?}")
+        };
+        assert!(drive);
+        assert_eq!(goals.clearance_m, 0.05);
+        assert_eq!(goals.waypoints[1].heading_rad, Some(1.5));
         assert_eq!(
             parse(r#"{"cmd":"plan"}"#),
             Ok(Command::Plan {

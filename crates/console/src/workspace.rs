@@ -1,12 +1,14 @@
 //! The operator's twin: a simulator they drive by hand (a dead-man command
-//! that lapses unless renewed) or hand to the wall follower, at real time or
-//! faster, recording a run as a rehearsal. No I/O: time comes in as
+//! that lapses unless renewed), hand to the wall follower or send along a
+//! way to their goals, at real time or faster, recording a run as a
+//! rehearsal. No I/O: time comes in as
 //! nanoseconds of the console's clock, so tests step it as they like.
 
 use std::collections::VecDeque;
 
 use twindrive_kinematics::{Pose, wheel_speeds};
 use twindrive_log::MissionLog;
+use twindrive_mission::follower::Follower;
 use twindrive_sim::ControllerConfig;
 use twindrive_sim::controller::{Controller, Observation};
 use twindrive_sim::scenario::WallFollowerSpec;
@@ -39,6 +41,9 @@ enum Drive {
         expires_ns: u64,
     },
     WallFollower(Box<Controller>),
+    /// Along a way through the operator's waypoints; a recording going on
+    /// ends when the last is reached.
+    Route(Box<Follower>),
 }
 
 /// A bump the twin's robot felt (for the map).
@@ -143,6 +148,7 @@ impl Workspace {
             Drive::Idle => "idle",
             Drive::Manual { .. } => "manual",
             Drive::WallFollower(_) => "wall_follower",
+            Drive::Route(_) => "route",
         }
     }
 
@@ -221,6 +227,12 @@ impl Workspace {
                 spec,
                 sensor,
             })));
+    }
+
+    /// Sends the robot along a way (planned from where it stands now).
+    pub fn follow(&mut self, follower: Follower, now_ns: u64) {
+        self.advance(now_ns);
+        self.drive = Drive::Route(Box::new(follower));
     }
 
     pub fn set_speed(&mut self, factor: f64, now_ns: u64) -> Result<(), String> {
@@ -347,6 +359,7 @@ impl Workspace {
 
     fn step_once(&mut self) {
         let nominal = self.base.robot.nominal_params;
+        let (pose, t_s) = (self.sim.pose(), self.t_s());
         let drive = &mut self.drive;
         let mut control = |s: &Sensed| -> [f64; 2] {
             match drive {
@@ -365,6 +378,11 @@ impl Workspace {
                     },
                     &nominal,
                 ),
+                Drive::Route(f) => {
+                    let (v, omega) = f.command(&pose, t_s);
+                    let (l, r) = wheel_speeds(&nominal, v, omega);
+                    [l, r]
+                }
             }
         };
         if !self.sim.step_with(&mut self.out, &mut control) {
@@ -395,6 +413,17 @@ impl Workspace {
             if self.out.record.t_ns as f64 * 1e-9 >= MAX_REHEARSAL_S {
                 let log = self.recording.take().expect("recording");
                 tracing::warn!("the rehearsal reached {MAX_REHEARSAL_S} s; recording stopped");
+                self.rehearsal = Some(log);
+                self.rehearsal_rev += 1;
+            }
+        }
+        // At the last waypoint: the robot stands, and the drive there is
+        // the rehearsal (a bump on the way ends it too: the way was not
+        // clear, and the operator sees where).
+        let arrived = matches!(&self.drive, Drive::Route(f) if f.done());
+        if arrived || (bump && matches!(self.drive, Drive::Route(_))) {
+            self.drive = Drive::Idle;
+            if let Some(log) = self.recording.take() {
                 self.rehearsal = Some(log);
                 self.rehearsal_rev += 1;
             }

@@ -13,11 +13,12 @@ const COLORS = {
   twin: '#2b6cb0', bumped: '#e53e3e', robot: '#dd6b20', prediction: '#90cdf4',
   robotPlan: '#3182ce', pinch: '#e53e3e', spike: '#d69e2e', region: '#805ad5',
   corridor: '#d6ebfa', keepOut: '#c53030', corridorRegion: '#2c7a7b', detour: '#9c4221',
+  route: '#2f855a',
 };
 const LEGEND = [['executed', 'executed'], ['deleted', 'deleted'], ['uncovered', 'uncovered'],
   ['plan', 'plan / twin'], ['openLoop', 'open-loop replay'], ['closedLoop', 'closed-loop replay'],
   ['rehearsal', 'rehearsal'], ['robot', 'robot (reported) / its logs'], ['prediction', 'prediction'],
-  ['corridor', 'corridor'], ['keepOut', 'keep-out zone'], ['detour', 'detour (robot)']];
+  ['corridor', 'corridor'], ['keepOut', 'keep-out zone'], ['detour', 'detour (robot)'], ['route', 'way to the goals']];
 
 // Everything the page knows (tests read it through window.twindrive).
 const S = {
@@ -28,6 +29,8 @@ const S = {
   // corridor regions ({ kind, name, polygon, half_width_m }), and the
   // polygon being drawn (its vertices).
   zones: [], draft: null,
+  // The operator's waypoints for the twin ({ x_m, y_m, heading_rad? }).
+  waypoints: [],
   // What the last map frame drew of the robots: { id, pose, color }.
   drawn: { robots: [] },
   // Bytes and milliseconds (parse and build) of the heavy messages.
@@ -141,6 +144,7 @@ function onState(m) {
   renderRobot(m.robots.find((r) => r.id === S.focus));
   renderBanner(m.robots);
   renderEvents(m.events);
+  renderRoute(m.route);
   if (m.verdict) renderVerdict(m.verdict);
   updateCursorRange();
   map.dirty = true;
@@ -436,7 +440,7 @@ const CLOSE_PX = 10;
 
 function pickVertex(mode, a, b) {
   const px = 1 / map.scale;
-  const kind = mode === 'zone' ? 'keep_out' : 'corridor';
+  const kind = { zone: 'keep_out', corridor: 'corridor', sweep: 'sweep' }[mode];
   if (!S.draft && Math.hypot(b[0] - a[0], b[1] - a[1]) > CLOSE_PX * px) {
     addZone(kind, [[a[0], a[1]], [b[0], a[1]], [b[0], b[1]], [a[0], b[1]]]);
     setMode(null);
@@ -463,7 +467,7 @@ function finishDraft() {
 }
 
 function addZone(kind, polygon) {
-  const word = kind === 'keep_out' ? 'zone' : 'corridor';
+  const word = { keep_out: 'zone', corridor: 'corridor', sweep: 'area' }[kind];
   let k = 1;
   while (S.zones.some((z) => z.name === `${word} ${k}`)) k++;
   const half = parseFloat($('corridor-width').value);
@@ -483,7 +487,7 @@ function area(poly) {
 
 function renderZones() {
   $('zones').innerHTML = S.zones.map((z, i) => {
-    const what = z.kind === 'keep_out' ? 'keep out' : 'corridor';
+    const what = { keep_out: 'keep out', corridor: 'corridor', sweep: 'to sweep' }[z.kind];
     const width = z.kind === 'corridor'
       ? ` half width <input data-i="${i}" data-f="half_width_m" type="number" step="0.05" min="0.05" value="${z.half_width_m}"> m` : '';
     return `<li data-kind="${z.kind}"><input data-i="${i}" data-f="name" value="${esc(z.name)}" size="10"> ${what}, ` +
@@ -543,12 +547,11 @@ function drawZones(ctx, px, zones, dashed) {
   ctx.lineWidth = 2 * px;
   ctx.setLineDash(dashed ? [6 * px, 4 * px] : []);
   for (const z of zones) {
-    const keep = z.kind === 'keep_out';
     ctx.beginPath();
     z.polygon.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
     ctx.closePath();
-    ctx.fillStyle = keep ? 'rgba(197, 48, 48, 0.18)' : 'rgba(44, 122, 123, 0.10)';
-    ctx.strokeStyle = keep ? COLORS.keepOut : COLORS.corridorRegion;
+    ctx.fillStyle = { keep_out: 'rgba(197, 48, 48, 0.18)', corridor: 'rgba(44, 122, 123, 0.10)', sweep: 'rgba(47, 133, 90, 0.12)' }[z.kind];
+    ctx.strokeStyle = { keep_out: COLORS.keepOut, corridor: COLORS.corridorRegion, sweep: COLORS.route }[z.kind];
     ctx.fill();
     ctx.stroke();
     if (!dashed) for (const [x, y] of z.polygon) ctx.strokeRect(x - 3 * px, y - 3 * px, 6 * px, 6 * px);
@@ -573,6 +576,83 @@ function drawDetours(ctx, px, detours) {
   }
 }
 
+// ---------------------------------------------------------------- goals
+// Waypoints for the twin: the console plans the way from where the twin's
+// robot stands (out of the keep-out zones drawn above) and, asked to,
+// drives it, recording the rehearsal, which ends at the last waypoint.
+function renderWaypoints() {
+  $('waypoints').innerHTML = S.waypoints.map((w, i) =>
+    `<li>(${fmt(w.x_m)}, ${fmt(w.y_m)})${w.heading_rad === undefined ? '' : `, facing ${deg(w.heading_rad)}°`} ` +
+    `<button data-i="${i}">remove</button></li>`).join('');
+  map.dirty = true;
+}
+$('waypoints').addEventListener('click', (e) => {
+  const i = e.target.dataset.i;
+  if (i !== undefined) { S.waypoints.splice(Number(i), 1); renderWaypoints(); }
+});
+$('btn-goals-clear').onclick = () => {
+  S.waypoints = [];
+  S.zones = S.zones.filter((z) => z.kind !== 'sweep');
+  renderWaypoints();
+  renderZones();
+};
+function goals(drive) {
+  if (map.mode === 'waypoint') setMode(null);
+  const goals = {
+    waypoints: S.waypoints,
+    areas: S.zones.filter((z) => z.kind === 'sweep').map((z) => ({ polygon: z.polygon })),
+  };
+  const clearance = parseFloat($('goal-clearance').value), speed = parseFloat($('goal-speed').value);
+  if (Number.isFinite(clearance)) goals.clearance_m = clearance;
+  if (Number.isFinite(speed)) goals.speed_m_s = speed;
+  send({ cmd: 'goals', drive, goals });
+}
+$('btn-route').onclick = () => goals(false);
+$('btn-drive-route').onclick = () => goals(true);
+
+function renderRoute(r) {
+  const text = !r ? '' : r.unreachable
+    ? `no way: ${r.reason}`
+    : `way: ${fmt(r.length_m)} m through ${r.waypoints.length} stop(s), about ${fmt(r.duration_s, 0)} s, the footprint at least ${fmt(r.min_clearance_m, 3)} m clear` +
+      (r.areas || []).map((a, i) => `; area ${i + 1}: ${a.lanes} lane(s), ${a.touch_ups} touch-up(s), ${fmt(a.planned_percent, 1)} % of ${fmt(a.free_m2)} m² swept as planned`).join('');
+  if ($('route-status').textContent !== text) $('route-status').textContent = text;
+  $('route-status').classList.toggle('warn', !!(r && r.unreachable));
+}
+
+// The waypoints (numbered, with their headings), the way planned to them,
+// or where it is blocked.
+function drawGoals(ctx, px) {
+  const r = S.state?.route;
+  if (r && r.points) {
+    ctx.strokeStyle = COLORS.route;
+    ctx.lineWidth = 2.5 * px;
+    ctx.setLineDash([8 * px, 4 * px]);
+    ctx.beginPath();
+    r.points.forEach(([x, y], i) => (i ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+    ctx.stroke();
+    ctx.setLineDash([]);
+  }
+  if (r && r.unreachable && r.unreachable.blocked_at) {
+    const u = r.unreachable, [bx, by] = u.blocked_at, d = 6 * px;
+    ctx.strokeStyle = COLORS.bumped;
+    ctx.lineWidth = 3 * px;
+    ctx.beginPath(); ctx.moveTo(bx - d, by - d); ctx.lineTo(bx + d, by + d); ctx.moveTo(bx - d, by + d); ctx.lineTo(bx + d, by - d); ctx.stroke();
+    ctx.setLineDash([4 * px, 4 * px]);
+    ctx.beginPath(); ctx.moveTo(u.nearest[0], u.nearest[1]); ctx.lineTo(u.at[0], u.at[1]); ctx.stroke();
+    ctx.setLineDash([]);
+  }
+  S.waypoints.forEach((w, i) => {
+    ctx.fillStyle = COLORS.route;
+    ctx.beginPath(); ctx.arc(w.x_m, w.y_m, 7 * px, 0, 2 * Math.PI); ctx.fill();
+    if (w.heading_rad !== undefined) {
+      ctx.strokeStyle = COLORS.route; ctx.lineWidth = 2 * px;
+      ctx.beginPath(); ctx.moveTo(w.x_m, w.y_m);
+      ctx.lineTo(w.x_m + 18 * px * Math.cos(w.heading_rad), w.y_m + 18 * px * Math.sin(w.heading_rad)); ctx.stroke();
+    }
+    label(ctx, px, [w.x_m - 16 * px, w.y_m - 16 * px], String(i + 1));
+  });
+}
+
 // ---------------------------------------------------------------- controls
 $('btn-wall').onclick = () => send({ cmd: 'wall_follow' });
 $('btn-stop').onclick = () => send({ cmd: 'stop' });
@@ -593,6 +673,8 @@ function setMode(mode) {
   $('btn-place').classList.toggle('on', map.mode === 'place');
   $('btn-region').classList.toggle('on', map.mode === 'region');
   $('btn-zone').classList.toggle('on', map.mode === 'zone');
+  $('btn-waypoint').classList.toggle('on', map.mode === 'waypoint');
+  $('btn-sweep').classList.toggle('on', map.mode === 'sweep');
   $('btn-corridor').classList.toggle('on', map.mode === 'corridor');
   $('map').className = map.mode || '';
 }
@@ -600,6 +682,8 @@ $('btn-place').onclick = () => setMode('place');
 $('btn-region').onclick = () => setMode('region');
 $('btn-zone').onclick = () => setMode('zone');
 $('btn-corridor').onclick = () => setMode('corridor');
+$('btn-waypoint').onclick = () => setMode('waypoint');
+$('btn-sweep').onclick = () => setMode('sweep');
 map.onPick = (mode, a, b) => {
   if (mode === 'place') {
     const heading = Math.hypot(b[0] - a[0], b[1] - a[1]) > 0.05 ? Math.atan2(b[1] - a[1], b[0] - a[0]) : 0;
@@ -608,9 +692,15 @@ map.onPick = (mode, a, b) => {
     const r = Math.hypot(b[0] - a[0], b[1] - a[1]);
     if (r > 0.02) S.regions.push({ kind: 'circle', x_m: a[0], y_m: a[1], radius_m: r });
     renderRegions();
-  } else if (mode === 'zone' || mode === 'corridor') {
+  } else if (mode === 'zone' || mode === 'corridor' || mode === 'sweep') {
     pickVertex(mode, a, b);
     return; // the mode stays until the polygon is closed
+  } else if (mode === 'waypoint') {
+    const w = { x_m: a[0], y_m: a[1] };
+    if (Math.hypot(b[0] - a[0], b[1] - a[1]) > CLOSE_PX / map.scale) w.heading_rad = Math.atan2(b[1] - a[1], b[0] - a[0]);
+    S.waypoints.push(w);
+    renderWaypoints();
+    return; // more clicks add more, until the button is pressed again
   }
   setMode(null);
 };
@@ -704,6 +794,7 @@ map.overlay = (ctx, px) => {
     drawZones(ctx, px, signed.map((z) => ({ kind: 'keep_out', polygon: z.polygon })), true);
   }
   if (S.detail?.detours && map.isVisible('detours')) drawDetours(ctx, px, S.detail.detours);
+  drawGoals(ctx, px);
   if (S.plan && map.isVisible('pinches')) {
     ctx.strokeStyle = COLORS.pinch;
     ctx.lineWidth = 1.5 * px;

@@ -62,7 +62,7 @@ impl PartialOrd for Open {
 }
 
 /// Neighbours of a cell: four sides, then four diagonals.
-const NEIGHBOURS: [(isize, isize); 8] = [
+pub const NEIGHBOURS: [(isize, isize); 8] = [
     (1, 0),
     (-1, 0),
     (0, 1),
@@ -100,6 +100,11 @@ impl ClearanceGrid {
     }
 
     /// The clearances, cell `i + j * size[0]` at index.
+    /// How many cells the grid has.
+    pub fn clearances_len(&self) -> usize {
+        self.clearance.len()
+    }
+
     pub fn clearances_mut(&mut self) -> &mut [f64] {
         &mut self.clearance
     }
@@ -149,22 +154,34 @@ impl ClearanceGrid {
     /// away from the ends when any way does.
     pub fn search(&self, from: [f64; 2], to: [f64; 2], keep: &Clearances) -> Option<Vec<usize>> {
         if keep.floor_m > 0.0
-            && let Some(path) = self.search_above(from, to, keep, keep.floor_m)
+            && let Ok(path) = self.search_above(from, to, keep, keep.floor_m)
         {
             return Some(path);
         }
-        self.search_above(from, to, keep, 0.0)
+        self.search_above(from, to, keep, 0.0).ok()
+    }
+
+    /// A* from `from` to `to` through cells that keep the floor (away from
+    /// the ends): the cells along the way, or, when none exists, the cell
+    /// the search reached nearest to `to` (where the way is closed).
+    pub fn search_or_nearest(
+        &self,
+        from: [f64; 2],
+        to: [f64; 2],
+        keep: &Clearances,
+    ) -> Result<Vec<usize>, usize> {
+        self.search_above(from, to, keep, keep.floor_m)
     }
 
     /// A* through cells that keep `floor_m`, or are within `ends_m` of
-    /// either end.
+    /// either end; without a way, the reached cell nearest to `to`.
     fn search_above(
         &self,
         from: [f64; 2],
         to: [f64; 2],
         keep: &Clearances,
         floor_m: f64,
-    ) -> Option<Vec<usize>> {
+    ) -> Result<Vec<usize>, usize> {
         let near = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) <= keep.ends_m;
         let (start, goal) = (self.cell_of(from), self.cell_of(to));
         let n = self.clearance.len();
@@ -172,9 +189,12 @@ impl ClearanceGrid {
         let mut parent = vec![usize::MAX; n];
         let mut open = BinaryHeap::new();
         let goal_p = self.centre(goal);
+        // Octile distance: the shortest 8-connected way on an empty grid,
+        // as tight as an admissible estimate gets here.
         let h = |c: usize| {
             let p = self.centre(c);
-            (p[0] - goal_p[0]).hypot(p[1] - goal_p[1])
+            let (dx, dy) = ((p[0] - goal_p[0]).abs(), (p[1] - goal_p[1]).abs());
+            dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)
         };
         cost[start] = 0.0;
         open.push(Open {
@@ -182,6 +202,7 @@ impl ClearanceGrid {
             cell: start,
         });
         let (w, hgt) = (self.size[0] as isize, self.size[1] as isize);
+        let mut nearest = (h(start), start);
         while let Some(Open { f, cell }) = open.pop() {
             if cell == goal {
                 let mut path = vec![goal];
@@ -191,10 +212,14 @@ impl ClearanceGrid {
                     path.push(c);
                 }
                 path.reverse();
-                return Some(path);
+                return Ok(path);
             }
             if f > cost[cell] + h(cell) + 1e-12 {
                 continue; // A stale entry.
+            }
+            let here = h(cell);
+            if here < nearest.0 {
+                nearest = (here, cell);
             }
             let (i, j) = (
                 (cell % self.size[0]) as isize,
@@ -233,7 +258,7 @@ impl ClearanceGrid {
                 }
             }
         }
-        None
+        Err(nearest.1)
     }
 
     /// Waypoints from `from` to `to`: the searched cells shortened by line

@@ -14,15 +14,25 @@
 //! - [`freedom`]: the robot's corridor and keep-out zones along a plan;
 //! - [`grid_search`]: the shortest way for a circular robot over a grid of
 //!   clearances (the twin's continuations and the robot's local planner);
+//! - [`distance_transform`]: the exact Euclidean distance transform of a grid;
+//! - [`site_grid`]: the twin's site as a grid of footprint clearances;
+//! - [`goals`]: the operator's waypoints for a rehearsal (`mission.toml`);
+//! - [`route`]: goal-level planning, the way through the operator's waypoints;
+//! - [`follower`]: driving that way on the twin;
+//! - [`coverage`]: sweeping an area the operator drew;
 //! - [`verify`]: replaying a plan on the twin, open and closed loop;
 //! - [`pipeline`]: the whole chain on one mission log.
 //!
 //! REP-103 frames, SI units, radians throughout.
 
 pub mod control;
+pub mod coverage;
 pub mod detour;
+pub mod distance_transform;
 mod error;
+pub mod follower;
 pub mod freedom;
+pub mod goals;
 pub mod grid_search;
 pub mod path;
 pub mod pipeline;
@@ -30,6 +40,8 @@ pub mod plan;
 pub mod planner;
 pub mod redundancy;
 pub mod retime;
+pub mod route;
+pub mod site_grid;
 pub mod spikes;
 pub mod verify;
 

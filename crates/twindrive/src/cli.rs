@@ -37,6 +37,48 @@ pub enum Command {
         #[arg(long, value_name = "SECONDS", value_parser = usage::seconds)]
         duration_s: Option<f64>,
     },
+    /// Rehearse from goals: plan the way from the scenario's start through
+    /// the waypoints of --goals on the twin's map, drive it on the twin and
+    /// write the mission log a manual rehearsal would.
+    ///
+    /// GOALS (`mission.toml`): `clearance_m` (0.1: the footprint kept clear
+    /// of everything by this), `speed_m_s` (0.2), and an ordered
+    /// `[[waypoints]]` list of `x_m`, `y_m` and optionally `heading_rad`
+    /// (turn to it there), `dwell_s` (stand there) and `speed_m_s` (the leg
+    /// to there at most this fast); the last is the goal; then `[[areas]]`
+    /// to sweep, in order (`polygon`, `sweep_radius_m`: default the
+    /// footprint, `overlap`: 0.1): lanes back and forth along each area's
+    /// longest edge, then touch-ups for the ground the lanes left, and the
+    /// share of its free ground the twin swept is printed. The way is the
+    /// shortest for the robot's footprint on a 5 cm grid of the twin's map
+    /// keeping the clearance (A*, then straight legs by line of sight), out
+    /// of the keep-out zones of --freedom; the twin's robot turns in place
+    /// at each corner and drives each leg straight. Writes into DIR what
+    /// `simulate` writes (log, ground truth, summary, figures) and
+    /// route.json (the way, its length, clearance and time). A waypoint
+    /// that cannot be reached is refused with the reason (off the site, too
+    /// close to something, or closed off, with the cell that blocks the
+    /// way): exit 1 and nothing written.
+    Rehearse {
+        /// The twin's scenario TOML (its world, its robot and its start).
+        scenario: PathBuf,
+        /// The goals (mission.toml).
+        #[arg(long, value_name = "GOALS.toml")]
+        goals: PathBuf,
+        /// Keep-out zones (a --freedom file of `twindrive plan`; its
+        /// `[[keep_out]]` zones are walls to the way).
+        #[arg(long, value_name = "FREEDOM.toml")]
+        freedom: Option<PathBuf>,
+        /// Print the way (JSON) and exit without driving it or writing.
+        #[arg(long)]
+        route_only: bool,
+        /// Output directory (created if missing; files twindrive did not write are kept).
+        #[arg(long, required_unless_present = "route_only")]
+        out: Option<PathBuf>,
+        /// Override the scenario's random seed.
+        #[arg(long)]
+        seed: Option<u64>,
+    },
     /// Estimate wheel diameters and wheelbase from encoders and an absolute
     /// pose, or with no pose reference (self-calibration) the wheels, the
     /// lidar's mount and a gyro's errors from encoders, scans and gyro.

@@ -21,6 +21,23 @@ struct Calibration {
     wheelbase_m: f64,
 }
 
+/// Reads a `--freedom` file (the robot's freedom on a plan) for a robot of
+/// `footprint_radius_m`; errors name the file and the line or field.
+pub fn read_freedom(
+    path: &Path,
+    footprint_radius_m: f64,
+) -> anyhow::Result<twindrive_mission::freedom::FreedomSettings> {
+    use anyhow::Context;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("--freedom: reading {}", path.display()))?;
+    let settings = toml::from_str::<twindrive_mission::freedom::FreedomSettings>(&text)
+        .with_context(|| format!("--freedom: {}", path.display()))?;
+    settings
+        .validate(footprint_radius_m)
+        .map_err(|e| anyhow::anyhow!("--freedom: {}: {e}", path.display()))?;
+    Ok(settings)
+}
+
 /// Reads the calibrated parameters from a `twindrive calibrate` output.
 pub fn read_calibration(path: &Path) -> anyhow::Result<DiffDriveParams> {
     let c: Calibration = twindrive_files::json::read(

@@ -486,9 +486,8 @@ async fn drag_on_map(c: &Client, from: (f64, f64), to: (f64, f64)) {
     c.perform_actions(mouse).await.unwrap();
 }
 
-/// Records a wall-following rehearsal on the page, makes a plan, verifies it.
-async fn rehearse_and_plan(c: &Client) {
-    click(c, "btn-wall").await;
+/// Runs the twin at 32 times real time.
+async fn speed_32(c: &Client) {
     c.find(Locator::Css("#speed option[value='32']"))
         .await
         .unwrap()
@@ -502,6 +501,12 @@ async fn rehearse_and_plan(c: &Client) {
         "32x",
     )
     .await;
+}
+
+/// Records a wall-following rehearsal on the page, makes a plan, verifies it.
+async fn rehearse_and_plan(c: &Client) {
+    click(c, "btn-wall").await;
+    speed_32(c).await;
     click(c, "btn-record").await;
     wait_js(
         c,
@@ -1147,4 +1152,101 @@ async fn foxglove_clients_get_the_map_the_twin_and_the_robots() {
         }
     }
     assert_eq!(seen.into_iter().collect::<Vec<_>>(), [7, 8]);
+}
+
+/// The goal workflow in the page: a goal on a wall is refused with the
+/// reason (the blocking cell on the map); waypoints clicked on the map (the
+/// last dragged for its heading) give the way, drawn with its length and
+/// clearance; the twin drives it recording the rehearsal, which ends at the
+/// goal; the plan made from it verifies, goes to the robot and the mission
+/// completes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn goals_clicked_on_the_map_become_a_mission_the_robot_completes() {
+    let m = with_robot(&repo().join("scenarios/wall_following.toml"), "lan");
+    let b = browser().await;
+    let c = &b.client;
+    loaded(c, &m.console.url).await;
+    speed_32(c).await;
+    let rev = js(c, "return window.twindrive.S.state.twin.rehearsal_rev").await;
+    click(c, "btn-waypoint").await;
+    drag_on_map(c, (4.5, 1.5), (4.5, 1.5)).await;
+    click(c, "btn-route").await;
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.route; return !!(r && r.unreachable)",
+        10.0,
+        "the refusal",
+    )
+    .await;
+    let status = text(c, "route-status").await;
+    assert!(
+        status.contains("no way: waypoint 1 at (4.50, 1.50)"),
+        "{status}"
+    );
+    click(c, "btn-goals-clear").await;
+    click(c, "btn-waypoint").await;
+    drag_on_map(c, (1.5, 1.0), (1.5, 1.0)).await;
+    drag_on_map(c, (1.1, 2.2), (1.1, 2.6)).await;
+    let waypoints = js(c, "return window.twindrive.S.waypoints").await;
+    assert_eq!(waypoints.as_array().unwrap().len(), 2, "{waypoints}");
+    let heading = waypoints[1]["heading_rad"].as_f64().unwrap();
+    assert!(
+        (heading - std::f64::consts::FRAC_PI_2).abs() < 0.1,
+        "{heading}"
+    );
+    click(c, "btn-route").await;
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.route; return !!(r && r.points)",
+        10.0,
+        "the way",
+    )
+    .await;
+    let status = text(c, "route-status").await;
+    assert!(status.starts_with("way: "), "{status}");
+    let route = js(c, "return window.twindrive.S.state.route").await;
+    assert!(route["min_clearance_m"].as_f64().unwrap() >= 0.1, "{route}");
+    shot(c, "11_way_to_the_goals").await;
+    click(c, "btn-drive-route").await;
+    wait_js(
+        c,
+        &format!(
+            "const t = window.twindrive.S.state.twin; return t.rehearsal_rev > {rev} && t.drive === 'idle'"
+        ),
+        60.0,
+        "the rehearsal driven to the goal",
+    )
+    .await;
+    let pose = pose(c).await;
+    assert!((pose[0] - 1.1).hypot(pose[1] - 2.2) < 0.05, "{pose:?}");
+    click(c, "btn-plan").await;
+    wait_js(
+        c,
+        "const v = window.twindrive.S.state.verdict; return !!(window.twindrive.S.plan && v && v.passed)",
+        60.0,
+        "a plan that verified",
+    )
+    .await;
+    wait_js(
+        c,
+        "return !document.getElementById('btn-upload').disabled",
+        10.0,
+        "the upload button",
+    )
+    .await;
+    click(c, "btn-upload").await;
+    let started = Instant::now();
+    while !text(c, "events")
+        .await
+        .contains("robot rover: mission over: completed")
+    {
+        assert!(
+            started.elapsed() < Duration::from_secs(90),
+            "{}",
+            text(c, "events").await
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    shot(c, "12_goal_mission_completed").await;
+    c.clone().close().await.unwrap();
 }

@@ -616,3 +616,91 @@ fn keep_out_zones_on_the_route_fail_verification_by_name_and_beside_it_pass() {
         assert!(!bad.join("out/plan.json").exists());
     }
 }
+
+/// `rehearse` from goals: the twin drives the way and writes what
+/// `simulate` would (the route beside it), the same goals give the same
+/// bytes, the rehearsal becomes a plan that verifies; a goal it cannot
+/// reach exits 1 with the reason and writes nothing; a bad goals file names
+/// its line; `--route-only` prints the way and writes nothing.
+#[test]
+fn a_rehearsal_from_goals_becomes_a_verified_plan() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let site = repo().join("scenarios/wall_following.toml");
+    let goals = d.join("mission.toml");
+    std::fs::write(
+        &goals,
+        "clearance_m = 0.1\n[[waypoints]]\nx_m = 1.0\ny_m = 3.5\n\n[[waypoints]]\nx_m = 5.2\ny_m = 4.2\nheading_rad = -1.57\ndwell_s = 1.0\n",
+    )
+    .unwrap();
+    let rehearse = |out: &Path, goals: &Path| {
+        twindrive(&["rehearse", s(&site), "--goals", s(goals), "--out", s(out)])
+    };
+    let (a, b) = (d.join("a"), d.join("b"));
+    for out in [&a, &b] {
+        let o = rehearse(out, &goals);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        assert!(
+            text(&o.stdout).contains("route: 2 waypoint(s)"),
+            "{}",
+            text(&o.stdout)
+        );
+    }
+    for name in ["log.csv", "ground_truth.tum", "route.json", "summary.json"] {
+        assert!(a.join(name).is_file(), "{name}");
+        if name != "route.json" {
+            assert_eq!(
+                std::fs::read(a.join(name)).unwrap(),
+                std::fs::read(b.join(name)).unwrap(),
+                "{name} differs"
+            );
+        }
+    }
+    let route: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(a.join("route.json")).unwrap()).unwrap();
+    assert!(
+        route["route"]["min_clearance_m"].as_f64().unwrap() >= 0.1,
+        "{route}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(a.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["bumps"], 0, "{summary}");
+    let (_, calib) = mission();
+    let plan = d.join("plan/plan.json");
+    let o = twindrive(&["plan", s(&a), "--calibration", s(calib), "--out", s(&plan)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let o = twindrive(&["verify-plan", s(&plan), "--out", s(&d.join("verified"))]);
+    assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
+
+    // On the inner wall's corner: too close to reach.
+    let shut = d.join("shut.toml");
+    std::fs::write(&shut, "[[waypoints]]\nx_m = 4.5\ny_m = 1.5\n").unwrap();
+    let o = rehearse(&d.join("never"), &shut);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stderr).contains("waypoint 1 at (4.50, 1.50)"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(!d.join("never").exists());
+    let bad = d.join("bad.toml");
+    std::fs::write(&bad, "[[waypoints]]\nx_m = 1.0\ny_m = 2.0\nz_m = 3.0\n").unwrap();
+    let o = rehearse(&d.join("never"), &bad);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        text(&o.stderr).contains("line 4") && text(&o.stderr).contains("bad.toml"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(!d.join("never").exists());
+    let o = twindrive(&["rehearse", s(&site), "--goals", s(&goals), "--route-only"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let printed: serde_json::Value = serde_json::from_str(&text(&o.stdout)).unwrap();
+    assert_eq!(printed["route"]["stops"].as_array().unwrap().len(), 2);
+    let o = twindrive(&["rehearse", s(&site), "--goals", s(&goals)]);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "--out is required without --route-only"
+    );
+}

@@ -2,6 +2,8 @@
 //! written whole or not at all, as the commands and the demo run them:
 //!
 //! - [`simulate`]: a scenario's run (log, ground truth, summary, figures);
+//! - [`rehearse`]: a rehearsal from goals (the way planned and driven on
+//!   the twin), written as a run is;
 //! - [`plan`]: the mission pipeline from a log to a hashed plan, with an
 //!   MCAP of every stage and the paper's pipeline figures;
 //! - [`verify`]: the plan replayed on the twin, the verdict and the overlay;
@@ -12,6 +14,7 @@
 pub mod figures;
 pub mod inputs;
 pub mod plan;
+pub mod rehearse;
 pub mod simulate;
 pub mod verification;
 pub mod verify;

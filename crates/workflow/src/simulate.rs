@@ -38,16 +38,29 @@ pub fn simulate_into(
     let log = Simulator::new(scenario).run(|done, _| bar.set_position(done));
     bar.finish_and_clear();
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "simulated");
+    let summary = write_run(&staging, &log, &world)?;
+    staging.commit()?;
+    tracing::info!(dir = %out.display(), elapsed_s = started.elapsed().as_secs_f64(), "wrote results");
+    Ok((summary, log))
+}
 
-    let summary = MissionSummary::new(&log, &world);
+/// Stages what a run on the twin writes (the log as CSV, its header, MCAP
+/// with the site map, the ground truth as TUM, the summary and the
+/// figures); the caller commits. Its summary.
+pub fn write_run(
+    staging: &Staging,
+    log: &twindrive_log::MissionLog,
+    world: &twindrive_sim::World,
+) -> anyhow::Result<MissionSummary> {
+    let summary = MissionSummary::new(log, world);
     staging.write_with("log.csv", |w| {
-        twindrive_log::write_csv(&log, w).map_err(Into::into)
+        twindrive_log::write_csv(log, w).map_err(Into::into)
     })?;
     staging.write_with("log.meta.json", |w| {
         serde_json::to_writer_pretty(w, &log.header).map_err(Into::into)
     })?;
     staging.write_with("log.mcap", |w| {
-        twindrive_log::write_mcap_with_map(&log, Some(&world.log_map()), w).map_err(Into::into)
+        twindrive_log::write_mcap_with_map(log, Some(&world.log_map()), w).map_err(Into::into)
     })?;
     staging.write_with("ground_truth.tum", |w| {
         twindrive_log::write_tum(log.steps.iter().map(|s| (s.t_ns, s.ground_truth)), w)
@@ -56,10 +69,8 @@ pub fn simulate_into(
     staging.write_with("summary.json", |w| {
         serde_json::to_writer_pretty(w, &summary).map_err(Into::into)
     })?;
-    figures::mission_figures(&log, &world, staging.dir()).context("drawing figures")?;
-    staging.commit()?;
-    tracing::info!(dir = %out.display(), elapsed_s = started.elapsed().as_secs_f64(), "wrote results");
-    Ok((summary, log))
+    figures::mission_figures(log, world, staging.dir()).context("drawing figures")?;
+    Ok(summary)
 }
 
 /// The summary as two lines for a terminal; `out` is where the files went.

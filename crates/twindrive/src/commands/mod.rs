@@ -11,6 +11,7 @@ mod map;
 mod ops;
 mod plan;
 mod prune;
+mod rehearse;
 mod relations;
 mod rosbag;
 mod simulate;
@@ -27,6 +28,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             seed,
             duration_s,
         } => simulate::run(&scenario, &out, seed, duration_s),
+        Command::Rehearse {
+            scenario,
+            goals,
+            freedom,
+            route_only,
+            out,
+            seed,
+        } => rehearse::run(&rehearse::Args {
+            scenario,
+            goals,
+            freedom,
+            route_only,
+            out,
+            seed,
+        }),
         Command::Calibrate(a) => calibrate::run(&a),
         Command::Map(a) => map::run(&a),
         Command::Plan(a) => plan::run(&a),

@@ -47,16 +47,7 @@ fn resolve(args: &PlanArgs) -> anyhow::Result<Job> {
     redundancy.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
     let scenario = scenario_for(&log, args.scenario.as_deref())?;
     let freedom = match &args.freedom {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("--freedom: reading {}", path.display()))?;
-            let settings = toml::from_str::<FreedomSettings>(&text)
-                .with_context(|| format!("--freedom: {}", path.display()))?;
-            settings
-                .validate(log.header.footprint_radius_m)
-                .map_err(|e| anyhow::anyhow!("--freedom: {}: {e}", path.display()))?;
-            settings
-        }
+        Some(path) => crate::flags::read_freedom(path, log.header.footprint_radius_m)?,
         None => FreedomSettings::default(),
     };
     Ok(Job {
