@@ -14,6 +14,7 @@ use twindrive_mission::coverage::with_sweeps;
 use twindrive_mission::follower::{Follower, FollowerSettings};
 use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::goals::Goals;
+use twindrive_mission::plan::KeepOutZone;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_mission::route::{RoutePlanner, RouteSettings};
@@ -239,8 +240,22 @@ impl Core {
     /// Plans the way to `goals` from where the twin's robot stands, out of
     /// the keep-out zones of the freedom last set; with `drive`, sends the
     /// robot along it recording a rehearsal.
-    fn goals(&mut self, goals: &Goals, drive: bool, now_ns: u64) -> Result<Applied, String> {
+    fn goals(
+        &mut self,
+        goals: &Goals,
+        drive: bool,
+        keep_out: Option<Vec<KeepOutZone>>,
+        now_ns: u64,
+    ) -> Result<Applied, String> {
         goals.validate().map_err(|e| format!("goals: {e}"))?;
+        let zones = keep_out.unwrap_or_else(|| self.freedom.keep_out.clone());
+        let probe = FreedomSettings {
+            keep_out: zones.clone(),
+            ..FreedomSettings::default()
+        };
+        probe
+            .validate(self.ws.scenario().robot.footprint_radius_m)
+            .map_err(|e| format!("goals: the keep-out zones, {e}"))?;
         if drive && let Some(job) = self.job {
             return Err(format!("busy {job}; wait for it"));
         }
@@ -253,7 +268,7 @@ impl Core {
         };
         let planner = RoutePlanner::new(
             &scenario.world,
-            &self.freedom.keep_out,
+            &zones,
             scenario.robot.footprint_radius_m,
             settings,
         )
@@ -340,7 +355,11 @@ impl Core {
                 self.ws.wall_follow(now_ns);
                 done("twin: wall follower on")
             }
-            Command::Goals { goals, drive } => self.goals(&goals, drive, now_ns),
+            Command::Goals {
+                goals,
+                drive,
+                keep_out,
+            } => self.goals(&goals, drive, keep_out, now_ns),
             Command::Speed { factor } => {
                 self.ws.set_speed(factor, now_ns)?;
                 Ok(Applied::Done(Some(format!("twin: {factor}x real time"))))
@@ -819,6 +838,16 @@ mod tests {
         assert!(e.contains("waypoint 1 at (4.50, 1.50)"), "{e}");
         let st = state(&mut c, 0);
         assert_eq!(st["route"]["unreachable"]["why"], "too_close", "{st}");
+        // A keep-out zone drawn on the page over the goal: refused by it.
+        let e = apply(
+            &mut c,
+            r#"{"cmd":"goals","keep_out":[{"name":"pond","polygon":[[1.2,0.7],[1.8,0.7],[1.8,1.3],[1.2,1.3]]}],
+                "goals":{"waypoints":[{"x_m":1.5,"y_m":1.0}]}}"#,
+            0,
+        )
+        .err()
+        .unwrap();
+        assert!(e.contains("waypoint 1 at (1.50, 1.00)"), "{e}");
         assert!(apply(&mut c, r#"{"cmd":"speed","factor":64}"#, 0).is_ok());
         let goals = r#"{"cmd":"goals","drive":true,"goals":{"speed_m_s":0.25,"waypoints":[{"x_m":1.5,"y_m":1.0},{"x_m":1.1,"y_m":2.2,"heading_rad":1.57}]}}"#;
         let Ok(Applied::Done(Some(line))) = apply(&mut c, goals, 0) else {

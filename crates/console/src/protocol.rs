@@ -4,6 +4,7 @@
 use serde::Deserialize;
 use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::goals::Goals;
+use twindrive_mission::plan::KeepOutZone;
 use twindrive_mission::redundancy::RedundancyConfig;
 
 /// A command from the page.
@@ -21,12 +22,15 @@ pub enum Command {
     /// Hand the twin's robot to the wall follower.
     WallFollow,
     /// Plan the way from where the twin's robot stands through the goals'
-    /// waypoints (out of the keep-out zones); with `drive`, send the robot
-    /// along it, recording a rehearsal that ends at the last waypoint.
+    /// waypoints and areas, out of `keep_out` (the zones on the page; the
+    /// last plan's when left out); with `drive`, send the robot along it,
+    /// recording a rehearsal that ends at the last stop.
     Goals {
         goals: Goals,
         #[serde(default)]
         drive: bool,
+        #[serde(default)]
+        keep_out: Option<Vec<KeepOutZone>>,
     },
     /// Simulated time per real time.
     Speed {
@@ -113,7 +117,7 @@ mod tests {
                 "waypoints":[{"x_m":1,"y_m":2},{"x_m":3,"y_m":4,"heading_rad":1.5}]}}"#,
         )
         .unwrap();
-        let Command::Goals { goals, drive } = goals else {
+        let Command::Goals { goals, drive, .. } = goals else {
             panic!("{goals:?}")
         };
         assert!(drive);

@@ -605,7 +605,7 @@ function goals(drive) {
   const clearance = parseFloat($('goal-clearance').value), speed = parseFloat($('goal-speed').value);
   if (Number.isFinite(clearance)) goals.clearance_m = clearance;
   if (Number.isFinite(speed)) goals.speed_m_s = speed;
-  send({ cmd: 'goals', drive, goals });
+  send({ cmd: 'goals', drive, goals, keep_out: freedomSettings().keep_out });
 }
 $('btn-route').onclick = () => goals(false);
 $('btn-drive-route').onclick = () => goals(true);
