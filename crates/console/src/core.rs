@@ -10,7 +10,7 @@ use serde_json::{Value, json};
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::envelope::{SigningKey, Supervision};
 use twindrive_log::MissionLog;
-use twindrive_mission::coverage::with_sweeps;
+use twindrive_mission::coverage::{covered_share, with_sweeps};
 use twindrive_mission::follower::{Follower, FollowerSettings};
 use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::goals::Goals;
@@ -24,6 +24,16 @@ use crate::fleet::{SharedSlot, Signing};
 use crate::planning::{self, PlanResult, Verification};
 use crate::protocol::Command;
 use crate::workspace::Workspace;
+
+/// Areas the twin is sweeping, to measure once the drive's rehearsal (the
+/// one after `rehearsal_rev`) ends.
+struct Sweeping {
+    rehearsal_rev: u64,
+    /// Each area's polygon and sweep radius (m).
+    areas: Vec<(Vec<[f64; 2]>, f64)>,
+    zones: Vec<KeepOutZone>,
+    settings: RouteSettings,
+}
 
 /// Work too slow for the console's tick, run on a blocking thread.
 pub enum Job {
@@ -118,6 +128,9 @@ pub struct Core {
     /// The way to the operator's goals (or why there is none), as the
     /// page draws it.
     route: Option<Value>,
+    /// A sweep being driven: what the twin swept of each area is measured
+    /// once its rehearsal ends.
+    sweeping: Option<Sweeping>,
     job: Option<&'static str>,
     events: VecDeque<Value>,
     event_seq: u64,
@@ -185,6 +198,7 @@ impl Core {
             verification: None,
             verify_rev: 0,
             route: None,
+            sweeping: None,
             job: None,
             events: VecDeque::new(),
             event_seq: 0,
@@ -331,6 +345,17 @@ impl Core {
             if self.ws.recording_s().is_none() {
                 self.ws.record_start(now_ns);
             }
+            self.sweeping = (!sweeps.is_empty()).then(|| Sweeping {
+                rehearsal_rev: self.ws.rehearsal_rev(),
+                areas: goals
+                    .areas
+                    .iter()
+                    .zip(&sweeps)
+                    .map(|(a, (s, _))| (a.polygon.clone(), s.sweep_radius_m))
+                    .collect(),
+                zones: zones.clone(),
+                settings: *planner.settings(),
+            });
             self.ws
                 .follow(Follower::new(&route, goals, settings), now_ns);
             return Ok(Applied::Done(Some(format!(
@@ -559,6 +584,7 @@ impl Core {
     /// Time passes: the twin moves, the operators react.
     pub fn tick(&mut self, now_ns: u64) {
         self.ws.advance(now_ns);
+        self.measure_sweep();
         let mut lines = Vec::new();
         for r in &self.robots {
             let mut slot = r.lock();
@@ -567,6 +593,54 @@ impl Core {
         }
         for (level, text) in lines {
             self.event(level, text);
+        }
+    }
+
+    /// Once a sweep's rehearsal has ended: what the twin swept of each
+    /// area, by its true track, into the way's view and the event list.
+    fn measure_sweep(&mut self) {
+        let Some(sw) = &self.sweeping else {
+            return;
+        };
+        if self.ws.rehearsal_rev() <= sw.rehearsal_rev {
+            return;
+        }
+        let sw = self.sweeping.take().expect("checked");
+        let Some(log) = self.ws.rehearsal() else {
+            return;
+        };
+        let track: Vec<[f64; 2]> = log
+            .steps
+            .iter()
+            .map(|s| [s.ground_truth.x_m, s.ground_truth.y_m])
+            .collect();
+        let scenario = self.ws.scenario();
+        let Some(planner) = RoutePlanner::new(
+            &scenario.world,
+            &sw.zones,
+            scenario.robot.footprint_radius_m,
+            sw.settings,
+        ) else {
+            return;
+        };
+        let mut lines = Vec::new();
+        for (i, (polygon, radius)) in sw.areas.iter().enumerate() {
+            let (free_m2, percent) = covered_share(&planner, polygon, &track, *radius);
+            if let Some(area) = self
+                .route
+                .as_mut()
+                .and_then(|r| r.get_mut("areas"))
+                .and_then(|a| a.get_mut(i))
+            {
+                area["swept_percent"] = json!(percent);
+            }
+            lines.push(format!(
+                "twin: area {} swept {percent:.1} % of its {free_m2:.2} m² of free ground",
+                i + 1
+            ));
+        }
+        for line in lines {
+            self.event("info", line);
         }
     }
 
@@ -894,11 +968,15 @@ mod tests {
             assert!(t < 20_000_000_000, "the twin did not finish the sweep");
             c.tick(t);
         }
+        c.tick(t);
+        let st = state(&mut c, t);
+        assert!(st["twin"]["bumps"].as_array().unwrap().is_empty());
+        let swept = st["route"]["areas"][0]["swept_percent"].as_f64().unwrap();
+        assert!(swept >= 95.0, "{swept}");
         assert!(
-            state(&mut c, t)["twin"]["bumps"]
-                .as_array()
-                .unwrap()
-                .is_empty()
+            st["events"].to_string().contains("twin: area 1 swept"),
+            "{}",
+            st["events"]
         );
     }
 
