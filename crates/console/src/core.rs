@@ -11,7 +11,7 @@ use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::envelope::{SigningKey, Supervision};
 use twindrive_log::MissionLog;
 use twindrive_mission::coverage::{covered_share, with_sweeps};
-use twindrive_mission::follower::{Follower, FollowerSettings};
+use twindrive_mission::follower::{Follower, FollowerSettings, expected_duration_s};
 use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::goals::Goals;
 use twindrive_mission::plan::KeepOutZone;
@@ -319,12 +319,8 @@ impl Core {
                 return Err(format!("goals: {why}"));
             }
         };
-        let slowest = (0..goals.waypoints.len())
-            .map(|k| goals.leg_speed_m_s(k))
-            .fold(goals.speed_m_s, f64::min);
         let settings = FollowerSettings::default();
-        let duration_s = route.duration_s(slowest, settings.max_turn_rad_s)
-            + goals.waypoints.iter().map(|w| w.dwell_s).sum::<f64>();
+        let duration_s = expected_duration_s(&route, goals, &settings);
         let line = format!(
             "twin: a way of {:.2} m to {} waypoint(s), about {duration_s:.0} s, the footprint at least {:.3} m clear",
             route.length_m,

@@ -115,24 +115,9 @@ impl Covered {
     /// Marks every cell within `r` of `p`.
     fn disc(&mut self, p: [f64; 2], r: f64) {
         let n = (r / self.cell_m).ceil() as isize + 1;
-        let Some(c) = self.index(p) else {
-            // Off the area's bounds: mark what of the disc falls inside.
-            for di in -n..=n {
-                for dj in -n..=n {
-                    let q = [
-                        p[0] + di as f64 * self.cell_m,
-                        p[1] + dj as f64 * self.cell_m,
-                    ];
-                    if (q[0] - p[0]).hypot(q[1] - p[1]) <= r
-                        && let Some(k) = self.index(q)
-                    {
-                        self.hit[k] = true;
-                    }
-                }
-            }
-            return;
-        };
-        let (ci, cj) = ((c % self.size[0]) as isize, (c / self.size[0]) as isize);
+        // The cell nearest `p`, on or off the grid.
+        let ci = ((p[0] - self.lo[0]) / self.cell_m).round() as isize;
+        let cj = ((p[1] - self.lo[1]) / self.cell_m).round() as isize;
         for di in -n..=n {
             for dj in -n..=n {
                 let (i, j) = (ci + di, cj + dj);

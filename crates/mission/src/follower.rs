@@ -66,6 +66,20 @@ struct Leg {
     waypoint: Option<usize>,
 }
 
+/// How long driving `route` through `goals`' waypoints takes (s): its
+/// length at the slowest leg's speed, its turns in place at the
+/// follower's rate, a braking and a start at every waypoint, and the
+/// dwells.
+pub fn expected_duration_s(route: &Route, goals: &Goals, settings: &FollowerSettings) -> f64 {
+    let slowest = (0..goals.waypoints.len())
+        .map(|k| goals.leg_speed_m_s(k))
+        .fold(goals.speed_m_s, f64::min);
+    let stops = goals.waypoints.len() as f64 * slowest / settings.decel_m_s2;
+    route.duration_s(slowest, settings.max_turn_rad_s)
+        + goals.waypoints.iter().map(|w| w.dwell_s).sum::<f64>()
+        + stops
+}
+
 /// Drives a route through the goals' waypoints.
 #[derive(Debug, Clone)]
 pub struct Follower {

@@ -347,7 +347,7 @@ impl RoutePlanner {
             leg.push(from);
             leg.extend(cells.iter().map(|&c| kept.centre(c)));
             leg.push(to);
-            let short = shorten(&leg, kept.cell_m(), &|p| self.keeps_clearance(p));
+            let short = shorten(&leg, &kept, &|p| self.clearance_at(p) - need);
             points.extend_from_slice(&short[1..]);
             stops.push(points.len() - 1);
             from = to;
@@ -398,25 +398,20 @@ impl RoutePlanner {
     }
 }
 
-/// `leg`'s points shortened by line of sight: from each corner, the
-/// furthest point on reachable straight through points that are `clear`
-/// (sampled every quarter of `cell_m`).
-fn shorten(leg: &[[f64; 2]], cell_m: f64, clear: &dyn Fn([f64; 2]) -> bool) -> Vec<[f64; 2]> {
-    let step = 0.25 * cell_m;
-    let sees = |a: [f64; 2], b: [f64; 2]| {
-        let length = (b[0] - a[0]).hypot(b[1] - a[1]);
-        let n = (length / step).ceil().max(1.0) as usize;
-        (0..=n).all(|s| {
-            let f = s as f64 / n as f64;
-            clear([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])])
-        })
-    };
+/// `leg`'s points shortened by line of sight: from each corner, on to the
+/// next point while the straight leg there stays `clear` (every point
+/// along it, sampled as `grid` samples a leg).
+fn shorten(
+    leg: &[[f64; 2]],
+    grid: &ClearanceGrid,
+    clear: &dyn Fn([f64; 2]) -> f64,
+) -> Vec<[f64; 2]> {
+    let sees = |a: [f64; 2], b: [f64; 2]| grid.leg_clearance(a, b, clear) > SPARE_M;
     let last = leg.len() - 1;
     let mut out = vec![leg[0]];
     let mut at = 0;
     while at < last {
         let mut next = at + 1;
-        // Furthest first over a short look-ahead, then on while in sight.
         while next < last && sees(leg[at], leg[next + 1]) {
             next += 1;
         }

@@ -14,7 +14,7 @@ use twindrive_files::Staging;
 use twindrive_kinematics::wheel_speeds;
 use twindrive_log::MissionLog;
 use twindrive_mission::coverage::{covered_share, with_sweeps};
-use twindrive_mission::follower::{Follower, FollowerSettings};
+use twindrive_mission::follower::{Follower, FollowerSettings, expected_duration_s};
 use twindrive_mission::goals::Goals;
 use twindrive_mission::plan::KeepOutZone;
 use twindrive_mission::route::{Route, RoutePlanner, RouteSettings, Unreachable};
@@ -95,14 +95,7 @@ pub fn plan_route(
         .route([s.x_m, s.y_m], &waypoints)
         .map_err(|why: Unreachable| anyhow::anyhow!("{why}"))?;
     let planning_ms = started.elapsed().as_secs_f64() * 1e3;
-    let slowest = (0..goals.waypoints.len())
-        .map(|k| goals.leg_speed_m_s(k))
-        .fold(goals.speed_m_s, f64::min);
-    // Stopping at every waypoint costs a braking and a start (s).
-    let stops = driven.waypoints.len() as f64 * slowest / FollowerSettings::default().decel_m_s2;
-    let duration_s = route.duration_s(slowest, FollowerSettings::default().max_turn_rad_s)
-        + goals.waypoints.iter().map(|w| w.dwell_s).sum::<f64>()
-        + stops;
+    let duration_s = expected_duration_s(&route, &driven, &FollowerSettings::default());
     Ok(PlannedRoute {
         route,
         duration_s,
