@@ -3,7 +3,9 @@ speaking rmw_zenoh as a TurtleBot-class robot running `rmw_zenoh_cpp` would.
 The physics is twindrive's site simulator (`twindrive site-sim`, the
 default) or, with --physics mujoco, the MuJoCo physics engine
 (`mujoco_site.py`: motors with a gain and a torque limit, inertia, tyre and
-caster friction, ray-cast range sensors, a bumper from contacts). Every byte on the wire is made by an
+caster friction, ray-cast range sensors, a bumper from contacts; a site
+drawn from a map is built from its map, --map-window X0,Y0,X1,Y1 keeps to
+a part of it). Every byte on the wire is made by an
 independent implementation: CDR and RIHS01 type hashes by `rosbags`, the
 session by `eclipse-zenoh`.
 
@@ -11,7 +13,7 @@ Publishes (rmw_zenoh key expressions, 33-byte attachments, liveliness
 tokens for the node and each publisher and subscription):
   /joint_states      sensor_msgs/msg/JointState (wheel_left_joint, wheel_right_joint)
   /odom              nav_msgs/msg/Odometry (the simulator's true pose)
-  /<sensor>          sensor_msgs/msg/Range or LaserScan per range sensor
+  /<sensor>          sensor_msgs/msg/Range or LaserScan per range sensor, at its rate_hz
   /hazard_detection  irobot_create_msgs/msg/HazardDetectionVector (BUMP, STALL)
 Subscribes /cmd_vel (geometry_msgs/msg/Twist) like a diff_drive_controller:
 wheel speeds from the twist through --wheel-radius/--wheel-separation, zero
@@ -22,10 +24,11 @@ holds the last command it heard).
 moved (a driver that hangs). At the end (--run-for, or SIGTERM) it writes
 --stats: commands received, their attachments, the speeds commanded after
 the stall, every command as received (`received`: [s since start, v, w]),
-the robot at every tick (`ticks`: [s, left, right rad/s driven, x, y]), the
-ticks with a contact (`contact_ticks`), with MuJoCo how far the robot rolls
-to a stop from its speed at the last moving command (`braking`), and the
-liveliness tokens on the network.
+the robot at every tick (`ticks`: [s, left, right rad/s driven, x, y,
+heading]), the ticks with a contact (`contact_ticks`), with MuJoCo how far
+the robot rolls to a stop from its speed at the last moving command
+(`braking`) and the model's geom count (`geoms`), and the liveliness
+tokens on the network.
 
 usage: fake_driver.py --connect E --site SITE.toml --twindrive BIN --stats OUT.json [...]
 """
@@ -47,7 +50,7 @@ import zenoh
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from check_bag import IROBOT
-from mujoco_site import MujocoSite
+from mujoco_site import MujocoSite, parse_window
 
 NODE = "fake_driver"
 
@@ -108,7 +111,7 @@ class SiteSim:
         self.proc = subprocess.Popen([twindrive, "site-sim", "--site", site], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, text=True)
 
-    def step(self, left, right, steps):
+    def step(self, left, right, steps, ranges=True):
         self.proc.stdin.write(f"{left!r} {right!r} {steps}\n")
         self.proc.stdin.flush()
         line = self.proc.stdout.readline()
@@ -154,6 +157,8 @@ def main():
     ap.add_argument("--run-for", type=float, default=600.0)
     ap.add_argument("--physics", choices=["site-sim", "mujoco"], default="site-sim")
     ap.add_argument("--seed", type=int, default=0, help="MuJoCo's sensor noise")
+    ap.add_argument("--map-window", type=parse_window,
+                    help="X0,Y0,X1,Y1 (m): MuJoCo builds only this part of the site's map")
     a = ap.parse_args()
 
     with open(a.site, "rb") as f:
@@ -220,9 +225,16 @@ def main():
         # `kind` existed means a ranger for one beam (as twindrive reads it).
         ranger = s.get("kind", "ranger" if s.get("beams", 1) == 1 else "lidar") == "ranger"
         kind = "sensor_msgs/msg/Range" if ranger else "sensor_msgs/msg/LaserScan"
-        pub_ranges.append((s, kind, ros.publisher("/" + s["name"], kind)[0]))
+        # Published at the sensor's rate (every tick without one), as the
+        # twin samples it: a 5 Hz lidar every tenth tick at 50 Hz.
+        every = max(1, round(a.rate / s["rate_hz"])) if s.get("rate_hz") else 1
+        pub_ranges.append((s, kind, ros.publisher("/" + s["name"], kind)[0], every))
 
-    sim = MujocoSite(site, a.seed) if a.physics == "mujoco" else SiteSim(a.twindrive, a.site)
+    if a.physics == "mujoco":
+        sim = MujocoSite(site, a.seed, base_dir=os.path.dirname(os.path.abspath(a.site)),
+                         map_window=a.map_window)
+    else:
+        sim = SiteSim(a.twindrive, a.site)
     try:
         stop = threading.Event()
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -234,6 +246,7 @@ def main():
                 sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame)
 
         moved_at = None
+        tick = 0
         next_tick = started
         announced = False
         while not stop.is_set() and time.monotonic() - started < a.run_for:
@@ -243,7 +256,9 @@ def main():
                 v, w = (cmd["v"], cmd["w"]) if fresh else (0.0, 0.0)
             left = (v - 0.5 * w * separation) / radius
             right = (v + 0.5 * w * separation) / radius
-            s = sim.step(left, right, steps)
+            due = [tick % every == 0 for _, _, _, every in pub_ranges]
+            tick += 1
+            s = sim.step(left, right, steps, ranges=any(due))
             if s is None:
                 break
             if moved_at is None and (abs(left) > 1e-9 or abs(right) > 1e-9):
@@ -266,7 +281,7 @@ def main():
                     announced = True
             x, y, th = s["pose"]
             with lock:
-                stats["ticks"].append([now - started, left, right, x, y])
+                stats["ticks"].append([now - started, left, right, x, y, th])
                 stats["contact_ticks"] += int(s["bump"] or s["blocked"])
             P = T["geometry_msgs/msg/Pose"](
                 position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
@@ -287,10 +302,12 @@ def main():
                 detections.append(HD(header=header("base_link"), type=3))
             pub_hazard(T["irobot_create_msgs/msg/HazardDetectionVector"](header=header("base_link"), detections=detections))
             offset = 0
-            for sensor, kind, put in pub_ranges:
+            for (sensor, kind, put, _), publish in zip(pub_ranges, due):
                 beams = sensor.get("beams", 1)
-                values = [math.inf if r is None else r for r in s["ranges_m"][offset:offset + beams]]
+                values = [math.inf if r is None else r for r in (s["ranges_m"] or [])[offset:offset + beams]]
                 offset += beams
+                if not publish:
+                    continue
                 if kind == "sensor_msgs/msg/Range":
                     put(T[kind](header=header(sensor["name"] + "_link"), radiation_type=1,
                                 field_of_view=float(sensor.get("fov_rad", 0.0)),
@@ -325,6 +342,7 @@ def main():
         with lock:
             if a.physics == "mujoco":
                 stats["braking"] = braking(sim, stats)
+                stats["geoms"] = sim.model.ngeom
             stats["liveliness"] = sorted(tokens)
             stats["type_hashes"] = {t: store.hash_rihs01(t) for t in [
                 "geometry_msgs/msg/Twist", "sensor_msgs/msg/JointState", "nav_msgs/msg/Odometry",

@@ -4,6 +4,12 @@ own simulator because nothing in it was written by twindrive.
 
 From a twindrive site file it builds:
   - the site's walls (segments, polylines) and blocks (rectangles) as boxes;
+  - its occupancy map (`[world] map`, a ROS map_server YAML and its PGM, as
+    `twindrive map` writes them), as the twin reads it: every cell that is
+    not free (occupied, unknown, and all around the map) is solid, in boxes
+    (runs of solid cells along the rows or the columns, merged with the
+    same run on the next ones into rectangles): a few thousand for a
+    building's floor;
   - a differential-drive robot: a cylindrical chassis of the site's
     footprint, two wheels of the site's *true* diameters on hinges the
     site's true wheelbase apart, each driven by a velocity servo with a
@@ -16,12 +22,23 @@ From a twindrive site file it builds:
     arc (detected `contact_margin_m` early, as the site file says).
 Encoders read the wheel hinges. Its `step(left, right, steps)` returns what
 `twindrive site-sim` prints for one line, so the driver can use either.
+
+Run as a script, it reads the robot's range sensors at poses:
+
+  mujoco_site.py SITE.toml [--map-window X0,Y0,X1,Y1] < POSES
+
+POSES: lines of `x y heading`; for each, the robot is set down there and a
+JSON line printed: `pose` (where it settled), `ranges_m` (every beam) and
+`geoms` (the model's geom count).
 """
 
+import argparse
 import math
+import os
 
 import mujoco
 import numpy as np
+from ruamel.yaml import YAML
 
 WALL_HEIGHT_M = 0.25
 WALL_THICKNESS_M = 0.004
@@ -42,7 +59,7 @@ TIMESTEP_S = 0.001
 WALLS, ROBOT = 0, 1
 
 
-def _wall_boxes(world):
+def _wall_boxes(world, base_dir=".", window=None):
     """(centre x, y, half length, half width, yaw) of every wall and block."""
     boxes = []
     segments = [tuple(map(tuple, s)) for s in world.get("segments", [])]
@@ -62,13 +79,151 @@ def _wall_boxes(world):
         (x0, y0), (x1, y1) = r["min"], r["max"]
         boxes.append(((x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) / 2, (y1 - y0) / 2, 0.0))
     if "map" in world:
-        raise ValueError("a site drawn from an occupancy map cannot be built in MuJoCo here "
-                         "(walls, polylines and rectangles can)")
+        boxes.extend(map_boxes(os.path.join(base_dir, world["map"]), window))
     return boxes
 
 
-def model_xml(site, kv_nm_s, torque_limit_nm):
-    """The MJCF of `site` (a parsed twindrive site file)."""
+def _read_pgm(path):
+    """A binary (P5) or plain (P2) PGM's grey levels scaled to 0-255, row 0
+    at the top as in the image."""
+    with open(path, "rb") as f:
+        data = f.read()
+    fields, pos = [], 0
+    while len(fields) < 4:
+        while pos < len(data) and data[pos:pos + 1].isspace():
+            pos += 1
+        if data[pos:pos + 1] == b"#":
+            pos = data.find(b"\n", pos)
+            if pos < 0:
+                break
+            continue
+        start = pos
+        while pos < len(data) and not data[pos:pos + 1].isspace():
+            pos += 1
+        if start == pos:
+            break
+        fields.append(data[start:pos])
+    if len(fields) < 4 or fields[0] not in (b"P5", b"P2"):
+        raise ValueError(f"{path}: expected a PGM image (P5 or P2 with width, height and maxval); "
+                         "MuJoCo's site reads the maps `twindrive map` writes")
+    try:
+        width, height, maxval = (int(v) for v in fields[1:4])
+    except ValueError:
+        raise ValueError(f"{path}: the PGM header's width, height and maxval must be integers, "
+                         f"got {[v.decode(errors='replace') for v in fields[1:4]]}") from None
+    if width <= 0 or height <= 0 or not 0 < maxval < 65536:
+        raise ValueError(f"{path}: a PGM of {width} x {height} pixels with maxval {maxval}: "
+                         "expected positive sizes and 0 < maxval < 65536")
+    n = width * height
+    if fields[0] == b"P5":
+        dtype = np.uint8 if maxval < 256 else np.dtype(">u2")
+        raw = data[pos + 1:]
+        if len(raw) < n * np.dtype(dtype).itemsize:
+            raise ValueError(f"{path}: {len(raw)} bytes of pixels, expected "
+                             f"{n * np.dtype(dtype).itemsize} for {width} x {height}")
+        pixels = np.frombuffer(raw, dtype=dtype, count=n)
+    else:
+        words = data[pos:].split()
+        if len(words) < n:
+            raise ValueError(f"{path}: {len(words)} pixels, expected {n} for {width} x {height}")
+        pixels = np.array([int(w) for w in words[:n]])
+    grey = pixels.astype(np.float64).reshape(height, width)
+    return np.round(grey * 255.0 / maxval) if maxval != 255 else grey
+
+
+def read_map(yaml_path):
+    """A ROS map_server map as the twin reads it (twindrive_sim::map):
+    (blocked cells, row 0 at the bottom; resolution in m; origin [x, y,
+    yaw] of the lower-left pixel). A cell is blocked unless it is free:
+    occupied and unknown cells are obstacles."""
+    with open(yaml_path, encoding="utf-8") as f:
+        meta = YAML(typ="safe").load(f)
+    if not isinstance(meta, dict):
+        raise ValueError(f"{yaml_path}: expected map_server's fields (image, resolution, origin, ...)")
+
+    def field(name, default=None):
+        if name not in meta and default is None:
+            raise ValueError(f"{yaml_path}: field `{name}` is missing")
+        return meta.get(name, default)
+
+    resolution = field("resolution")
+    origin = field("origin")
+    if not (isinstance(resolution, (int, float)) and resolution > 0):
+        raise ValueError(f"{yaml_path}: field `resolution`: must be > 0 metres per pixel, got {resolution!r}")
+    if not (isinstance(origin, list) and len(origin) == 3
+            and all(isinstance(v, (int, float)) and math.isfinite(v) for v in origin)):
+        raise ValueError(f"{yaml_path}: field `origin`: must be three finite numbers [x, y, yaw], got {origin!r}")
+    occupied_thresh = field("occupied_thresh", 0.65)
+    free_thresh = field("free_thresh", 0.196)
+    negate = field("negate", 0)
+    mode = field("mode", "trinary")
+    if mode not in ("trinary", "scale", "raw"):
+        raise ValueError(f"{yaml_path}: field `mode`: expected trinary, scale or raw, got `{mode}`")
+    if not 0.0 <= free_thresh < occupied_thresh <= 1.0:
+        raise ValueError(f"{yaml_path}: field `free_thresh`: need 0 <= free_thresh < occupied_thresh <= 1, "
+                         f"got {free_thresh} and {occupied_thresh}")
+    grey = _read_pgm(os.path.join(os.path.dirname(yaml_path), field("image")))
+    if mode == "raw":
+        free = grey <= free_thresh * 100.0
+    else:
+        occupancy = grey / 255.0 if negate else (255.0 - grey) / 255.0
+        free = occupancy < free_thresh
+    return ~free[::-1], float(resolution), [float(v) for v in origin]
+
+
+def _rectangles(solid):
+    """(row0, row1, col0, col1) rectangles, ends excluded, covering the
+    True cells of `solid`: runs along each row, each merged with the same
+    run on the row below when there is one."""
+    done = []
+    open_runs = {}
+    for r, row in enumerate(solid):
+        edges = np.flatnonzero(np.diff(np.concatenate(([False], row, [False])).astype(np.int8)))
+        runs = set(zip(edges[::2].tolist(), edges[1::2].tolist()))
+        for run, r0 in list(open_runs.items()):
+            if run not in runs:
+                done.append((r0, r, *run))
+                del open_runs[run]
+        for run in runs:
+            open_runs.setdefault(run, r)
+    done.extend((r0, len(solid), *run) for run, r0 in open_runs.items())
+    return sorted(done)
+
+
+def map_boxes(yaml_path, window=None):
+    """(centre x, y, half length, half width, yaw) of boxes over the map's
+    solid cells, with a ring of solid cells around the map (beyond it
+    nothing is free): runs of solid cells along the rows (or the columns,
+    whichever gives fewer boxes), each merged with the same run on the
+    next rows. With `window` (x0, y0, x1, y1 in the site's frame, m) only
+    the cells whose centres lie in it may be free: the rest are solid, so
+    the building ends at the window's edge (a smaller model, faster to ray
+    cast, the same as the whole map wherever the sensors reach from the
+    robot's way)."""
+    blocked, res, (ox, oy, yaw) = read_map(yaml_path)
+    c, s = math.cos(yaw), math.sin(yaw)
+    if window is not None:
+        x0, y0, x1, y1 = window
+        rows, cols = np.indices(blocked.shape)
+        u, v = (cols + 0.5) * res, (rows + 0.5) * res
+        x, y = ox + c * u - s * v, oy + s * u + c * v
+        blocked = blocked | (x < x0) | (x > x1) | (y < y0) | (y > y1)
+    padded = np.ones((blocked.shape[0] + 2, blocked.shape[1] + 2), dtype=bool)
+    padded[1:-1, 1:-1] = blocked
+    by_rows = _rectangles(padded)
+    by_columns = [(r0, r1, c0, c1) for c0, c1, r0, r1 in _rectangles(padded.T)]
+    boxes = []
+    for r0, r1, c0, c1 in min(by_rows, by_columns, key=len):
+        # Padded cell (col, row) is the map's (col - 1, row - 1).
+        u, v = (c0 + c1 - 2) * res / 2, (r0 + r1 - 2) * res / 2
+        boxes.append((ox + c * u - s * v, oy + s * u + c * v, (c1 - c0) * res / 2, (r1 - r0) * res / 2, yaw))
+    return boxes
+
+
+def model_xml(site, kv_nm_s, torque_limit_nm, base_dir=".", map_window=None):
+    """The MJCF of `site` (a parsed twindrive site file; its map, if any,
+    relative to `base_dir`, the site file's directory, and only within
+    `map_window`, see `map_boxes`)."""
     robot = site["robot"]
     truth = robot["true_params"]
     r_left, r_right = truth["left_diameter_m"] / 2, truth["right_diameter_m"] / 2
@@ -77,7 +232,7 @@ def model_xml(site, kv_nm_s, torque_limit_nm):
     footprint = robot["footprint_radius_m"]
     margin = site.get("bump", {}).get("contact_margin_m", 0.0)
     walls = []
-    for k, (x, y, hl, hw, yaw) in enumerate(_wall_boxes(site["world"])):
+    for k, (x, y, hl, hw, yaw) in enumerate(_wall_boxes(site["world"], base_dir, map_window)):
         walls.append(
             f'<geom name="wall{k}" type="box" group="{WALLS}" pos="{x} {y} {WALL_HEIGHT_M / 2}" '
             f'size="{hl} {hw} {WALL_HEIGHT_M / 2}" euler="0 0 {yaw}" rgba=".6 .6 .6 1"/>')
@@ -128,12 +283,14 @@ def model_xml(site, kv_nm_s, torque_limit_nm):
 class MujocoSite:
     """The site and its robot in MuJoCo, stepped as `twindrive site-sim` is."""
 
-    def __init__(self, site, seed=0, kv_nm_s=0.08, torque_limit_nm=0.25):
+    def __init__(self, site, seed=0, kv_nm_s=0.08, torque_limit_nm=0.25, base_dir=".", map_window=None):
+        """`base_dir`: the site file's directory (its map is relative to
+        it); `map_window`: the part of the map to build (`map_boxes`)."""
         self.site = site
         self.dt = site["simulation"]["dt_s"]
         self.kv_nm_s = kv_nm_s
         self.torque_limit_nm = torque_limit_nm
-        self.model = mujoco.MjModel.from_xml_string(model_xml(site, kv_nm_s, torque_limit_nm))
+        self.model = mujoco.MjModel.from_xml_string(model_xml(site, kv_nm_s, torque_limit_nm, base_dir, map_window))
         self.data = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(seed)
         self.substeps = max(1, round(self.dt / TIMESTEP_S))
@@ -194,7 +351,6 @@ class MujocoSite:
         z = float(self.data.xpos[self.chassis_body][2])
         groups = np.zeros(6, dtype=np.uint8)
         groups[WALLS] = 1
-        geomid = np.zeros(1, dtype=np.int32)
         out = []
         for s in self.sensors:
             m = s["mount"]
@@ -211,10 +367,16 @@ class MujocoSite:
             else:
                 first, step = -fov / 2, fov / (beams - 1)
             lo, hi = s.get("min_range_m", 0.0), s["max_range_m"]
-            for k in range(beams):
-                a = th + m["heading_rad"] + first + k * step
-                d = mujoco.mj_ray(self.model, self.data, np.array([ox, oy, z]),
-                                  np.array([math.cos(a), math.sin(a), 0.0]), groups, 1, -1, geomid)
+            # All of a sensor's beams at once: MuJoCo passes over the geoms
+            # beyond the range and those no beam points at (a building's
+            # map has thousands).
+            angles = th + m["heading_rad"] + first + step * np.arange(beams)
+            directions = np.column_stack((np.cos(angles), np.sin(angles), np.zeros(beams)))
+            geomid = np.zeros(beams, dtype=np.int32)
+            dist = np.zeros(beams)
+            mujoco.mj_multiRay(self.model, self.data, np.array([ox, oy, z]), directions.ravel(),
+                               groups, 1, -1, geomid, dist, beams, hi)
+            for d in dist.tolist():
                 r = hi if d < 0 or d >= hi else d
                 if r < hi:
                     r = min(max(r + s.get("noise_std_m", 0.0) * self.rng.standard_normal(), lo), hi)
@@ -223,9 +385,10 @@ class MujocoSite:
                 out.append(r)
         return out
 
-    def step(self, left, right, steps):
+    def step(self, left, right, steps, ranges=True):
         """Drives the wheels at (left, right) rad/s (scaled down together to
-        the robot's limit) for `steps` site periods; what site-sim prints."""
+        the robot's limit) for `steps` site periods; what site-sim prints
+        (`ranges_m` None unless `ranges`: no sensor is due)."""
         peak = max(abs(left), abs(right))
         if peak > self.max_wheel:
             left, right = left * self.max_wheel / peak, right * self.max_wheel / peak
@@ -244,7 +407,7 @@ class MujocoSite:
             "wheel_rad_s": [float(self.data.qvel[a]) for a in self.joint_v],
             "bump": bump,
             "blocked": blocked,
-            "ranges_m": self._ranges(),
+            "ranges_m": self._ranges() if ranges else None,
             "pose": list(self.pose()),
         }
 
@@ -269,3 +432,41 @@ class MujocoSite:
                 break
         x1, y1, _ = probe.pose()
         return math.hypot(x1 - x0, y1 - y0)
+
+
+def parse_window(text):
+    """`X0,Y0,X1,Y1` (m) as a window for `map_boxes` (an argparse type)."""
+    try:
+        x0, y0, x1, y1 = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X0,Y0,X1,Y1 in metres, got `{text}`") from None
+    if not (x0 < x1 and y0 < y1):
+        raise argparse.ArgumentTypeError(f"expected X0 < X1 and Y0 < Y1, got `{text}`")
+    return x0, y0, x1, y1
+
+
+def main():
+    import json
+    import sys
+    import tomllib
+
+    ap = argparse.ArgumentParser(description="The robot's range sensors in MuJoCo at the poses on stdin.")
+    ap.add_argument("site")
+    ap.add_argument("--map-window", type=parse_window)
+    a = ap.parse_args()
+    with open(a.site, "rb") as f:
+        site = tomllib.load(f)
+    sim = MujocoSite(site, base_dir=os.path.dirname(os.path.abspath(a.site)), map_window=a.map_window)
+    for n, line in enumerate(sys.stdin, 1):
+        if not line.strip():
+            continue
+        try:
+            x, y, heading = (float(v) for v in line.split())
+        except ValueError:
+            sys.exit(f"stdin, line {n}: expected `x y heading`, got `{line.strip()}`")
+        sim.place(x, y, heading)
+        print(json.dumps({"pose": list(sim.pose()), "ranges_m": sim._ranges(), "geoms": sim.model.ngeom}))
+
+
+if __name__ == "__main__":
+    main()

@@ -90,6 +90,7 @@ fn plan(walls: Vec<[f64; 4]>) -> MissionPlan {
                 max_extra_time_s: 60.0,
                 max_extra_distance_m: 5.0,
             },
+            goals: Default::default(),
             source_log_sha256: "0".repeat(64),
             settings: serde_json::json!({}),
             summary: serde_json::json!({}),

@@ -179,13 +179,37 @@ fn crossed(seen: &mut Option<(TransferId, u32)>, transfer: TransferId, tenth: u3
 fn execution(s: &twindrive_link::wire::Status) -> String {
     let pct = 100.0 * f64::from(s.progress.0) / f64::from(s.progress.1.max(1));
     format!(
-        "{pct:.0} % of the plan, {:.1} s in, deviation {:.3} m, range residual {}",
+        "{pct:.0} % of the plan, {:.1} s in, {}, range residual {}",
         s.plan_t_s,
-        s.deviation_m,
+        deviation(s),
         if s.range_residual_m.is_finite() {
             format!("{:.3} m", s.range_residual_m)
         } else {
             "-".into()
+        }
+    )
+}
+
+/// The robot's distance from the plan's pose now and the largest since
+/// the plan started, each labelled, with the detour each came on:
+/// `deviation now 0.03 m, worst 1.95 m (during a detour)`.
+fn deviation(s: &twindrive_link::wire::Status) -> String {
+    let metres = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.2} m")
+        } else {
+            "-".into()
+        }
+    };
+    format!(
+        "deviation now {}{}, worst {}{}",
+        metres(s.deviation_now_m),
+        if s.on_detour { " (on a detour)" } else { "" },
+        metres(s.deviation_m),
+        if s.max_deviation_on_detour {
+            " (during a detour)"
+        } else {
+            ""
         }
     )
 }
@@ -238,6 +262,92 @@ fn event_text(event: &str, detail: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use twindrive_link::wire::Status;
+
+    fn executing(deviation_now_m: f64, on_detour: bool, worst: (f64, bool)) -> Status {
+        Status {
+            plan: Some(([7; 32], PlanPhase::Executing)),
+            progress: (40, 100),
+            plan_t_s: 12.0,
+            pose: [1.0, 2.0, 0.3],
+            params: [0.065, 0.066, 0.27],
+            params_std: [1e-4; 3],
+            deviation_m: worst.0,
+            range_residual_m: 0.01,
+            wheel_travel_rad: 50.0,
+            logs_pending: 0,
+            handback_pending: false,
+            bumps: 0,
+            collisions: 0,
+            refused: 0,
+            deviation_now_m,
+            max_deviation_on_detour: worst.1,
+            on_detour,
+        }
+    }
+
+    /// A robot's deviation through random plans, each with a detour that
+    /// leaves the plan and rejoins it: every line says the deviation now
+    /// and the worst so far, each under its name, the worst marked as a
+    /// detour's exactly when it came on one; back on the plan, the line says
+    /// the small deviation now, not the detour's.
+    #[test]
+    fn the_deviation_is_said_now_and_at_its_worst_labelled() {
+        let mut rng = ChaCha8Rng::seed_from_u64(54);
+        for _ in 0..50 {
+            let n = rng.random_range(20..80);
+            let from = rng.random_range(2..n / 2);
+            let to = rng.random_range(from + 5..n - 1);
+            let peak = rng.random_range(0.3..2.5);
+            let (mut worst, mut worst_on_detour) = (0.0f64, false);
+            let mut last = String::new();
+            for k in 0..n {
+                let on_detour = (from..to).contains(&k);
+                let now = if on_detour {
+                    // Out to the peak and back.
+                    let x = (k - from) as f64 / (to - from) as f64;
+                    peak * (std::f64::consts::PI * x).sin() + rng.random_range(0.0..0.02)
+                } else {
+                    rng.random_range(0.0..0.05)
+                };
+                if now > worst {
+                    (worst, worst_on_detour) = (now, on_detour);
+                }
+                let line = execution(&executing(now, on_detour, (worst, worst_on_detour)));
+                let said_now = format!("deviation now {now:.2} m");
+                assert!(line.contains(&said_now), "{line}");
+                assert_eq!(line.contains("(on a detour)"), on_detour, "{line}");
+                let said_worst = format!("worst {worst:.2} m");
+                assert!(line.contains(&said_worst), "{line}");
+                assert_eq!(
+                    line.contains("(during a detour)"),
+                    worst_on_detour,
+                    "{line}"
+                );
+                assert!(
+                    !line.contains("deviation 0") && !line.contains("deviation 1"),
+                    "{line}"
+                );
+                last = line;
+            }
+            // Back on the plan after the detour: now is small, the worst the
+            // detour's, said as such.
+            assert!(worst_on_detour, "{last}");
+            let now: f64 = last
+                .split("deviation now ")
+                .nth(1)
+                .and_then(|t| t.split(' ').next())
+                .and_then(|v| v.parse().ok())
+                .unwrap();
+            assert!(now < 0.06 && worst > 0.3, "{last}");
+            assert!(last.contains(" (during a detour)"), "{last}");
+        }
+        // No plan running: no numbers to say.
+        let idle = execution(&executing(f64::NAN, false, (f64::NAN, false)));
+        assert!(idle.contains("deviation now -, worst -"), "{idle}");
+    }
 
     #[test]
     fn a_tenth_is_said_once_per_transfer() {

@@ -187,6 +187,13 @@ pub struct Report {
     pub failure: Option<String>,
     pub collisions: u32,
     pub bumps: u32,
+    /// The robot's distance from the plan's pose in its latest status
+    /// while a plan ran (m) ...
+    pub last_deviation_m: Option<f64>,
+    /// ... the largest any status reported (m; every plan's, continuations'
+    /// too), and whether the robot was on a detour then.
+    pub max_deviation_m: Option<f64>,
+    pub max_deviation_on_detour: bool,
     /// Directories of the robot's logs as received (filled by the owner).
     pub robot_logs: Vec<String>,
     pub status_messages: u64,
@@ -264,6 +271,9 @@ impl<S: ChunkStore> Operator<S> {
                 failure: None,
                 collisions: 0,
                 bumps: 0,
+                last_deviation_m: None,
+                max_deviation_m: None,
+                max_deviation_on_detour: false,
                 robot_logs: Vec::new(),
                 status_messages: 0,
                 refused_messages: 0,
@@ -555,6 +565,18 @@ impl<S: ChunkStore> Operator<S> {
                     self.handback_pending = s.handback_pending;
                     self.report.collisions = s.collisions;
                     self.report.bumps = s.bumps;
+                    if driving && s.deviation_now_m.is_finite() {
+                        self.report.last_deviation_m = Some(s.deviation_now_m);
+                    }
+                    if s.deviation_m.is_finite()
+                        && self
+                            .report
+                            .max_deviation_m
+                            .is_none_or(|m| s.deviation_m > m)
+                    {
+                        self.report.max_deviation_m = Some(s.deviation_m);
+                        self.report.max_deviation_on_detour = s.max_deviation_on_detour;
+                    }
                     self.report.robot_refused_messages = s.refused;
                 }
             }

@@ -26,6 +26,18 @@
 //!   bumper, not how wide it is: its block reaches `contact_grow_m` along
 //!   the face either way.
 //!
+//! The twin learns only what it did not know. A reading is compared with
+//! the twin's geometry where it ended, not only with the range predicted
+//! along its beam: a beam that grazes a door frame or a box's corner ends
+//! far from where the map predicts on a centimetre of pose error, yet on
+//! the frame. A point (or a contact) within `known_margin_m` of what the
+//! twin knew (walls, blocks, map cells), or within three standard
+//! deviations of where the range noise and the robot's pose uncertainty
+//! put it, is explained by that and is no evidence. A learnt block keeps
+//! `known_margin_m` clear of what the twin knew: where a block's guessed
+//! extent (its depth, its growth along a face, or the gap between its
+//! points) would reach it, the block is cut back, keeping its points.
+//!
 //! Where a continuation leaves the interrupted plan's path (its back-off,
 //! its way back, its detours) it keeps three standard deviations of the
 //! refined position (towards the nearest wall or block) clear of everything
@@ -120,6 +132,11 @@ pub struct LearnSettings {
     /// through the guess cut it back.
     pub contact_grow_m: f64,
     pub contact_depth_m: f64,
+    /// A point or contact nearer than this to what the twin knew (or than
+    /// three standard deviations of the range noise and the robot's pose
+    /// uncertainty) is explained by it; a learnt block keeps this far from
+    /// it (m).
+    pub known_margin_m: f64,
     pub refine: RefineSettings,
 }
 
@@ -132,6 +149,7 @@ impl Default for LearnSettings {
             depth_m: 0.1,
             contact_grow_m: 0.3,
             contact_depth_m: 0.3,
+            known_margin_m: 0.06,
             refine: RefineSettings::default(),
         }
     }
@@ -203,10 +221,7 @@ impl Twin {
         // obstacle's face, it is not inside it).
         let clear =
             self.scenario.robot.footprint_radius_m + 0.1 * self.scenario.bump.contact_margin_m;
-        let blocks: Vec<Block> = cluster(&self.evidence, &self.free, settings)
-            .into_iter()
-            .filter_map(|b| clip_clear_of(b, [pose.x_m, pose.y_m], clear))
-            .collect();
+        let blocks = self.blocks([pose.x_m, pose.y_m], clear, settings);
         let obstacles_added: Vec<Block> = blocks
             .iter()
             .filter(|b| !self.learnt.contains(b))
@@ -238,24 +253,39 @@ impl Twin {
     /// robot went around it on its own, so no round trip and no pose to
     /// refine). Returns the blocks added. The same clustering as a
     /// hand-back's; blocks stay clear of `clear_of` (where the robot was).
+    ///
+    /// The robot chose the points by range, against the map's prediction
+    /// at its estimate; here a point that lies on what the twin knew
+    /// (within `known_margin_m`, or three standard deviations of its
+    /// sensors' range noise) is taken for a reading of that, not of
+    /// something new. The report carries no pose covariance: a localizing
+    /// robot knows its pose to a centimetre or so, which the margin holds.
     pub fn learn_seen(
         &mut self,
         points: &[[f64; 2]],
         seen_from: [f64; 2],
         settings: &LearnSettings,
     ) -> Vec<Block> {
-        let finite = |p: &&[f64; 2]| p[0].is_finite() && p[1].is_finite();
-        self.evidence
-            .extend(points.iter().filter(finite).map(|&point| Evidence {
+        let noise = self
+            .scenario
+            .range_sensors
+            .iter()
+            .map(|s| s.noise_std_m)
+            .fold(0.0, f64::max);
+        let explained_m = settings.known_margin_m.max(3.0 * noise);
+        let new: Vec<Evidence> = points
+            .iter()
+            .filter(|p| p[0].is_finite() && p[1].is_finite())
+            .filter(|&&p| !self.known_explains(p, explained_m))
+            .map(|&point| Evidence {
                 point,
                 seen_from,
                 contact: false,
-            }));
-        let clear = self.scenario.robot.footprint_radius_m;
-        let blocks: Vec<Block> = cluster(&self.evidence, &self.free, settings)
-            .into_iter()
-            .filter_map(|b| clip_clear_of(b, seen_from, clear))
+            })
             .collect();
+        self.evidence.extend(new);
+        let clear = self.scenario.robot.footprint_radius_m;
+        let blocks = self.blocks(seen_from, clear, settings);
         let added: Vec<Block> = blocks
             .iter()
             .filter(|b| !self.learnt.contains(b))
@@ -291,6 +321,15 @@ impl Twin {
         let mut predicted_known = vec![0.0; model.beams()];
         let (mut points, mut free) = (Vec::new(), Vec::new());
         let sensors = &self.scenario.range_sensors;
+        // Where the refined pose puts a reading's end, to a standard
+        // deviation: the position's, the heading's at the point's distance
+        // from the robot, and the sensor's noise.
+        let position_var = refined.position_std_m().powi(2);
+        let heading_var = refined.covariance[8].max(0.0);
+        let explained_m = |noise: f64, from_robot_m: f64| {
+            let var = noise * noise + position_var + heading_var * from_robot_m * from_robot_m;
+            settings.known_margin_m.max(3.0 * var.sqrt())
+        };
         for w in &h.window {
             let [x, y, heading] = refined.correct(w.pose);
             let pose = Pose::new(x, y, heading);
@@ -317,11 +356,18 @@ impl Twin {
                     if measured < info.max_range_m - 0.02
                         && measured < expected_known - settings.shorter_by_m
                     {
-                        points.push(Evidence {
-                            point: at(measured),
-                            seen_from: [mx, my],
-                            contact: false,
-                        });
+                        // Short of the prediction, but on what the twin
+                        // knew (a grazed edge, a pose a little off): no
+                        // evidence.
+                        let p = at(measured);
+                        let from_robot_m = (p[0] - pose.x_m).hypot(p[1] - pose.y_m);
+                        if !self.known_explains(p, explained_m(s.noise_std_m, from_robot_m)) {
+                            points.push(Evidence {
+                                point: p,
+                                seen_from: [mx, my],
+                                contact: false,
+                            });
+                        }
                     } else if measured > expected + settings.shorter_by_m
                         && self.on_learnt(at(expected))
                     {
@@ -336,17 +382,43 @@ impl Twin {
                 // robot standing there touches it too).
                 let r = self.scenario.robot.footprint_radius_m
                     + 0.25 * self.scenario.bump.contact_margin_m;
-                points.push(Evidence {
-                    point: [
-                        pose.x_m + r * pose.heading_rad.cos(),
-                        pose.y_m + r * pose.heading_rad.sin(),
-                    ],
-                    seen_from: [pose.x_m, pose.y_m],
-                    contact: true,
-                });
+                let point = [
+                    pose.x_m + r * pose.heading_rad.cos(),
+                    pose.y_m + r * pose.heading_rad.sin(),
+                ];
+                // A contact with what the twin knew, a little off where
+                // the refined pose says: no evidence either.
+                let reach = self.scenario.bump.contact_margin_m + explained_m(0.0, r);
+                if !self.known_explains(point, reach) {
+                    points.push(Evidence {
+                        point,
+                        seen_from: [pose.x_m, pose.y_m],
+                        contact: true,
+                    });
+                }
             }
         }
         (points, free)
+    }
+
+    /// Whether `p` lies within `within_m` of what the twin knew before
+    /// learning (a wall, a block, an occupied or unknown map cell).
+    fn known_explains(&self, p: [f64; 2], within_m: f64) -> bool {
+        self.known.clearance_m(p[0], p[1], within_m) < within_m
+    }
+
+    /// The learnt world from the evidence kept: its clusters' blocks, each
+    /// clear of the disc of `clear` around `centre` (where the robot
+    /// stands) and cut back to keep `known_margin_m` from what the twin
+    /// knew (a block that cannot is dropped).
+    fn blocks(&self, centre: [f64; 2], clear: f64, settings: &LearnSettings) -> Vec<Block> {
+        clusters(&self.evidence, &self.free, settings)
+            .into_iter()
+            .filter_map(|(b, members)| {
+                let b = clip_clear_of(b, centre, clear)?;
+                clip_off_known(b, &members, &self.known, settings.known_margin_m)
+            })
+            .collect()
     }
 
     /// Whether `p` lies on (within a centimetre of) a learnt block.
@@ -575,8 +647,12 @@ impl Default for ContinuationSettings {
 ///
 /// A block is then cut back by every sight line through it that passes
 /// none of its points (the guessed part of a contact's block, or a grown
-/// edge, that a reading went through).
-fn cluster(evidence: &[Evidence], free: &[Ray], settings: &LearnSettings) -> Vec<Block> {
+/// edge, that a reading went through). Each block comes with its points.
+fn clusters(
+    evidence: &[Evidence],
+    free: &[Ray],
+    settings: &LearnSettings,
+) -> Vec<(Block, Vec<[f64; 2]>)> {
     let n = evidence.len();
     let mut label: Vec<Option<usize>> = vec![None; n];
     let mut blocks = Vec::new();
@@ -607,7 +683,7 @@ fn cluster(evidence: &[Evidence], free: &[Ray], settings: &LearnSettings) -> Vec
         for ray in free {
             block = cut(block, &members, ray);
         }
-        blocks.push(block);
+        blocks.push((block, members));
     }
     blocks
 }
@@ -680,6 +756,90 @@ fn point_box(e: &Evidence, settings: &LearnSettings) -> Block {
     (min, max)
 }
 
+/// `block` cut back until it keeps `margin_m` from everything in `known`,
+/// keeping as many of its points `members` as can be, then as much of its
+/// area. The block is sampled on a grid of at most [`KNOWN_STEP_M`] that
+/// spans it (a sample nearer than the margin and half the grid's diagonal
+/// is too near: then so may be the ground around it); the slab from the
+/// too-near sample nearest its points outwards is taken off, along the
+/// axis and to the side that keep the most, until none is left in it; the
+/// block left is sampled again, until one has none. `None` when nothing
+/// is left.
+fn clip_off_known(
+    (mut min, mut max): Block,
+    members: &[[f64; 2]],
+    known: &World,
+    margin_m: f64,
+) -> Option<Block> {
+    let near_m = margin_m + KNOWN_STEP_M * std::f64::consts::FRAC_1_SQRT_2;
+    let inside = |p: &[f64; 2], min: [f64; 2], max: [f64; 2]| {
+        (0..2).all(|k| min[k] <= p[k] && p[k] <= max[k])
+    };
+    // Each round cuts at least a step off: the rounds end.
+    loop {
+        let steps = |k: usize| ((max[k] - min[k]) / KNOWN_STEP_M).ceil().max(1.0) as usize;
+        let (nx, ny) = (steps(0), steps(1));
+        let mut near = Vec::new();
+        for i in 0..=nx {
+            for j in 0..=ny {
+                let p = [
+                    min[0] + (max[0] - min[0]) * i as f64 / nx as f64,
+                    min[1] + (max[1] - min[1]) * j as f64 / ny as f64,
+                ];
+                if known.clearance_m(p[0], p[1], near_m) < near_m {
+                    near.push(p);
+                }
+            }
+        }
+        if near.is_empty() {
+            return Some((min, max));
+        }
+        while !near.is_empty() {
+            let kept: Vec<[f64; 2]> = members
+                .iter()
+                .filter(|p| inside(p, min, max))
+                .copied()
+                .collect();
+            let to_kept = |p: &[f64; 2]| {
+                kept.iter()
+                    .map(|m| (m[0] - p[0]).hypot(m[1] - p[1]))
+                    .fold(f64::INFINITY, f64::min)
+            };
+            let worst = near
+                .iter()
+                .map(|p| (to_kept(p), *p))
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map(|(_, p)| p)?;
+            // The cut keeping the most points, then the most area.
+            let mut best: Option<((usize, f64), Block)> = None;
+            for k in 0..2 {
+                for above in [true, false] {
+                    let (mut nmin, mut nmax) = (min, max);
+                    if above {
+                        nmin[k] = worst[k] + KNOWN_STEP_M;
+                    } else {
+                        nmax[k] = worst[k] - KNOWN_STEP_M;
+                    }
+                    if nmax[k] <= nmin[k] {
+                        continue;
+                    }
+                    let count = kept.iter().filter(|p| inside(p, nmin, nmax)).count();
+                    let area = (nmax[0] - nmin[0]) * (nmax[1] - nmin[1]);
+                    if best.is_none_or(|((c, a), _)| (count, area) > (c, a)) {
+                        best = Some(((count, area), (nmin, nmax)));
+                    }
+                }
+            }
+            (min, max) = best?.1;
+            near.retain(|p| inside(p, min, max));
+        }
+    }
+}
+
+/// The largest spacing a block is sampled at for its distance from what
+/// the twin knew (m).
+const KNOWN_STEP_M: f64 = 0.01;
+
 /// Distance from `p` to the segment `a`-`b`.
 fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
@@ -727,6 +887,14 @@ mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use twindrive_link::wire::WindowSample;
+
+    /// The blocks of [`clusters`] alone.
+    fn cluster(evidence: &[Evidence], free: &[Ray], settings: &LearnSettings) -> Vec<Block> {
+        clusters(evidence, free, settings)
+            .into_iter()
+            .map(|(b, _)| b)
+            .collect()
+    }
 
     /// A hand-back whose window holds what the site's sensors read at `poses`.
     fn handback(site: &Scenario, poses: &[Pose]) -> Handback {

@@ -489,6 +489,32 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
     for u in &unreadable {
         let _ = writeln!(o, "  cannot read: {u}");
     }
+    // The robot's description: the nominal wheels `map` and `calibrate`
+    // take when no flag gives them.
+    let described = crate::described_wheels::of_bag(bag);
+    match &described {
+        Ok(d) => {
+            let _ = writeln!(o, "  robot description: {}", d.summary());
+        }
+        Err(why)
+            if bag
+                .topics()
+                .iter()
+                .any(|t| t.name.ends_with("robot_description")) =>
+        {
+            let _ = writeln!(o, "  robot description: {why}");
+        }
+        Err(_) => {
+            let _ = writeln!(o, "  robot description: none");
+        }
+    }
+    let described = described.ok().map(|d| d.topic);
+    // Without a description, the wheels' nominal sizes are the user's to give.
+    let initial = if described.is_some() {
+        ""
+    } else {
+        " --initial DL,DR,B"
+    };
 
     let wheel_flags = match joints
         .iter()
@@ -535,7 +561,7 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
                 ""
             };
             Some(format!(
-                "twindrive calibrate --bag {}{w} --scan-topic {scan}{imu}{interval} --initial DL,DR,B --out calib.json",
+                "twindrive calibrate --bag {}{w} --scan-topic {scan}{imu}{interval}{initial} --out calib.json",
                 shell_quote(&path.display().to_string())
             ))
         }
@@ -547,6 +573,18 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
         let bag = shell_quote(&path.display().to_string());
         map_odometry.sort_by_key(|(_, tf)| *tf);
         let map = match (map_odometry.first(), &wheel_flags) {
+            (Some((topic, _)), _) if described.is_some() => Some(format!(
+                "twindrive map --bag {bag} --scan-topic {scan} --odom-topic {topic} --out site\n  \
+                 (the twin's robot takes its wheels from {}; or give them with --wheel-diameter-m D --wheelbase-m B, \
+                 or --calibration calib.json)",
+                described.as_deref().unwrap_or_default()
+            )),
+            (None, Some(w)) if described.is_some() => Some(format!(
+                "twindrive map --bag {bag}{w} --scan-topic {scan} --calibration calib.json --out site\n  \
+                 (calib.json: from the calibrate command line below; or, with the nominal wheels of {}, \
+                 leave out --calibration)",
+                described.as_deref().unwrap_or_default()
+            )),
             (Some((topic, _)), _) => Some(format!(
                 "twindrive map --bag {bag} --scan-topic {scan} --odom-topic {topic} --wheel-diameter-m D --wheelbase-m B --out site\n  \
                  (D, B: the robot's wheel diameter and wheelbase in metres, for the twin's robot; or --calibration calib.json)"
@@ -570,11 +608,15 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             }
         }
     }
+    let guess = match &described {
+        Some(d) => format!("the wheels' first guess from {d}"),
+        None => "DL,DR,B: your robot's nominal wheel diameters and wheelbase in metres".to_string(),
+    };
     match (wheel_flags, reference) {
         (Some(w), Some(p)) => {
             let _ = writeln!(
                 o,
-                "\nSuggested (DL,DR,B: your robot's nominal wheel diameters and wheelbase in metres):\n  twindrive calibrate --bag {}{w}{p} --time-offset auto --initial DL,DR,B --out calib.json",
+                "\nSuggested ({guess}):\n  twindrive calibrate --bag {}{w}{p} --time-offset auto{initial} --out calib.json",
                 shell_quote(&path.display().to_string())
             );
             if let Some(c) = &self_cal {
@@ -588,7 +630,7 @@ fn usable(bag: &Bag, path: &Path, o: &mut String) -> anyhow::Result<()> {
             let _ = writeln!(
                 o,
                 "\nSuggested, with no pose reference (self-calibration of the wheels and the lidar's mount; \
-                 DL,DR,B: your robot's nominal wheel diameters and wheelbase in metres):\n  {}",
+                 {guess}):\n  {}",
                 self_cal.as_deref().unwrap_or_default()
             );
         }

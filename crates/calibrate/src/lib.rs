@@ -15,6 +15,8 @@
 //! - [`drive`]: the built-in calibration drive ([`calibrate_like`]);
 //! - [`bag_info`]: what a rosbag2 recording holds and which of it a
 //!   calibration can use (`twindrive bag info`);
+//! - [`described_wheels`]: the nominal wheels a recording's robot
+//!   description (`/robot_description`, a URDF) gives;
 //! - [`self_cal`]: self-calibration with no pose reference: the wheels and
 //!   the lidar's mount (and a gyro) from encoders and scans
 //!   ([`self_calibrate`]), its inputs from logs ([`scan_inputs`]);
@@ -24,6 +26,7 @@
 //!   (`twindrive master --site-maps`).
 
 pub mod bag_info;
+pub mod described_wheels;
 pub mod drive;
 pub mod figures;
 pub mod inputs;

@@ -440,6 +440,24 @@ pub(crate) fn map_files(grid: &LogOddsGrid) -> (Vec<u8>, String) {
     twindrive_sim::map::encode_map(&image, "map.pgm")
 }
 
+/// `map.png`: the map's cells in the PGM's greys (`pgm`, as
+/// [`map_files`] encodes `grid`), the drive's path on it, its start
+/// marked ([`twindrive_plot::MapPicture`]).
+fn map_picture(grid: &LogOddsGrid, pgm: &[u8], map: &SiteMap) -> anyhow::Result<Vec<u8>> {
+    let cells = grid.width() * grid.height();
+    let path: Vec<(f64, f64)> = map.mapping.poses.iter().map(|p| (p[0], p[1])).collect();
+    let picture = twindrive_plot::MapPicture {
+        width: grid.width(),
+        height: grid.height(),
+        resolution_m: grid.resolution_m(),
+        origin_m: grid.origin_m(),
+        grey: &pgm[pgm.len().saturating_sub(cells)..],
+        path_m: &path,
+        start: map.mapping.poses.first().map(|p| (p[0], p[1], p[2])),
+    };
+    Ok(picture.png()?)
+}
+
 /// Copies `from` into `staging` under its own file name.
 pub(crate) fn stage_copy(staging: &Staging, from: &Path) -> anyhow::Result<()> {
     let name = from
@@ -470,7 +488,8 @@ fn start_candidates(map: &SiteMap) -> Vec<Pose> {
     out
 }
 
-/// Writes `map.pgm`, `map.yaml`, `site.toml` (and a file it names),
+/// Writes `map.pgm`, `map.yaml`, `map.png` (a picture of the map with the
+/// drive on it), `site.toml` (and a file it names),
 /// `poses.tum` (the drive's poses in the map, each stamped with its scan's
 /// time on the recording's clock) and `map_report.json` into `out`, as one
 /// directory. `site` makes `site.toml` with the robot at a start: the
@@ -484,9 +503,12 @@ pub fn write_site(
     report: &MapReport,
     site: impl Fn(Pose) -> anyhow::Result<(String, Option<std::path::PathBuf>)>,
 ) -> anyhow::Result<()> {
-    let (pgm, yaml) = map_files(&map.grid());
+    let grid = map.grid();
+    let (pgm, yaml) = map_files(&grid);
+    let png = map_picture(&grid, &pgm, map)?;
     let staging = Staging::new(out, "map")?;
     staging.write_with("map.pgm", |w| Ok(w.write_all(&pgm)?))?;
+    staging.write_with("map.png", |w| Ok(w.write_all(&png)?))?;
     staging.write_with("map.yaml", |w| Ok(w.write_all(yaml.as_bytes())?))?;
     staging.write_with("poses.tum", |w| {
         twindrive_log::write_tum(
@@ -543,7 +565,7 @@ pub fn write_site(
     staging.commit()?;
     let why = first_error.map_or_else(|| "the drive has no pose".to_string(), |e| format!("{e:#}"));
     bail!(
-        "the map is written to {} (map.pgm, map.yaml, poses.tum, map_report.json), but no site.toml: \
+        "the map is written to {} (map.pgm, map.yaml, map.png, poses.tum, map_report.json), but no site.toml: \
          at none of the drive's {} poses tried does the site load as a scenario on it (first: {why}); \
          give the site's robot a smaller footprint (--footprint-radius-m) or a --mission whose robot fits",
         out.display(),

@@ -2,7 +2,7 @@
 //! and its verification, the robots; commands in, frames out. No I/O but
 //! the files a plan leaves behind (rehearsals), and time as an argument.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -10,10 +10,11 @@ use serde_json::{Value, json};
 use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_link::envelope::{SigningKey, Supervision};
 use twindrive_log::MissionLog;
-use twindrive_mission::coverage::{covered_share, with_sweeps};
+use twindrive_mission::coverage::covered_share;
 use twindrive_mission::follower::{Follower, FollowerSettings, expected_duration_s};
 use twindrive_mission::freedom::FreedomSettings;
 use twindrive_mission::goals::Goals;
+use twindrive_mission::itinerary::{Itinerary, ItineraryError};
 use twindrive_mission::plan::KeepOutZone;
 use twindrive_mission::plan::MissionPlan;
 use twindrive_mission::redundancy::RedundancyConfig;
@@ -23,6 +24,7 @@ use twindrive_sim::Scenario;
 use crate::fleet::{SharedSlot, Signing};
 use crate::planning::{self, PlanResult, Verification};
 use crate::protocol::Command;
+use crate::words::in_operator_words;
 use crate::workspace::Workspace;
 
 /// Areas the twin is sweeping, to measure once the drive's rehearsal (the
@@ -126,8 +128,12 @@ pub struct Core {
     verification: Option<(Verification, Value)>,
     verify_rev: u64,
     /// The way to the operator's goals (or why there is none), as the
-    /// page draws it.
+    /// page draws it, with the goals as given (a page opened later takes
+    /// them up).
     route: Option<Value>,
+    /// The last refusal of each part of the page ([`spot`]), in the
+    /// operator's words, until a command there succeeds.
+    refusals: BTreeMap<&'static str, String>,
     /// A sweep being driven: what the twin swept of each area is measured
     /// once its rehearsal ends.
     sweeping: Option<Sweeping>,
@@ -138,6 +144,28 @@ pub struct Core {
     plan_cache: Option<(u64, Arc<str>)>,
     verify_cache: Option<(u64, Arc<str>)>,
     rehearsal_cache: Option<(u64, Arc<str>)>,
+}
+
+/// The part of the page a command comes from, where its refusal shows:
+/// `goals` (Show the way, Drive it), `plan` (Make plan, Verify; `freedom`
+/// when the robot's freedom is refused), `twin` (the twin's controls),
+/// `robot` (upload, and the decision after a hand-back). Driving, stopping
+/// and focusing have none: they are refused only for a broken page.
+pub fn spot(cmd: &Command) -> Option<&'static str> {
+    match cmd {
+        Command::Goals { .. } | Command::GoalsClear => Some("goals"),
+        Command::Plan { .. } | Command::Verify => Some("plan"),
+        Command::Upload { .. } | Command::Replan { .. } | Command::EndMission { .. } => {
+            Some("robot")
+        }
+        Command::WallFollow
+        | Command::Speed { .. }
+        | Command::Reset
+        | Command::Place { .. }
+        | Command::RecordStart
+        | Command::RecordStop => Some("twin"),
+        Command::Drive { .. } | Command::Stop | Command::Focus { .. } => None,
+    }
 }
 
 /// The map as the page draws it: walls, solids, the occupancy grid (row 0
@@ -198,6 +226,7 @@ impl Core {
             verification: None,
             verify_rev: 0,
             route: None,
+            refusals: BTreeMap::new(),
             sweeping: None,
             job: None,
             events: VecDeque::new(),
@@ -287,15 +316,20 @@ impl Core {
             settings,
         )
         .ok_or("goals: the twin's site has no walls or map to plan on")?;
-        // The areas' sweeps after the waypoints.
-        let (goals, sweeps) = with_sweeps(
-            &planner,
-            goals,
-            [pose.x_m, pose.y_m],
-            scenario.robot.footprint_radius_m,
-        )
-        .map_err(|e| format!("goals: {e}"))?;
-        let goals = &goals;
+        let itinerary = match Itinerary::plan(&planner, goals, pose, &scenario.robot) {
+            Ok(itinerary) => itinerary,
+            Err(ItineraryError::Unreachable { reason, why }) => {
+                let waypoints: Vec<[f64; 2]> = goals.waypoints.iter().map(|w| w.at()).collect();
+                self.route = Some(json!({
+                    "waypoints": waypoints,
+                    "unreachable": why,
+                    "reason": reason,
+                }));
+                return Err(format!("goals: {reason}"));
+            }
+            Err(e) => return Err(format!("goals: {e}")),
+        };
+        let sweeps = &itinerary.sweeps;
         let areas: Vec<Value> = sweeps
             .iter()
             .map(|(_, s)| {
@@ -307,20 +341,18 @@ impl Core {
                 })
             })
             .collect();
+        let goals = &itinerary.driven;
         let waypoints: Vec<[f64; 2]> = goals.waypoints.iter().map(|w| w.at()).collect();
-        let route = match planner.route([pose.x_m, pose.y_m], &waypoints) {
-            Ok(route) => route,
-            Err(why) => {
-                self.route = Some(json!({
-                    "waypoints": waypoints,
-                    "unreachable": why,
-                    "reason": why.to_string(),
-                }));
-                return Err(format!("goals: {why}"));
-            }
-        };
+        let route = itinerary.route.clone();
         let settings = FollowerSettings::default();
-        let duration_s = expected_duration_s(&route, goals, &settings);
+        let duration_s = expected_duration_s(
+            &route,
+            goals,
+            &settings,
+            &scenario.robot,
+            pose,
+            scenario.dt_ns as f64 * 1e-9,
+        );
         let line = format!(
             "twin: a way of {:.2} m to {} waypoint(s), about {duration_s:.0} s, the footprint at least {:.3} m clear",
             route.length_m,
@@ -343,17 +375,18 @@ impl Core {
             }
             self.sweeping = (!sweeps.is_empty()).then(|| Sweeping {
                 rehearsal_rev: self.ws.rehearsal_rev(),
-                areas: goals
+                areas: itinerary
+                    .goals
                     .areas
                     .iter()
-                    .zip(&sweeps)
+                    .zip(sweeps)
                     .map(|(a, (s, _))| (a.polygon.clone(), s.sweep_radius_m))
                     .collect(),
                 zones: zones.clone(),
                 settings: *planner.settings(),
             });
-            self.ws
-                .follow(Follower::new(&route, goals, settings), now_ns);
+            let follower = Follower::new(&route, goals, settings);
+            self.ws.follow(follower, itinerary, now_ns);
             return Ok(Applied::Done(Some(format!(
                 "{line}: driving it, recording the rehearsal"
             ))));
@@ -361,7 +394,58 @@ impl Core {
         Ok(Applied::Done(Some(line)))
     }
 
+    /// Carries out `cmd` at console time `now_ns`. A refusal comes back in
+    /// the operator's words and stays in the state beside the part of the
+    /// page that sent it ([`spot`]) until a command there succeeds; new
+    /// goals replace the way shown.
     pub fn apply(&mut self, cmd: Command, now_ns: u64) -> Result<Applied, String> {
+        let zones = match &cmd {
+            Command::Goals {
+                keep_out: Some(z), ..
+            } => z.clone(),
+            Command::Plan {
+                freedom: Some(f), ..
+            } => f.keep_out.clone(),
+            _ => self.freedom.keep_out.clone(),
+        };
+        let given = match &cmd {
+            Command::Goals { goals, .. } => Some(goals.clone()),
+            _ => None,
+        };
+        if given.is_some() {
+            self.route = None;
+        }
+        let place = spot(&cmd);
+        let result = self.carry_out(cmd, now_ns);
+        if let (Some(goals), Some(route)) = (given, self.route.as_mut()) {
+            route["goals"] = json!(goals);
+        }
+        match result {
+            Ok(applied) => {
+                if let Some(place) = place {
+                    self.refusals.remove(place);
+                    if place == "plan" {
+                        self.refusals.remove("freedom");
+                    }
+                }
+                Ok(applied)
+            }
+            Err(e) => {
+                let words = in_operator_words(&e, &zones);
+                if let Some(place) = place {
+                    let place = if place == "plan" && e.starts_with("plan: the robot's freedom") {
+                        "freedom"
+                    } else {
+                        place
+                    };
+                    self.refusals.insert(place, words.clone());
+                }
+                Err(words)
+            }
+        }
+    }
+
+    fn carry_out(&mut self, cmd: Command, now_ns: u64) -> Result<Applied, String> {
         let done = |s: &str| Ok(Applied::Done(Some(s.to_owned())));
         match cmd {
             Command::Drive { forward, turn } => {
@@ -381,6 +465,10 @@ impl Core {
                 drive,
                 keep_out,
             } => self.goals(&goals, drive, keep_out, now_ns),
+            Command::GoalsClear => {
+                self.route = None;
+                Ok(Applied::Done(None))
+            }
             Command::Speed { factor } => {
                 self.ws.set_speed(factor, now_ns)?;
                 Ok(Applied::Done(Some(format!("twin: {factor}x real time"))))
@@ -562,7 +650,11 @@ impl Core {
                 self.verify_rev += 1;
                 Ok(line)
             }
-            JobResult::Plan(Err(e)) => Err(e),
+            JobResult::Plan(Err(e)) => {
+                let words = in_operator_words(&e, &self.freedom.keep_out);
+                self.refusals.insert("plan", words.clone());
+                Err(words)
+            }
             JobResult::Verify(Ok(v)) => {
                 let line = format!(
                     "verification of {}: {}",
@@ -573,7 +665,10 @@ impl Core {
                 self.verify_rev += 1;
                 Ok(line)
             }
-            JobResult::Verify(Err(e)) => Err(e),
+            JobResult::Verify(Err(e)) => {
+                self.refusals.insert("plan", e.clone());
+                Err(e)
+            }
         }
     }
 
@@ -620,8 +715,10 @@ impl Core {
             return;
         };
         let mut lines = Vec::new();
+        let mut percents = Vec::new();
         for (i, (polygon, radius)) in sw.areas.iter().enumerate() {
             let (free_m2, percent) = covered_share(&planner, polygon, &track, *radius);
+            percents.push((polygon, percent));
             if let Some(area) = self
                 .route
                 .as_mut()
@@ -634,6 +731,16 @@ impl Core {
                 "twin: area {} swept {percent:.1} % of its {free_m2:.2} m² of free ground",
                 i + 1
             ));
+        }
+        // The rehearsal records them with its areas (the last ones it met).
+        if let Some(goals) = self.ws.rehearsal_goals_mut() {
+            for (record, (polygon, percent)) in
+                goals.areas.iter_mut().rev().zip(percents.into_iter().rev())
+            {
+                if &record.polygon == polygon {
+                    record.swept_percent = Some(percent);
+                }
+            }
         }
         for line in lines {
             self.event("info", line);
@@ -700,6 +807,7 @@ impl Core {
             })),
             "verify_rev": self.verify_rev,
             "route": self.route,
+            "refusals": self.refusals,
             "verdict": verdict,
             "redundancy": self.redundancy,
             "freedom": self.freedom,
@@ -976,6 +1084,80 @@ mod tests {
         );
     }
 
+    /// A refused goal says why in the operator's words (the waypoint, the
+    /// zone by its name), and the state keeps it beside the goals' buttons
+    /// until a goals command succeeds; Clear forgets the way and the
+    /// refusal, so a page opened later shows neither; the way shown keeps
+    /// the goals as given, for a page opened later to take up.
+    #[test]
+    fn goals_refusals_are_in_words_and_clear_forgets_the_way() {
+        let mut c = core(true);
+        let e = apply(
+            &mut c,
+            r#"{"cmd":"goals","goals":{"waypoints":[{"x_m":1.5,"y_m":1.0},{"x_m":1.1,"y_m":2.2,"speed_m_s":-1}]}}"#,
+            0,
+        )
+        .err()
+        .unwrap();
+        assert!(
+            e.contains("the speed of waypoint 2: expected a number > 0"),
+            "{e}"
+        );
+        let st = state(&mut c, 0);
+        assert_eq!(st["refusals"]["goals"], e.as_str());
+        assert_eq!(st["route"], Value::Null, "no way for refused goals");
+        let e = apply(
+            &mut c,
+            r#"{"cmd":"goals","keep_out":[{"name":"flowers","polygon":[[0,0],[1,1],[1,0],[0,1]]}],
+                "goals":{"waypoints":[{"x_m":1.5,"y_m":1.0}]}}"#,
+            0,
+        )
+        .err()
+        .unwrap();
+        assert!(
+            e.contains("the outline of the keep-out zone 'flowers': its sides 1 and 3 cross"),
+            "{e}"
+        );
+        assert!(!e.contains("keep_out["), "{e}");
+        // A way: the refusal is gone, the goals are kept with the way.
+        let goals =
+            r#"{"cmd":"goals","goals":{"return_home":true,"waypoints":[{"x_m":1.5,"y_m":1.0}]}}"#;
+        assert!(apply(&mut c, goals, 0).is_ok());
+        let st = state(&mut c, 0);
+        assert_eq!(st["refusals"]["goals"], Value::Null, "{st}");
+        assert!(st["route"]["length_m"].as_f64().unwrap() > 0.0, "{st}");
+        assert_eq!(st["route"]["goals"]["return_home"], true);
+        assert_eq!(st["route"]["goals"]["waypoints"][0]["x_m"], 1.5);
+        // Home is a stop of the way too.
+        assert_eq!(st["route"]["waypoints"].as_array().unwrap().len(), 2);
+        // Unreachable: the way's refusal (the cell that blocks it) and the
+        // refusal beside the buttons, until Clear.
+        assert!(
+            apply(
+                &mut c,
+                r#"{"cmd":"goals","goals":{"waypoints":[{"x_m":4.5,"y_m":1.5}]}}"#,
+                0
+            )
+            .is_err()
+        );
+        let st = state(&mut c, 0);
+        assert_eq!(st["route"]["unreachable"]["why"], "too_close", "{st}");
+        assert!(st["refusals"]["goals"].is_string(), "{st}");
+        assert!(apply(&mut c, r#"{"cmd":"goals_clear"}"#, 0).is_ok());
+        let st = state(&mut c, 0);
+        assert_eq!(st["route"], Value::Null, "{st}");
+        assert_eq!(st["refusals"]["goals"], Value::Null, "{st}");
+        // Other parts of the page keep their own.
+        let e = apply(
+            &mut c,
+            r#"{"cmd":"place","x_m":0.05,"y_m":0.05,"heading_rad":0}"#,
+            0,
+        )
+        .err()
+        .unwrap();
+        assert_eq!(state(&mut c, 0)["refusals"]["twin"], e.as_str());
+    }
+
     #[test]
     fn without_a_robot_model_the_console_refuses_to_plan() {
         let mut c = core_with(true, false);
@@ -999,10 +1181,15 @@ mod tests {
         )
         .err()
         .unwrap();
-        assert!(e.contains("corridor[0].half_width_m"), "{e}");
-        assert_eq!(state(&mut c, s)["job"], Value::Null);
-        // A zone over where the robot starts: the plan is made and signed
-        // with it, and verification names it.
+        assert!(e.contains("the half width of corridor region 1"), "{e}");
+        let st = state(&mut c, s);
+        assert_eq!(st["job"], Value::Null);
+        // Beside the freedom panel, not the plan button.
+        assert_eq!(st["refusals"]["freedom"], e.as_str(), "{st}");
+        assert_eq!(st["refusals"]["plan"], Value::Null, "{st}");
+        // A zone over where the robot starts: no plan is made, and the
+        // refusal beside the plan button names the zone and where the way
+        // enters it.
         let Ok(Applied::Job(job)) = apply(
             &mut c,
             r#"{"cmd":"plan","freedom":{"keep_out":[{"name":"pond","polygon":[[2.5,0.8],[3.5,0.8],[3.5,1.3],[2.5,1.3]]}]}}"#,
@@ -1010,12 +1197,24 @@ mod tests {
         ) else {
             panic!("a planning job")
         };
-        c.finish(job.run()).unwrap();
+        let e = c.finish(job.run()).unwrap_err();
+        assert!(
+            e.contains("keep-out zone `pond` at 0.00 s (3.00, 1.05)"),
+            "{e}"
+        );
         let st = state(&mut c, s);
         assert_eq!(st["freedom"]["keep_out"][0]["name"], "pond");
-        assert_eq!(st["verdict"]["passed"], false, "{st}");
-        let reasons = st["verdict"]["reasons"].to_string();
-        assert!(reasons.contains("pond"), "{reasons}");
+        assert_eq!(st["refusals"]["plan"], e.as_str(), "{st}");
+        assert!(c.frame(s).plan.is_none());
+        // Away from the way, the zone goes with the plan, signed with it.
+        let Ok(Applied::Job(job)) = apply(
+            &mut c,
+            r#"{"cmd":"plan","freedom":{"keep_out":[{"name":"pond","polygon":[[5.6,4.6],[5.9,4.6],[5.9,4.9],[5.6,4.9]]}]}}"#,
+            s,
+        ) else {
+            panic!("a planning job")
+        };
+        c.finish(job.run()).unwrap();
         let frame = c.frame(s);
         let plan: Value = serde_json::from_str(&frame.plan.unwrap().1).unwrap();
         assert_eq!(plan["freedom"]["keep_out"][0]["name"], "pond");

@@ -863,6 +863,9 @@ mod tests {
             bumps: 0,
             collisions: 0,
             refused: 0,
+            deviation_now_m: 0.01,
+            max_deviation_on_detour: false,
+            on_detour: false,
         }))
     }
 

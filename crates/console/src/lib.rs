@@ -11,19 +11,23 @@
 //! mission).
 //!
 //! Modules: [`workspace`] (the twin, no I/O), [`planning`] (pipeline and
-//! verification), [`fleet`] (one master end and operator per robot),
-//! [`core`] (commands in, frames out), [`protocol`] (the page's commands),
+//! verification), [`corridor`] (a plan's corridor clipped to the map, as
+//! drawn), [`fleet`] (one master end and operator per robot), [`core`]
+//! (commands in, frames out), [`words`] (refusals in the operator's
+//! words), [`protocol`] (the page's commands),
 //! [`auth`] (token and origin), [`server`] (axum, WebSockets, zenoh
 //! drivers). The page itself is `web/` (plain modules, uPlot), embedded in
 //! the binary.
 
 pub mod auth;
 pub mod core;
+pub mod corridor;
 pub mod fleet;
 pub mod foxglove_bridge;
 pub mod planning;
 pub mod protocol;
 pub mod server;
+pub mod words;
 pub mod workspace;
 
 use std::io::Write;

@@ -10,7 +10,7 @@ use twindrive_log::MissionLog;
 use twindrive_mission::freedom::{FreedomSettings, sample_arc_lengths};
 use twindrive_mission::path::PathSample;
 use twindrive_mission::pipeline::{PipelineSettings, plan_from_log};
-use twindrive_mission::plan::{MissionPlan, sha256_hex};
+use twindrive_mission::plan::{MissionPlan, SiteMapGeometry, sha256_hex};
 use twindrive_mission::redundancy::RedundancyConfig;
 use twindrive_mission::verify::{Replay, Verdict};
 use twindrive_sim::Scenario;
@@ -57,18 +57,30 @@ pub fn mcap_bytes(log: &MissionLog, scenario: &Scenario) -> Result<Vec<u8>, Stri
 }
 
 /// What the page draws of a plan's freedom: the corridor's half width at
-/// each sample (m; `null` without a corridor), the keep-out zones and the
-/// detour bounds, as signed in the plan.
+/// each sample (m; `null` without a corridor), the band the page fills
+/// (its spokes in order round it, `[from_x, from_y, to_x, to_y, …]`: the
+/// corridor clipped to what the path sees on the plan's own map, see
+/// [`crate::corridor`]), the keep-out zones and the detour bounds, as
+/// signed in the plan.
 pub fn freedom_view(plan: &MissionPlan) -> Value {
     let f = &plan.header.freedom;
     let corridor = (!f.corridor.is_empty()).then(|| {
         sample_arc_lengths(&plan.samples)
             .iter()
-            .map(|&s| f.half_width_at(s).map_or(0.0, r4))
+            .map(|&s| f.half_width_at(s).unwrap_or(0.0))
             .collect::<Vec<_>>()
     });
+    let band = corridor.as_ref().map(|widths| {
+        let path: Vec<[f64; 2]> = plan.samples.iter().map(|s| [s.x_m, s.y_m]).collect();
+        crate::corridor::band(&path, widths, &plan.header.site_map.world())
+            .into_iter()
+            .flat_map(|(a, b)| [r4(a[0]), r4(a[1]), r4(b[0]), r4(b[1])])
+            .collect::<Vec<_>>()
+    });
+    let corridor = corridor.map(|w| w.into_iter().map(r4).collect::<Vec<_>>());
     json!({
         "corridor_half_width_m": corridor,
+        "corridor_band": band,
         "stretches": f.corridor.len(),
         "keep_out": f.keep_out,
         "max_extra_time_s": f.max_extra_time_s,
@@ -167,6 +179,7 @@ pub fn make_plan(
             "refused_cuts": summary.refused_cuts.len(),
             "reversing_m": r4(summary.reversing_m),
         },
+        "goals": summary.goals,
         "settings": settings.redundancy,
         "freedom_settings": settings.freedom,
         "freedom": freedom_view(&plan),

@@ -32,6 +32,8 @@ pub enum Command {
         #[serde(default)]
         keep_out: Option<Vec<KeepOutZone>>,
     },
+    /// Forget the way to the goals (and why there was none).
+    GoalsClear,
     /// Simulated time per real time.
     Speed {
         factor: f64,
@@ -92,7 +94,7 @@ pub fn parse(text: &str) -> Result<Command, String> {
     serde_json::from_str(text).map_err(|e| {
         format!(
             "not a console command ({e}); expected a JSON object with `cmd` one of drive, stop, \
-             wall_follow, goals, speed, reset, place, record_start, record_stop, plan, verify, upload, \
+             wall_follow, goals, goals_clear, speed, reset, place, record_start, record_stop, plan, verify, upload, \
              replan, end_mission, focus"
         )
     })
@@ -112,6 +114,7 @@ mod tests {
             })
         );
         assert_eq!(parse(r#"{"cmd":"stop"}"#), Ok(Command::Stop));
+        assert_eq!(parse(r#"{"cmd":"goals_clear"}"#), Ok(Command::GoalsClear));
         let goals = parse(
             r#"{"cmd":"goals","drive":true,"goals":{"clearance_m":0.05,
                 "waypoints":[{"x_m":1,"y_m":2},{"x_m":3,"y_m":4,"heading_rad":1.5}]}}"#,

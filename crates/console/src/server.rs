@@ -251,9 +251,14 @@ async fn connection(mut socket: WebSocket, app: App) {
                     }
                     Some(Ok(_)) => continue,
                 };
-                if let Err(e) = command(&app, &text, &mut focus) {
+                if let Err((e, logged)) = command(&app, &text, &mut focus) {
                     tracing::warn!("a page's command: {e}");
-                    let e = json!({"type": "error", "message": e});
+                    // Which command (the page shows the refusal beside its
+                    // control), and whether the event list has it.
+                    let cmd = serde_json::from_str::<serde_json::Value>(&text)
+                        .ok()
+                        .and_then(|v| v.get("cmd")?.as_str().map(str::to_owned));
+                    let e = json!({"type": "error", "message": e, "cmd": cmd, "logged": logged});
                     if socket.send(WsMessage::Text(e.to_string().into())).await.is_err() {
                         break;
                     }
@@ -267,14 +272,25 @@ async fn connection(mut socket: WebSocket, app: App) {
 }
 
 /// Carries out one command; slow work goes to a blocking thread and
-/// reports in the event list.
-fn command(app: &App, text: &str, focus: &mut Option<String>) -> Result<(), String> {
-    let cmd = protocol::parse(text)?;
+/// reports in the event list. A refusal of a command from a control of the
+/// page ([`crate::core::spot`]) goes into the event list too (`true`); a
+/// message that is no command goes back to its page only.
+fn command(app: &App, text: &str, focus: &mut Option<String>) -> Result<(), (String, bool)> {
+    let cmd = protocol::parse(text).map_err(|e| (e, false))?;
     if let protocol::Command::Focus { robot } = &cmd {
         *focus = robot.clone();
     }
     let now = app.now_ns();
-    let applied = app.core().apply(cmd, now)?;
+    let logged = crate::core::spot(&cmd).is_some();
+    let applied = {
+        let mut core = app.core();
+        core.apply(cmd, now).inspect_err(|e| {
+            if logged {
+                core.event("error", e.clone());
+            }
+        })
+    }
+    .map_err(|e| (e, logged))?;
     match applied {
         Applied::Done(Some(line)) => app.core().event("info", line),
         Applied::Done(None) => {}

@@ -9,6 +9,7 @@ use std::collections::VecDeque;
 use twindrive_kinematics::{Pose, wheel_speeds};
 use twindrive_log::MissionLog;
 use twindrive_mission::follower::Follower;
+use twindrive_mission::itinerary::Itinerary;
 use twindrive_sim::ControllerConfig;
 use twindrive_sim::controller::{Controller, Observation};
 use twindrive_sim::scenario::WallFollowerSpec;
@@ -42,8 +43,8 @@ enum Drive {
     },
     WallFollower(Box<Controller>),
     /// Along a way through the operator's waypoints; a recording going on
-    /// ends when the last is reached.
-    Route(Box<Follower>),
+    /// ends when the last is reached, and records the goals met.
+    Route(Box<(Follower, Itinerary)>),
 }
 
 /// A bump the twin's robot felt (for the map).
@@ -178,6 +179,11 @@ impl Workspace {
         self.rehearsal.as_ref()
     }
 
+    /// The goals the rehearsal met (to add what was measured of them).
+    pub fn rehearsal_goals_mut(&mut self) -> Option<&mut twindrive_log::RehearsedGoals> {
+        self.rehearsal.as_mut().map(|log| &mut log.header.goals)
+    }
+
     /// Changes whenever a new rehearsal is recorded.
     pub fn rehearsal_rev(&self) -> u64 {
         self.rehearsal_rev
@@ -204,17 +210,32 @@ impl Workspace {
         let (v_max, omega_max) = self.velocity_limits();
         // Both at full deflection would saturate a wheel: share the range.
         let (v, omega) = (0.7 * forward * v_max, 0.5 * turn * omega_max);
-        self.drive = Drive::Manual {
+        self.set_drive(Drive::Manual {
             v_m_s: v,
             omega_rad_s: omega,
             expires_ns: now_ns + DEAD_MAN_NS,
-        };
+        });
         Ok(())
     }
 
     pub fn stop(&mut self, now_ns: u64) {
         self.advance(now_ns);
-        self.drive = Drive::Idle;
+        self.set_drive(Drive::Idle);
+    }
+
+    /// Drives the twin by `drive` from now on; the goals a way met so far
+    /// go into the recording going on.
+    fn set_drive(&mut self, drive: Drive) {
+        if let Drive::Route(route) = &self.drive
+            && let Some(log) = &mut self.recording
+        {
+            let (follower, itinerary) = route.as_ref();
+            let met = itinerary.record(follower.arrivals());
+            let goals = &mut log.header.goals;
+            goals.waypoints.extend(met.waypoints);
+            goals.areas.extend(met.areas);
+        }
+        self.drive = drive;
     }
 
     /// Hands the robot to the wall follower (the scenario's, or the paper's
@@ -222,17 +243,15 @@ impl Workspace {
     pub fn wall_follow(&mut self, now_ns: u64) {
         self.advance(now_ns);
         let (spec, sensor) = self.wall_spec.clone();
-        self.drive =
-            Drive::WallFollower(Box::new(Controller::new(&ControllerConfig::WallFollower {
-                spec,
-                sensor,
-            })));
+        self.set_drive(Drive::WallFollower(Box::new(Controller::new(
+            &ControllerConfig::WallFollower { spec, sensor },
+        ))));
     }
 
     /// Sends the robot along a way (planned from where it stands now).
-    pub fn follow(&mut self, follower: Follower, now_ns: u64) {
+    pub fn follow(&mut self, follower: Follower, itinerary: Itinerary, now_ns: u64) {
         self.advance(now_ns);
-        self.drive = Drive::Route(Box::new(follower));
+        self.set_drive(Drive::Route(Box::new((follower, itinerary))));
     }
 
     pub fn set_speed(&mut self, factor: f64, now_ns: u64) -> Result<(), String> {
@@ -378,8 +397,8 @@ impl Workspace {
                     },
                     &nominal,
                 ),
-                Drive::Route(f) => {
-                    let (v, omega) = f.command(&pose, t_s);
+                Drive::Route(route) => {
+                    let (v, omega) = route.0.command(&pose, t_s);
                     let (l, r) = wheel_speeds(&nominal, v, omega);
                     [l, r]
                 }
@@ -420,9 +439,9 @@ impl Workspace {
         // At the last waypoint: the robot stands, and the drive there is
         // the rehearsal (a bump on the way ends it too: the way was not
         // clear, and the operator sees where).
-        let arrived = matches!(&self.drive, Drive::Route(f) if f.done());
+        let arrived = matches!(&self.drive, Drive::Route(route) if route.0.done());
         if arrived || (bump && matches!(self.drive, Drive::Route(_))) {
-            self.drive = Drive::Idle;
+            self.set_drive(Drive::Idle);
             if let Some(log) = self.recording.take() {
                 self.rehearsal = Some(log);
                 self.rehearsal_rev += 1;

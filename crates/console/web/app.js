@@ -31,6 +31,9 @@ const S = {
   zones: [], draft: null,
   // The operator's waypoints for the twin ({ x_m, y_m, heading_rad? }).
   waypoints: [],
+  // Refusals the page made itself (nothing was sent), by the part of the
+  // page they are shown in; the console's own come with its state.
+  local: {}, localSeq: 0,
   // What the last map frame drew of the robots: { id, pose, color }.
   drawn: { robots: [] },
   // Bytes and milliseconds (parse and build) of the heavy messages.
@@ -98,8 +101,13 @@ function receive(m) {
     case 'rehearsal': onRehearsal(m); break;
     case 'robot': onDetail(m); break;
     case 'error':
+      // A refusal of a control's command is in the console's state (shown
+      // beside the control) and its event list; anything else only here.
       S.errors.push(m.message);
-      addEvent({ seq: `local${S.errors.length}`, level: 'error', text: m.message });
+      if (!m.logged) {
+        addEvent({ seq: `local${S.errors.length}`, level: 'error', text: m.message });
+        if (CMD_SPOT[m.cmd]) { S.local[CMD_SPOT[m.cmd]] = m.message; renderRefusals(); }
+      }
       break;
   }
 }
@@ -119,6 +127,7 @@ function onState(m) {
   }
   S.instance = m.instance;
   if (!S.state && m.freedom && !S.zones.length) loadFreedom(m.freedom);
+  if (!S.state && m.route?.goals && !S.waypoints.length) loadGoals(m.route.goals);
   S.state = m;
   const t = m.twin;
   $('twin-readout').textContent =
@@ -144,7 +153,7 @@ function onState(m) {
   renderRobot(m.robots.find((r) => r.id === S.focus));
   renderBanner(m.robots);
   renderEvents(m.events);
-  renderRoute(m.route);
+  renderRefusals();
   if (m.verdict) renderVerdict(m.verdict);
   updateCursorRange();
   map.dirty = true;
@@ -280,8 +289,8 @@ function renderBanner(robots) {
 }
 function bannerKey(r) { return `${r.id}:${r.handbacks}:${r.awaiting.plan_t_s}`; }
 $('banner-ack').onclick = () => { S.acked.add($('banner').dataset.key); $('banner').hidden = true; };
-$('banner-replan').onclick = () => { send({ cmd: 'replan', robot: $('banner').dataset.robot }); S.acked.add($('banner').dataset.key); };
-$('banner-end').onclick = () => { send({ cmd: 'end_mission', robot: $('banner').dataset.robot }); S.acked.add($('banner').dataset.key); };
+$('banner-replan').onclick = () => { act('robot', { cmd: 'replan', robot: $('banner').dataset.robot }); S.acked.add($('banner').dataset.key); };
+$('banner-end').onclick = () => { act('robot', { cmd: 'end_mission', robot: $('banner').dataset.robot }); S.acked.add($('banner').dataset.key); };
 
 // ---------------------------------------------------------------- charts
 let seriesChart = null, windowChart = null;
@@ -324,9 +333,9 @@ function onDetail(d) {
   if (key !== S.detailLayers) {
     S.detailLayers = key;
     map.setLayer('robot:plan', d.plan ? new LodPath(d.plan) : null, { color: COLORS.robotPlan, width: 1, dash: [6, 4], alpha: 0.8 });
-    const widths = d.freedom?.corridor_half_width_m;
+    const band = d.freedom?.corridor_band;
     const own = d.plan_sha256 && d.plan_sha256 !== S.plan?.sha256;
-    map.setLayer('corridor:robot', own && widths ? new Band(d.plan, widths) : null, { color: COLORS.corridor });
+    map.setLayer('corridor:robot', own && band ? new Band(band) : null, { color: COLORS.corridor });
     map.setVisible('corridor', map.isVisible('corridor'));
     for (const n of [...map.layers.keys()]) if (n.startsWith('robot:log')) map.setLayer(n, null);
     d.logs.forEach((l, i) => map.setLayer(`robot:log${i}`, new LodPath(l), { color: COLORS.robot, width: 2 }));
@@ -344,8 +353,8 @@ function onPlan(p) {
   map.setLayer('deleted', deleted.length ? new LodPath(ex, deleted) : null, { color: COLORS.deleted, width: 2.5, alpha: 0.8 });
   map.setLayer('uncovered', uncovered.length ? new LodPath(ex, uncovered) : null, { color: COLORS.uncovered, width: 4 });
   map.setLayer('plan', new LodPath(p.plan), { color: COLORS.plan, width: 2 });
-  const widths = p.freedom.corridor_half_width_m;
-  map.setLayer('corridor', widths ? new Band(p.plan, widths) : null, { color: COLORS.corridor });
+  const band = p.freedom.corridor_band;
+  map.setLayer('corridor', band ? new Band(band) : null, { color: COLORS.corridor });
   for (const g of ['executed', 'deleted', 'uncovered', 'plan', 'corridor']) map.setVisible(g, map.isVisible(g));
   const s = p.summary;
   $('plan-summary').innerHTML =
@@ -354,11 +363,23 @@ function onPlan(p) {
     `<b>${fmt(s.coverage_percent, 2)} %</b> of the route within ${fmt(s.coverage_radius_m)} m (${fmt(s.uncovered_m, 3)} m uncovered) · ` +
     `${s.loops_removed} loop(s), ${s.kinks_removed} kink(s), ${fmt(s.trailing_retrace_m)} m trailing retrace cut · ` +
     `${s.refused_cuts} cut(s) refused (they would drop ground) · ${s.spikes_found} spike(s) filtered in ${s.filter_windows} window(s) · ${p.samples} samples · ` +
-    freedomLine(p.freedom);
+    freedomLine(p.freedom) + goalsLine(p.goals);
   $('verdict').textContent = '';
   map.setLayer('replays:open', null);
   map.setLayer('replays:closed', null);
   updateCursorRange();
+}
+
+// The operator's goals the plan keeps, in words (nothing for a manual
+// rehearsal).
+function goalsLine(g) {
+  if (!g || (!(g.waypoints || []).length && !(g.areas || []).length)) return '';
+  const ways = (g.waypoints || []).map((w) =>
+    `${esc(w.name)} within ${fmt(w.passed_m, 3)} m` +
+    (w.heading_error_rad != null ? `, facing within ${fmt(w.heading_error_rad, 3)} rad` : '') +
+    (w.dwell_s > 0 ? `, standing ${fmt(w.stood_s, 1)} of ${fmt(w.dwell_s, 1)} s` : ''));
+  const areas = (g.areas || []).map((a) => `${esc(a.name)} swept ${fmt(a.swept_percent, 1)} %`);
+  return ` · <span id="plan-goals">goals kept: ${ways.concat(areas).join('; ')}</span>`;
 }
 
 // The freedom a plan was signed with, in words.
@@ -402,13 +423,20 @@ for (const box of document.querySelectorAll('input[data-layer]')) {
   });
 }
 
+// What the plan command carries of the redundancy settings; a
+// `refused` reason, in words, when the inputs do not say numbers.
 function redundancySettings() {
   const pinch = parseFloat($('pinch').value);
   const cov = $('coverage').value.trim();
-  const windows = $('keep-windows').value.split(',').map((w) => w.trim()).filter(Boolean).map((w) => {
-    const [a, b] = w.split('-').map(Number);
-    return { start_s: a, end_s: b };
+  if (!(pinch > 0)) return { refused: 'the pinch distance: a number of metres above 0, please' };
+  if (cov !== '' && !(parseFloat(cov) > 0)) return { refused: 'the coverage radius: a number of metres above 0, or empty for the pinch distance' };
+  const texts = $('keep-windows').value.split(',').map((w) => w.trim()).filter(Boolean);
+  const windows = texts.map((w) => {
+    const m = w.match(/^(-?[\d.]+)\s*-\s*(-?[\d.]+)$/);
+    return m ? { start_s: Number(m[1]), end_s: Number(m[2]) } : { start_s: NaN, end_s: NaN };
   });
+  const bad = windows.findIndex((w) => !(Number.isFinite(w.start_s) && Number.isFinite(w.end_s) && w.end_s > w.start_s));
+  if (bad >= 0) return { refused: `keep times: “${texts[bad]}” is not a window; write them as 10-20, 45-50 (seconds from the rehearsal's start, the end after the start)` };
   const r = {
     pinch_distance_m: pinch,
     reversing_is_redundant: $('cut-reversing').checked,
@@ -417,7 +445,7 @@ function redundancySettings() {
     keep_windows: windows,
   };
   if (cov !== '') r.coverage_radius_m = parseFloat(cov);
-  return r;
+  return { settings: r };
 }
 
 function renderRegions() {
@@ -467,7 +495,7 @@ function finishDraft() {
 }
 
 function addZone(kind, polygon) {
-  const word = { keep_out: 'zone', corridor: 'corridor', sweep: 'area' }[kind];
+  const word = { keep_out: 'zone', corridor: 'corridor region', sweep: 'area' }[kind];
   let k = 1;
   while (S.zones.some((z) => z.name === `${word} ${k}`)) k++;
   const half = parseFloat($('corridor-width').value);
@@ -532,11 +560,23 @@ function freedomSettings() {
   return f;
 }
 
+// Why the freedom's inputs say no numbers, in words; null when they do.
+function freedomProblem() {
+  const corridor = S.zones.filter((z) => z.kind === 'corridor');
+  const bad = corridor.find((z) => !Number.isFinite(z.half_width_m));
+  if (bad) return `the half width of the corridor region '${bad.name}': a number of metres, please`;
+  for (const [id, what] of [['max-extra-time', 'the time detours may add in all (s)'], ['max-extra-distance', 'the distance a detour may add (m)']]) {
+    const e = $(id);
+    if (e.validity.badInput || (e.value !== '' && !Number.isFinite(parseFloat(e.value)))) return `${what}: a number, please`;
+  }
+  return null;
+}
+
 // The console's last freedom settings (a page opened later takes them up).
 function loadFreedom(f) {
   S.zones = [
     ...f.keep_out.map((z) => ({ kind: 'keep_out', name: z.name, polygon: z.polygon, half_width_m: 0.5 })),
-    ...f.corridor.map((c, i) => ({ kind: 'corridor', name: `corridor ${i + 1}`, polygon: c.region, half_width_m: c.half_width_m })),
+    ...f.corridor.map((c, i) => ({ kind: 'corridor', name: `corridor region ${i + 1}`, polygon: c.region, half_width_m: c.half_width_m })),
   ];
   $('max-extra-time').value = String(f.max_extra_time_s);
   $('max-extra-distance').value = String(f.max_extra_distance_m);
@@ -590,11 +630,14 @@ $('waypoints').addEventListener('click', (e) => {
   const i = e.target.dataset.i;
   if (i !== undefined) { S.waypoints.splice(Number(i), 1); renderWaypoints(); }
 });
+// Clear: the waypoints and areas go, and the console forgets the way (or
+// why there was none), so no page shows it again.
 $('btn-goals-clear').onclick = () => {
   S.waypoints = [];
   S.zones = S.zones.filter((z) => z.kind !== 'sweep');
   renderWaypoints();
   renderZones();
+  act('goals', { cmd: 'goals_clear' });
 };
 function goals(drive) {
   if (map.mode === 'waypoint') setMode(null);
@@ -603,20 +646,79 @@ function goals(drive) {
     areas: S.zones.filter((z) => z.kind === 'sweep').map((z) => ({ polygon: z.polygon })),
   };
   const clearance = parseFloat($('goal-clearance').value), speed = parseFloat($('goal-speed').value);
-  if (Number.isFinite(clearance)) goals.clearance_m = clearance;
-  if (Number.isFinite(speed)) goals.speed_m_s = speed;
-  send({ cmd: 'goals', drive, goals, keep_out: freedomSettings().keep_out });
+  if (!Number.isFinite(clearance)) return refuse('goals', 'the clearance: a number of metres, please');
+  if (!Number.isFinite(speed)) return refuse('goals', 'the speed: a number of metres a second, please');
+  goals.clearance_m = clearance;
+  goals.speed_m_s = speed;
+  if ($('goal-home').checked) goals.return_home = true;
+  act('goals', { cmd: 'goals', drive, goals, keep_out: freedomSettings().keep_out });
 }
 $('btn-route').onclick = () => goals(false);
 $('btn-drive-route').onclick = () => goals(true);
 
-function renderRoute(r) {
-  const text = !r ? '' : r.unreachable
-    ? `no way: ${r.reason}`
+// The goals the console's way was planned to (a page opened later takes
+// them up, as it takes up the freedom).
+function loadGoals(g) {
+  S.waypoints = (g.waypoints || []).map((w) => {
+    const o = { x_m: w.x_m, y_m: w.y_m };
+    if (w.heading_rad !== null && w.heading_rad !== undefined) o.heading_rad = w.heading_rad;
+    if (w.dwell_s) o.dwell_s = w.dwell_s;
+    if (w.speed_m_s !== null && w.speed_m_s !== undefined) o.speed_m_s = w.speed_m_s;
+    return o;
+  });
+  (g.areas || []).forEach((a, i) => S.zones.push({ kind: 'sweep', name: `area ${i + 1}`, polygon: a.polygon, half_width_m: 0.5 }));
+  $('goal-clearance').value = String(g.clearance_m);
+  $('goal-speed').value = String(g.speed_m_s);
+  $('goal-home').checked = !!g.return_home;
+  renderWaypoints();
+  renderZones();
+}
+
+// The way to the goals, or the refusal of the last goals (beside the
+// buttons that sent them).
+function renderRoute(r, refusal) {
+  const text = refusal
+    ? `${r && r.unreachable ? 'no way' : 'refused'}: ${refusal.replace(/^goals: /, '')}`
+    : !r || r.unreachable ? ''
     : `way: ${fmt(r.length_m)} m through ${r.waypoints.length} stop(s), about ${fmt(r.duration_s, 0)} s, the footprint at least ${fmt(r.min_clearance_m, 3)} m clear` +
-      (r.areas || []).map((a, i) => `; area ${i + 1}: ${a.lanes} lane(s), ${a.touch_ups} touch-up(s), ${fmt(a.planned_percent, 1)} % of ${fmt(a.free_m2)} m² swept as planned`).join('');
+      (r.areas || []).map((a, i) => `; area ${i + 1}: ${a.lanes} lane(s), ${a.touch_ups} touch-up(s), ${fmt(a.planned_percent, 1)} % of ${fmt(a.free_m2)} m² swept as planned` +
+        (a.swept_percent !== undefined ? `, ${fmt(a.swept_percent, 1)} % swept by the twin` : '')).join('');
   if ($('route-status').textContent !== text) $('route-status').textContent = text;
-  $('route-status').classList.toggle('warn', !!(r && r.unreachable));
+  $('route-status').classList.toggle('warn', !!refusal);
+}
+
+// ---------------------------------------------------------------- refusals
+// Each part of the page shows the last refusal of what it sent, in the
+// operator's words, until a command from there succeeds; the event list
+// keeps them all. The console's are in its state (a page opened later
+// shows them too); the page's own (inputs that say no number) are local.
+const SPOTS = { twin: 'refusal-twin', plan: 'refusal-plan', freedom: 'refusal-freedom', robot: 'refusal-robot' };
+const CMD_SPOT = {
+  goals: 'goals', goals_clear: 'goals', plan: 'plan', verify: 'plan', upload: 'robot', replan: 'robot',
+  end_mission: 'robot', wall_follow: 'twin', speed: 'twin', reset: 'twin', place: 'twin', record_start: 'twin', record_stop: 'twin',
+};
+function renderRefusals() {
+  const r = S.state?.refusals || {};
+  for (const [spot, id] of Object.entries(SPOTS)) {
+    const text = S.local[spot] ?? r[spot] ?? '';
+    if ($(id).textContent !== text) $(id).textContent = text;
+  }
+  renderRoute(S.state?.route, S.local.goals ?? r.goals);
+}
+
+// A refusal the page makes itself: nothing is sent.
+function refuse(spot, text) {
+  S.local[spot] = text;
+  addEvent({ seq: `page${++S.localSeq}`, level: 'error', text });
+  renderRefusals();
+}
+
+// Sends a command from a part of the page; the page's own refusal there
+// goes (the console's goes once the command succeeds).
+function act(spot, cmd) {
+  delete S.local[spot];
+  renderRefusals();
+  send(cmd);
 }
 
 // The waypoints (numbered, with their headings), the way planned to them,
@@ -654,18 +756,23 @@ function drawGoals(ctx, px) {
 }
 
 // ---------------------------------------------------------------- controls
-$('btn-wall').onclick = () => send({ cmd: 'wall_follow' });
+$('btn-wall').onclick = () => act('twin', { cmd: 'wall_follow' });
 $('btn-stop').onclick = () => send({ cmd: 'stop' });
-$('btn-reset').onclick = () => send({ cmd: 'reset' });
-$('speed').onchange = () => send({ cmd: 'speed', factor: parseFloat($('speed').value) });
-$('btn-record').onclick = () => send({ cmd: S.state?.twin.recording_s !== null && S.state ? 'record_stop' : 'record_start' });
+$('btn-reset').onclick = () => act('twin', { cmd: 'reset' });
+$('speed').onchange = () => act('twin', { cmd: 'speed', factor: parseFloat($('speed').value) });
+$('btn-record').onclick = () => act('twin', { cmd: S.state?.twin.recording_s !== null && S.state ? 'record_stop' : 'record_start' });
 $('btn-plan').onclick = () => {
   if (S.draft) finishDraft();
-  send({ cmd: 'plan', redundancy: redundancySettings(), freedom: freedomSettings() });
+  delete S.local.freedom;
+  const r = redundancySettings();
+  if (r.refused) return refuse('plan', r.refused);
+  const problem = freedomProblem();
+  if (problem) return refuse('freedom', problem);
+  act('plan', { cmd: 'plan', redundancy: r.settings, freedom: freedomSettings() });
 };
-$('btn-verify').onclick = () => send({ cmd: 'verify' });
+$('btn-verify').onclick = () => act('plan', { cmd: 'verify' });
 $('btn-upload').onclick = () => {
-  if (S.focus) send({ cmd: 'upload', robot: S.focus, force: $('force-upload').checked });
+  if (S.focus) act('robot', { cmd: 'upload', robot: S.focus, force: $('force-upload').checked });
 };
 function setMode(mode) {
   if (S.draft) finishDraft();
@@ -687,7 +794,7 @@ $('btn-sweep').onclick = () => setMode('sweep');
 map.onPick = (mode, a, b) => {
   if (mode === 'place') {
     const heading = Math.hypot(b[0] - a[0], b[1] - a[1]) > 0.05 ? Math.atan2(b[1] - a[1], b[0] - a[0]) : 0;
-    send({ cmd: 'place', x_m: a[0], y_m: a[1], heading_rad: heading });
+    act('twin', { cmd: 'place', x_m: a[0], y_m: a[1], heading_rad: heading });
   } else if (mode === 'region') {
     const r = Math.hypot(b[0] - a[0], b[1] - a[1]);
     if (r > 0.02) S.regions.push({ kind: 'circle', x_m: a[0], y_m: a[1], radius_m: r });

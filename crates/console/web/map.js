@@ -44,27 +44,34 @@ function buildPath(xs, ys, ranges, tol) {
   return p;
 }
 
-// A band along a path (columns x, y) as wide as `halfWidths` (m, one per
-// point) each side: a plan's corridor. Points of one width make one stroke
-// (flat ends, so a narrow stretch shows narrow between wide ones; round
-// joins; a disc at the path's two ends); the map draws bands opaque, under
-// the walls and paths, so where two strokes overlap nothing darkens.
+// A plan's corridor as the console sends it: spokes [from_x, from_y, to_x,
+// to_y, …] in order round the band, each a ray across the path from a
+// point of it to the corridor's half width or the first wall, whichever is
+// nearer (crates/console/src/corridor.rs). The band is the union of the
+// quadrilaterals between each spoke and the next, each laid down as two
+// triangles turning the same way, so the non-zero fill is their union
+// however the path bends or crosses itself: no band over a wall's far side
+// or an occupied cell. The map draws bands opaque, under the walls and
+// paths.
 export class Band {
-  constructor(cols, halfWidths) {
-    this.strokes = [];
-    this.ends = [];
-    const n = Math.min(cols.x.length, halfWidths.length);
-    let start = 0;
-    for (let i = 1; i <= n; i++) {
-      if (i < n && halfWidths[i] === halfWidths[start]) continue;
-      const p = new Path2D();
-      const a = Math.max(0, start - 1); // from the last point of the one before
-      p.moveTo(cols.x[a], cols.y[a]);
-      for (let k = a + 1; k < i; k++) p.lineTo(cols.x[k], cols.y[k]);
-      this.strokes.push({ path: p, half: halfWidths[start] });
-      start = i;
+  constructor(spokes) {
+    this.path = new Path2D();
+    const n = Math.floor(spokes.length / 4);
+    const tri = (ax, ay, bx, by, cx, cy) => {
+      const area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+      if (area === 0) return;
+      this.path.moveTo(ax, ay);
+      if (area > 0) { this.path.lineTo(bx, by); this.path.lineTo(cx, cy); } else { this.path.lineTo(cx, cy); this.path.lineTo(bx, by); }
+      this.path.closePath();
+    };
+    for (let k = 0; k < n; k++) {
+      const i = 4 * k, j = 4 * ((k + 1) % n);
+      const [cx, cy, ex, ey] = [spokes[i], spokes[i + 1], spokes[i + 2], spokes[i + 3]];
+      const [dx, dy, fx, fy] = [spokes[j], spokes[j + 1], spokes[j + 2], spokes[j + 3]];
+      tri(cx, cy, ex, ey, fx, fy);
+      tri(cx, cy, fx, fy, dx, dy);
     }
-    if (n) this.ends = [[cols.x[0], cols.y[0], halfWidths[0]], [cols.x[n - 1], cols.y[n - 1], halfWidths[n - 1]]];
+    this.spokes = n;
   }
 }
 
@@ -122,6 +129,9 @@ export class MapView {
     this.dpr = dpr;
     this.cache = null;
     this.dirty = true;
+    // Until the operator pans or zooms, the whole site fits the view,
+    // whatever the window's size.
+    if (this.fitted && !this.moved && this.world?.bounds) this.fit(this.world.bounds);
   }
 
   setWorld(world) {
@@ -234,23 +244,11 @@ export class MapView {
 
   // Band layers (corridors), in their colour, opaque.
   drawBands(ctx) {
-    ctx.save();
-    ctx.lineCap = 'butt';
-    ctx.lineJoin = 'round';
     for (const [, l] of this.layers) {
       if (!l.visible || !(l.path instanceof Band)) continue;
-      ctx.strokeStyle = ctx.fillStyle = l.style.color;
-      for (const { path, half } of l.path.strokes) {
-        ctx.lineWidth = 2 * half;
-        ctx.stroke(path);
-      }
-      for (const [x, y, half] of l.path.ends) {
-        ctx.beginPath();
-        ctx.arc(x, y, half, 0, 2 * Math.PI);
-        ctx.fill();
-      }
+      ctx.fillStyle = l.style.color;
+      ctx.fill(l.path.path, 'nonzero');
     }
-    ctx.restore();
   }
 
   // The static picture is drawn once into an offscreen canvas twice the
@@ -411,6 +409,7 @@ export class MapView {
   }
 
   pan(dx, dy) {
+    this.moved = true;
     this.lastViewChange = performance.now();
     this.cx -= dx / this.scale;
     this.cy += dy / this.scale;
@@ -418,6 +417,7 @@ export class MapView {
   }
 
   zoomAt(px, py, factor) {
+    this.moved = true;
     this.lastViewChange = performance.now();
     const before = this.toWorld(px, py);
     this.scale = Math.min(5000, Math.max(2, this.scale * factor));

@@ -37,8 +37,9 @@ use twindrive_mission::redundancy::RouteProgress;
 use crate::mission::Mission;
 use crate::rehearsal::{Rehearsal, SITE_BOX, score};
 
-/// The lidar added to the case study's robot for the lidar rows.
-const LIDAR: &str = r#"
+/// The lidar added to the case study's robot for the lidar rows (a site
+/// file's `[[range_sensors]]` table).
+pub const LIDAR: &str = r#"
 [[range_sensors]]
 name = "lidar"
 kind = "lidar"

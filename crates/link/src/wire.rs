@@ -11,8 +11,9 @@
 use serde::{Deserialize, Serialize};
 
 /// Version of this message set; a message of another version is refused
-/// (4: the robot reports its detours).
-pub const PROTOCOL_VERSION: u16 = 4;
+/// (4: the robot reports its detours; 5: its status says its deviation now
+/// beside the largest).
+pub const PROTOCOL_VERSION: u16 = 5;
 /// Nothing longer is decoded.
 pub const MAX_MESSAGE_BYTES: usize = 64 * 1024;
 /// Longest robot id.
@@ -182,9 +183,10 @@ pub struct Status {
     /// and their standard deviations.
     pub params: [f64; 3],
     pub params_std: [f64; 3],
-    /// Distance from the plan's pose now, and the latest median range
-    /// residual (m).
+    /// The largest distance from the plan's pose since the plan started
+    /// (m; NaN while no plan runs).
     pub deviation_m: f64,
+    /// The latest median range residual (m).
     pub range_residual_m: f64,
     /// Wheel rotation since the agent started (rad, both wheels).
     pub wheel_travel_rad: f64,
@@ -201,6 +203,12 @@ pub struct Status {
     /// Payloads refused before they were read (not authentic, replays)
     /// since the agent started.
     pub refused: u32,
+    /// Distance from the plan's pose now (m; NaN while no plan runs).
+    pub deviation_now_m: f64,
+    /// Whether the robot was on a detour when it was farthest from the plan
+    /// (`deviation_m`), and whether it is on one now.
+    pub max_deviation_on_detour: bool,
+    pub on_detour: bool,
 }
 
 /// Why and where the robot handed control back, with what it knows.

@@ -48,6 +48,7 @@ fn plan_json() -> Vec<u8> {
             start_covariance: None,
             site_map: Default::default(),
             freedom: Default::default(),
+            goals: Default::default(),
             source_log_sha256: "0".repeat(64),
             settings: serde_json::json!({}),
             summary: serde_json::json!({}),

@@ -65,6 +65,9 @@ fn samples() -> Vec<Vec<u8>> {
             bumps: 2,
             collisions: 0,
             refused: 3,
+            deviation_now_m: 0.01,
+            max_deviation_on_detour: true,
+            on_detour: false,
         })),
         Body::Handback(Box::new(Handback {
             plan: t,

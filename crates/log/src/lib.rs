@@ -10,6 +10,7 @@ pub mod carmen;
 mod csv_io;
 pub mod digest;
 mod error;
+pub mod goals;
 pub mod map_topic;
 mod mcap_io;
 mod time;
@@ -17,6 +18,7 @@ mod tum;
 
 pub use csv_io::{read_csv, read_csv_from, write_csv};
 pub use error::LogError;
+pub use goals::{ReachedWaypoint, RehearsedGoals, SweptArea};
 pub use map_topic::{MapGrid, WorldMap};
 pub use mcap_io::{
     Track, is_mcap, read_mcap, read_mcap_bytes, write_mcap, write_mcap_with_map, write_tracks_mcap,
@@ -95,6 +97,10 @@ pub struct LogHeader {
     /// [`StepRecord::gyro_z_rad_s`]. Absent from headers without one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gyro: Option<GyroInfo>,
+    /// The goals a rehearsal from goals reached, and when (absent from a
+    /// manual rehearsal's header): the plan keeps them.
+    #[serde(default, skip_serializing_if = "RehearsedGoals::is_empty")]
+    pub goals: RehearsedGoals,
 }
 
 /// A yaw-rate gyro as the operator knows it: its name and rate. A simulated
@@ -279,6 +285,7 @@ pub(crate) mod testutil {
                 },
             ],
             gyro: None,
+            goals: Default::default(),
         };
         let mut log = MissionLog::new(header);
         for k in 0..7u64 {

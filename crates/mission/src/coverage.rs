@@ -21,7 +21,6 @@
 
 use serde::Serialize;
 
-use crate::goals::{Goals, Waypoint};
 use crate::route::RoutePlanner;
 
 /// How an area is swept.
@@ -335,38 +334,4 @@ pub fn sweep(
             100.0 * hit as f64 / free.len() as f64
         },
     })
-}
-
-/// `goals` with each of its areas' sweeps after its waypoints (each from
-/// where the robot is then, the first from `start`), for a robot whose
-/// sweep defaults to `footprint_m`; and each area's sweep. Errors name the
-/// area.
-pub fn with_sweeps(
-    planner: &RoutePlanner,
-    goals: &Goals,
-    start: [f64; 2],
-    footprint_m: f64,
-) -> Result<(Goals, Vec<(SweepSettings, Sweep)>), String> {
-    let mut driven = goals.clone();
-    let mut sweeps = Vec::new();
-    for (i, area) in goals.areas.iter().enumerate() {
-        let from = driven.waypoints.last().map_or(start, |w| w.at());
-        let settings = SweepSettings {
-            sweep_radius_m: area.sweep_radius_m.unwrap_or(footprint_m),
-            overlap: area.overlap,
-        };
-        let swept = sweep(planner, &area.polygon, from, &settings)
-            .map_err(|e| format!("areas[{i}]: {e}"))?;
-        driven
-            .waypoints
-            .extend(swept.waypoints.iter().map(|p| Waypoint {
-                x_m: p[0],
-                y_m: p[1],
-                heading_rad: None,
-                dwell_s: 0.0,
-                speed_m_s: None,
-            }));
-        sweeps.push((settings, swept));
-    }
-    Ok((driven, sweeps))
 }

@@ -66,18 +66,63 @@ struct Leg {
     waypoint: Option<usize>,
 }
 
-/// How long driving `route` through `goals`' waypoints takes (s): its
-/// length at the slowest leg's speed, its turns in place at the
-/// follower's rate, a braking and a start at every waypoint, and the
-/// dwells.
-pub fn expected_duration_s(route: &Route, goals: &Goals, settings: &FollowerSettings) -> f64 {
-    let slowest = (0..goals.waypoints.len())
-        .map(|k| goals.leg_speed_m_s(k))
-        .fold(goals.speed_m_s, f64::min);
-    let stops = goals.waypoints.len() as f64 * slowest / settings.decel_m_s2;
-    route.duration_s(slowest, settings.max_turn_rad_s)
-        + goals.waypoints.iter().map(|w| w.dwell_s).sum::<f64>()
-        + stops
+/// How long driving `route` through `goals`' waypoints takes (s): the
+/// follower driven on `robot` (its nominal wheels, their speed and
+/// acceleration limits, at the control period `dt_s`) from `start`, as the
+/// twin drives it but without noise or slip. Gives up (and says so with
+/// `f64::INFINITY`) after an hour of driving.
+pub fn expected_duration_s(
+    route: &Route,
+    goals: &Goals,
+    settings: &FollowerSettings,
+    robot: &twindrive_sim::RobotConfig,
+    start: Pose,
+    dt_s: f64,
+) -> f64 {
+    const GIVE_UP_S: f64 = 3600.0;
+    let params = &robot.nominal_params;
+    let mut follower = Follower::new(route, goals, *settings);
+    let mut pose = start;
+    let mut wheels = [0.0f64; 2];
+    let max_change = robot.max_wheel_accel_rad_s2 * dt_s;
+    let mut t_s = 0.0;
+    while !follower.done() {
+        if t_s > GIVE_UP_S {
+            return f64::INFINITY;
+        }
+        let (v, omega) = follower.command(&pose, t_s);
+        let (l, r) = twindrive_kinematics::wheel_speeds(params, v, omega);
+        // The simulator's limits: both wheels scaled to the top speed
+        // (keeping the curvature), then each towards it at the acceleration.
+        let peak = l.abs().max(r.abs());
+        let scale = if peak > robot.max_wheel_speed_rad_s {
+            robot.max_wheel_speed_rad_s / peak
+        } else {
+            1.0
+        };
+        for (w, cmd) in wheels.iter_mut().zip([l * scale, r * scale]) {
+            *w += (cmd - *w).clamp(-max_change, max_change);
+        }
+        pose = twindrive_kinematics::arc_step_wheels(
+            &pose,
+            params,
+            wheels[0] * dt_s,
+            wheels[1] * dt_s,
+        );
+        t_s += dt_s;
+    }
+    t_s
+}
+
+/// When the robot met a waypoint: it stood there at `reached_t_s`, then
+/// turned to the waypoint's heading and stood its dwell, and left at
+/// `left_t_s` (the times the follower was given).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Arrival {
+    /// Index into the goals' waypoints.
+    pub waypoint: usize,
+    pub reached_t_s: f64,
+    pub left_t_s: f64,
 }
 
 /// Drives a route through the goals' waypoints.
@@ -90,6 +135,9 @@ pub struct Follower {
     phase: Phase,
     /// Waypoints reached so far.
     reached: usize,
+    /// When the robot stood at the waypoint it is at now.
+    standing_since_s: Option<f64>,
+    arrivals: Vec<Arrival>,
 }
 
 impl Follower {
@@ -133,7 +181,14 @@ impl Follower {
             k: 0,
             phase,
             reached: 0,
+            standing_since_s: None,
+            arrivals: Vec::new(),
         }
+    }
+
+    /// The waypoints met so far, in order, and when.
+    pub fn arrivals(&self) -> &[Arrival] {
+        &self.arrivals
     }
 
     /// Whether the last waypoint is reached (and its dwell stood).
@@ -182,6 +237,7 @@ impl Follower {
                     let left = length - along;
                     if left <= s.reached_m {
                         self.phase = if leg.waypoint.is_some() {
+                            self.standing_since_s = Some(t_s);
                             Phase::Heading
                         } else {
                             self.k += 1;
@@ -220,6 +276,11 @@ impl Follower {
                     if t_s < until_s {
                         return (0.0, 0.0);
                     }
+                    self.arrivals.push(Arrival {
+                        waypoint: leg.waypoint.expect("a waypoint's leg"),
+                        reached_t_s: self.standing_since_s.take().unwrap_or(t_s),
+                        left_t_s: t_s,
+                    });
                     self.k += 1;
                     self.phase = if self.k < self.legs.len() {
                         Phase::Face

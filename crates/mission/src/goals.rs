@@ -24,6 +24,11 @@
 //! sweep_radius_m = 0.15  # the sweep about the robot's centre (default: its footprint)
 //! overlap = 0.1       # lanes overlap by this share of the sweep's width
 //! ```
+//!
+//! With `return_home = true` the robot comes back, after the waypoints and
+//! areas, to where it started and turns to face as it did. The goals are
+//! the operator's intent: a plan made from their rehearsal keeps every one
+//! (see [`crate::itinerary`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -40,6 +45,9 @@ pub struct Goals {
     /// Areas to sweep, in order, after the waypoints.
     #[serde(default)]
     pub areas: Vec<Area>,
+    /// Come back to the start (and face as there) after everything else.
+    #[serde(default)]
+    pub return_home: bool,
 }
 
 /// An area to sweep ([`crate::coverage`]).
@@ -144,11 +152,19 @@ impl Goals {
                 }
             }
             if let Some(h) = w.heading_rad
-                && !h.is_finite()
+                && !(h.is_finite() && h.abs() <= std::f64::consts::TAU)
             {
                 return Err(format!(
-                    "field `{}`: expected a finite angle, got {h}",
-                    field("heading_rad")
+                    "field `{}`: expected an angle in radians within ±2π (±6.283), got {h}{}",
+                    field("heading_rad"),
+                    if h.is_finite() {
+                        format!(
+                            " (if you meant {h} degrees, that is {:.4} rad)",
+                            h.to_radians()
+                        )
+                    } else {
+                        String::new()
+                    }
                 ));
             }
             if !(w.dwell_s.is_finite() && w.dwell_s >= 0.0) {
@@ -221,6 +237,18 @@ mod tests {
                 "waypoints[0].speed_m_s",
             ),
             ("[[waypoints]]\nx_m = nan\ny_m = 2\n", "waypoints[0].x_m"),
+            (
+                "[[waypoints]]\nx_m = 1\ny_m = 2\nheading_rad = 90\n",
+                "waypoints[0].heading_rad`: expected an angle in radians within ±2π",
+            ),
+            (
+                "[[waypoints]]\nx_m = 1\ny_m = 2\nheading_rad = -7\n",
+                "waypoints[0].heading_rad",
+            ),
+            (
+                "return_home = 1\n[[waypoints]]\nx_m = 1\ny_m = 2\n",
+                "line 1",
+            ),
         ] {
             let e = Goals::parse(text).unwrap_err();
             assert!(e.contains(says), "{text:?}: {e}");

@@ -17,6 +17,9 @@
 //! - [`distance_transform`]: the exact Euclidean distance transform of a grid;
 //! - [`site_grid`]: the twin's site as a grid of footprint clearances;
 //! - [`goals`]: the operator's waypoints for a rehearsal (`mission.toml`);
+//! - [`itinerary`]: the goals as the stops of one way (waypoints, sweeps,
+//!   home), and the record of what a drive met and when;
+//! - [`kept`]: whether a path keeps the operator's goals;
 //! - [`route`]: goal-level planning, the way through the operator's waypoints;
 //! - [`follower`]: driving that way on the twin;
 //! - [`coverage`]: sweeping an area the operator drew;
@@ -34,6 +37,8 @@ pub mod follower;
 pub mod freedom;
 pub mod goals;
 pub mod grid_search;
+pub mod itinerary;
+pub mod kept;
 pub mod path;
 pub mod pipeline;
 pub mod plan;

@@ -3,21 +3,22 @@
 //! alternative). Each stage's output is kept for figures and reports.
 
 use serde::{Deserialize, Serialize};
-use twindrive_kinematics::DiffDriveParams;
+use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_log::MissionLog;
 
 use crate::control::{WheelCommand, recompute};
 use crate::error::PipelineError;
 use crate::freedom::FreedomSettings;
+use crate::kept::GoalsKept;
 use crate::path::{PathSample, path_length_m};
 use crate::plan::{SiteMap, SiteMapGeometry};
 use crate::planner::{PlannerSettings, executed_path};
 use crate::redundancy::{
-    Deletion, DeletionReason, Pruned, RedundancyConfig, RefusedCut, RouteCoverage,
+    Deletion, DeletionReason, Pruned, RedundancyConfig, RefusedCut, RouteCoverage, TimeWindow,
     remove_redundancy, route_coverage,
 };
 use crate::retime::WheelLimits;
-use crate::spikes::{FilterSettings, Filtered, filter_spikes, time_optimal};
+use crate::spikes::{FilterSettings, Filtered, filter_spikes_keeping, time_optimal_keeping};
 
 /// Every setting of the pipeline (the plan records them).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -53,6 +54,10 @@ pub struct Stages {
     /// How much of the executed route the plan passes within the coverage
     /// radius.
     pub coverage: RouteCoverage,
+    /// The operator's goals the rehearsal met (empty for a manual one),
+    /// and how the plan keeps them.
+    pub goals: twindrive_plan::PlanGoals,
+    pub kept: GoalsKept,
 }
 
 /// Numbers for people.
@@ -88,6 +93,10 @@ pub struct StageSummary {
     pub deletion_list: Vec<Deletion>,
     /// Cuts refused because they would have dropped explored ground.
     pub refused_cuts: Vec<RefusedCut>,
+    /// How the plan keeps each of the operator's goals (a rehearsal from
+    /// goals).
+    #[serde(skip_serializing_if = "GoalsKept::is_empty")]
+    pub goals: GoalsKept,
 }
 
 impl Stages {
@@ -121,6 +130,7 @@ impl Stages {
             coverage: self.coverage.clone(),
             deletion_list: deletions.clone(),
             refused_cuts: self.pruned.refused.clone(),
+            goals: self.kept.clone(),
         }
     }
 }
@@ -174,17 +184,54 @@ pub fn run(
     let executed = executed_path(log, params, &settings.planner)?;
     let period_s = (executed.last().expect("two samples at least").t_s - executed[0].t_s)
         / (executed.len() - 1) as f64;
-    let pruned = remove_redundancy(&executed, &settings.redundancy)?;
+    // The operator's goals are intent: no cut deletes, and no smoothing or
+    // re-timing moves, what the rehearsal drove while meeting one, so every
+    // cut lies between goals.
+    // (Half a period either side: the log's times and the follower's are
+    // the same steps, summed differently.)
+    let windows: Vec<(f64, f64)> = log
+        .header
+        .goals
+        .windows_s()
+        .into_iter()
+        .map(|(a, b)| (a - 0.5 * period_s, b + 0.5 * period_s))
+        .collect();
+    let mut redundancy = settings.redundancy.clone();
+    redundancy.keep_windows.extend(
+        windows
+            .iter()
+            .map(|&(start_s, end_s)| TimeWindow { start_s, end_s }),
+    );
+    let pruned = remove_redundancy(&executed, &redundancy)?;
     let mut cleaned = close_gaps(&executed, &pruned.kept, period_s);
+    let fixed: Vec<bool> = pruned
+        .kept
+        .iter()
+        .map(|&k| {
+            let t = executed[k].t_s;
+            windows.iter().any(|&(a, b)| (a..=b).contains(&t))
+        })
+        .collect();
     let cleaned_commands = recompute(&mut cleaned, params);
-    let filtered = filter_spikes(&cleaned, params, limits, period_s, &settings.filter)?;
+    let filtered =
+        filter_spikes_keeping(&cleaned, &fixed, params, limits, period_s, &settings.filter)?;
     // The alternative must not cost the plan: its failure is reported.
-    let fastest = time_optimal(&filtered.samples, params, limits, period_s);
+    let fastest =
+        time_optimal_keeping(&filtered.samples, &filtered.fixed, params, limits, period_s);
     let coverage = route_coverage(
         &executed,
         &filtered.samples,
         settings.redundancy.effective_coverage_radius_m(),
     )?;
+    let goals = plan_goals(
+        &log.header.goals,
+        executed.last().map_or(0.0, |p| p.t_s),
+        period_s,
+    );
+    let kept = GoalsKept {
+        waypoints: goals.check_waypoints(&timed_poses(&filtered.samples)),
+        areas: Vec::new(),
+    };
     Ok(Stages {
         executed,
         pruned,
@@ -194,7 +241,58 @@ pub fn run(
         fastest,
         period_s,
         coverage,
+        goals,
+        kept,
     })
+}
+
+/// The goals a rehearsal met, as a plan keeps them; the plan ends at the
+/// last waypoint when the rehearsal did (its last goal is a waypoint, met
+/// at the log's end, `end_t_s`, within two control periods).
+pub fn plan_goals(
+    met: &twindrive_log::RehearsedGoals,
+    end_t_s: f64,
+    period_s: f64,
+) -> twindrive_plan::PlanGoals {
+    use twindrive_plan::{GoalArea, GoalWaypoint, PlanGoals};
+    let last_area_s = met
+        .areas
+        .iter()
+        .map(|a| a.end_t_s)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let ends_at_last_waypoint = met
+        .waypoints
+        .last()
+        .is_some_and(|w| w.left_t_s > last_area_s && w.left_t_s >= end_t_s - 2.0 * period_s);
+    PlanGoals {
+        waypoints: met
+            .waypoints
+            .iter()
+            .map(|w| GoalWaypoint {
+                name: w.name.clone(),
+                x_m: w.x_m,
+                y_m: w.y_m,
+                heading_rad: w.heading_rad,
+                dwell_s: w.dwell_s,
+            })
+            .collect(),
+        areas: met
+            .areas
+            .iter()
+            .map(|a| GoalArea {
+                name: a.name.clone(),
+                polygon: a.polygon.clone(),
+                sweep_radius_m: a.sweep_radius_m,
+                swept_percent: a.swept_percent,
+            })
+            .collect(),
+        ends_at_last_waypoint,
+    }
+}
+
+/// Each sample's time and pose.
+pub fn timed_poses(path: &[PathSample]) -> Vec<(f64, twindrive_kinematics::Pose)> {
+    path.iter().map(|p| (p.t_s, p.pose)).collect()
 }
 
 /// A mission log made on the twin, turned into a plan: the pipeline's
@@ -220,20 +318,38 @@ pub fn plan_from_log(
         .freedom
         .validate(header.footprint_radius_m)
         .map_err(|e| PipelineError::Infeasible(format!("the freedom settings: {e}")))?;
-    let stages = run(log, params, &limits, settings)?;
+    let mut stages = run(log, params, &limits, settings)?;
     let (path, commands) = if time_optimal {
         let (p, c) = stages.fastest.as_ref().map_err(|e| {
             PipelineError::Infeasible(format!("the time-optimal re-timing failed: {e}"))
         })?;
-        (p, c)
+        (p.clone(), c.clone())
     } else {
-        (&stages.filtered.samples, &stages.filtered.commands)
+        (
+            stages.filtered.samples.clone(),
+            stages.filtered.commands.clone(),
+        )
     };
+    // The plan keeps the operator's goals, or it is not made.
+    stages.kept = crate::kept::goals_kept(
+        &stages.goals,
+        &timed_poses(&path),
+        &scenario.world,
+        header.footprint_radius_m,
+        &settings.freedom.keep_out,
+    );
+    let missed = stages.kept.missed();
+    if !missed.is_empty() {
+        return Err(PipelineError::Infeasible(format!(
+            "the plan would not keep the operator's goals: {}",
+            missed.join("; ")
+        )));
+    }
     let summary = serde_json::to_value(stages.summary())
         .map_err(|e| PipelineError::Infeasible(format!("the stage summary: {e}")))?;
     let plan = plan_document(
-        path,
-        commands,
+        &path,
+        &commands,
         PlanHeader {
             robot: RobotInfo {
                 scenario: header.scenario.clone(),
@@ -248,10 +364,11 @@ pub fn plan_from_log(
             start_covariance: None,
             site_map: SiteMap::default(),
             freedom: settings.freedom.freedom_along(
-                &positions(path),
+                &positions(&path),
                 &scenario.world,
                 header.footprint_radius_m,
             ),
+            goals: stages.goals.clone(),
             source_log_sha256: log_sha256.to_owned(),
             settings: serde_json::json!({
                 "pipeline": settings,
@@ -262,6 +379,13 @@ pub fn plan_from_log(
         scenario,
     );
     plan.validate()?;
+    // The operator's zones are never crossed on purpose: a rehearsal that
+    // drove through one cannot become a plan.
+    if let Some(entry) = crate::verify::zone_entry(&plan) {
+        return Err(PipelineError::Infeasible(format!(
+            "{entry}: the rehearsal drove through it; rehearse a way around it (`rehearse --goals ... --freedom` keeps out of the zones) or draw the zone where the rehearsal did not go"
+        )));
+    }
     Ok((plan, stages))
 }
 
@@ -340,8 +464,37 @@ pub fn continuation_plan(
         learnt,
         detour,
     )?;
+    // The operator's waypoints still ahead stay goals of the continuation
+    // (their dwells kept); those met before the hand-back, and the areas,
+    // were the interrupted plan's.
+    let before: Vec<(f64, Pose)> = interrupted
+        .samples
+        .iter()
+        .map(|s| (s.t_s, s.pose()))
+        .collect();
+    let met = h.goals.check_waypoints(&before);
+    let goals = twindrive_plan::PlanGoals {
+        waypoints: h
+            .goals
+            .waypoints
+            .iter()
+            .zip(&met)
+            .filter(|(_, m)| m.at_t_s >= plan_t_s)
+            .map(|(w, _)| w.clone())
+            .collect(),
+        areas: Vec::new(),
+        ends_at_last_waypoint: h.goals.ends_at_last_waypoint,
+    };
+    let dwell_at = |p: &PathSample| {
+        goals.waypoints.iter().any(|w| {
+            w.dwell_s > 0.0
+                && (p.pose.x_m - w.x_m).hypot(p.pose.y_m - w.y_m) <= crate::kept::GOAL_REACH_M
+        })
+    };
+    let fixed: Vec<bool> = path.iter().map(dwell_at).collect();
     let limits = h.limits.scaled(pace);
-    let (path, commands) = crate::spikes::time_optimal(&path, params, &limits, h.time_step_s)?;
+    let (path, commands) =
+        crate::spikes::time_optimal_keeping(&path, &fixed, params, &limits, h.time_step_s)?;
     // The operator's freedom goes on: their corridor settings (recorded
     // with the interrupted plan, or the defaults) on the new path, their
     // zones and bounds as they were.
@@ -381,6 +534,7 @@ pub fn continuation_plan(
                     h.robot.footprint_radius_m,
                 )
             },
+            goals,
             source_log_sha256: h.source_log_sha256.clone(),
             settings: serde_json::json!({
                 "continuation_of": interrupted.sha256,

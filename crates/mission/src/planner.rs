@@ -70,6 +70,50 @@ pub fn savitzky_golay(values: &[f64], half: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The wheel angles smoothed (Savitzky-Golay, windows of `half` samples
+/// each side) stretch by stretch between standstills: where neither
+/// wheel's count changes for `half` samples or more the robot stands, and
+/// stands exactly (a dwell is not smoothed into a creep); each moving
+/// stretch is smoothed on its own, its windows shrinking to the raw counts
+/// at the standstills on either side, as at the log's ends.
+fn smooth_moving(encoders: &[(f64, [f64; 2])], half: usize) -> Vec<[f64; 2]> {
+    let n = encoders.len();
+    let mut still = vec![false; n];
+    let mut k = 0;
+    while k < n {
+        let run = encoders[k..]
+            .iter()
+            .take_while(|e| e.1 == encoders[k].1)
+            .count();
+        if run > half.max(1) {
+            still[k..k + run].fill(true);
+        }
+        k += run;
+    }
+    let mut out: Vec<[f64; 2]> = encoders.iter().map(|e| e.1).collect();
+    let mut k = 0;
+    while k < n {
+        if still[k] {
+            k += 1;
+            continue;
+        }
+        // From the standstill before (or the start) to the one after (or
+        // the end), both ends kept as they are.
+        let a = k.saturating_sub(1);
+        let b = (k..n).find(|&j| still[j]).unwrap_or(n - 1);
+        let smooth = |wheel: usize| {
+            let values: Vec<f64> = encoders[a..=b].iter().map(|e| e.1[wheel]).collect();
+            savitzky_golay(&values, half)
+        };
+        let (left, right) = (smooth(0), smooth(1));
+        for (o, (l, r)) in out[a..=b].iter_mut().zip(left.into_iter().zip(right)) {
+            *o = [l, r];
+        }
+        k = b + 1;
+    }
+    out
+}
+
 /// The executed path at every encoder sample. `v_m_s` and `omega_rad_s` of a
 /// sample are the velocities over the interval that starts there (the last
 /// sample's are zero).
@@ -115,11 +159,7 @@ pub fn executed_path(
     let span = encoders.last().expect("two at least").0 - encoders[0].0;
     let period = span / (encoders.len() - 1) as f64;
     let half = (0.5 * settings.smoothing_window_s / period).round() as usize;
-    let smoothed: Vec<[f64; 2]> = {
-        let left = savitzky_golay(&encoders.iter().map(|e| e.1[0]).collect::<Vec<_>>(), half);
-        let right = savitzky_golay(&encoders.iter().map(|e| e.1[1]).collect::<Vec<_>>(), half);
-        left.into_iter().zip(right).map(|(l, r)| [l, r]).collect()
-    };
+    let smoothed = smooth_moving(&encoders, half);
     let encoders: Vec<(f64, [f64; 2])> = encoders
         .iter()
         .zip(smoothed)

@@ -111,48 +111,44 @@ pub enum Unreachable {
     },
 }
 
-impl fmt::Display for Unreachable {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let name = |k: usize| {
-            if k == 0 {
-                "the start".to_string()
-            } else {
-                format!("waypoint {k}")
-            }
-        };
+impl Unreachable {
+    /// Which waypoint (from 1; 0 is the start).
+    pub fn waypoint(&self) -> usize {
         match self {
-            Self::OffSite { waypoint, at } => write!(
-                f,
-                "{} at ({:.2}, {:.2}) is off the twin's site",
-                name(*waypoint),
-                at[0],
-                at[1]
+            Self::OffSite { waypoint, .. }
+            | Self::TooClose { waypoint, .. }
+            | Self::Closed { waypoint, .. } => *waypoint,
+        }
+    }
+
+    /// The reason, with the waypoint called `name`.
+    pub fn naming(&self, name: &str) -> String {
+        match self {
+            Self::OffSite { at, .. } => format!(
+                "{name} at ({:.2}, {:.2}) is off the twin's site",
+                at[0], at[1]
             ),
             Self::TooClose {
-                waypoint,
                 at,
                 clearance_m,
                 need_m,
-            } => write!(
-                f,
-                "{} at ({:.2}, {:.2}): the robot's footprint there clears the nearest obstacle by {:.3} m, the route keeps {need_m:.3} m",
-                name(*waypoint),
+                ..
+            } => format!(
+                "{name} at ({:.2}, {:.2}): the robot's footprint there clears the nearest obstacle by {:.3} m, the route keeps {need_m:.3} m",
                 at[0],
                 at[1],
                 clearance_m.max(0.0)
             ),
             Self::Closed {
-                waypoint,
                 at,
                 nearest,
                 short_m,
                 blocked_at,
                 blocked_clearance_m,
                 need_m,
-            } => write!(
-                f,
-                "{} at ({:.2}, {:.2}) cannot be reached keeping {need_m:.3} m clear: the nearest the robot gets is ({:.2}, {:.2}), {short_m:.2} m short; the way on is blocked at ({:.2}, {:.2}), where its footprint clears {:.3} m",
-                name(*waypoint),
+                ..
+            } => format!(
+                "{name} at ({:.2}, {:.2}) cannot be reached keeping {need_m:.3} m clear: the nearest the robot gets is ({:.2}, {:.2}), {short_m:.2} m short; the way on is blocked at ({:.2}, {:.2}), where its footprint clears {:.3} m",
                 at[0],
                 at[1],
                 nearest[0],
@@ -162,6 +158,16 @@ impl fmt::Display for Unreachable {
                 blocked_clearance_m.max(0.0)
             ),
         }
+    }
+}
+
+impl fmt::Display for Unreachable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let name = match self.waypoint() {
+            0 => "the start".to_string(),
+            k => format!("waypoint {k}"),
+        };
+        f.write_str(&self.naming(&name))
     }
 }
 

@@ -128,6 +128,17 @@ pub struct Filtered {
     /// Re-interpolated windows (time spans in the output).
     pub windows: Vec<(f64, f64)>,
     pub iterations: usize,
+    /// Per sample: whether it is one the filter was to keep where it was
+    /// (an operator's goal; see [`filter_spikes_keeping`]).
+    pub fixed: Vec<bool>,
+}
+
+/// What the filter knows of a sample: whether it was re-interpolated, and
+/// whether it must stay where it is.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Marks {
+    touched: bool,
+    fixed: bool,
 }
 
 /// Wheel rotations [left, right] of the arc from `a` to `b`.
@@ -208,9 +219,9 @@ fn reinterpolate(
 /// the new samples and, per input sample, whether its pieces inherit a flag.
 fn subdivide(
     samples: &[PathSample],
-    flags: &[bool],
+    flags: &[Marks],
     max_duration_s: f64,
-) -> (Vec<PathSample>, Vec<bool>) {
+) -> (Vec<PathSample>, Vec<Marks>) {
     let mut out = Vec::with_capacity(samples.len());
     let mut out_flags = Vec::with_capacity(samples.len());
     for (k, w) in samples.windows(2).enumerate() {
@@ -234,7 +245,15 @@ fn subdivide(
                 pose,
                 ..*a
             });
-            out_flags.push(flags[k]);
+            // A piece inside a kept stretch is kept too.
+            out_flags.push(if i == 0 {
+                flags[k]
+            } else {
+                Marks {
+                    fixed: flags[k].fixed && flags[k + 1].fixed,
+                    ..flags[k]
+                }
+            });
         }
     }
     if let Some(last) = samples.last() {
@@ -287,7 +306,10 @@ fn retime_checked(
             let lo = s.segment.saturating_sub(1);
             let hi = (s.segment + 1).min(durations.len() - 1);
             for k in lo..=hi {
-                mins[k] = mins[k].max(durations[k] * 1.15);
+                // A standstill (a dwell) is no faster for being longer.
+                if inc[k].iter().any(|v| v.abs() >= 1e-9) {
+                    mins[k] = mins[k].max(durations[k] * 1.15);
+                }
             }
         }
     }
@@ -306,7 +328,7 @@ pub const MAX_HOLD_IN_PERIODS: f64 = 1.5;
 /// Returns the commands and the spikes left.
 fn make_executable(
     samples: &mut Vec<PathSample>,
-    flags: &mut Vec<bool>,
+    flags: &mut Vec<Marks>,
     period_s: f64,
     mut commands: Vec<WheelCommand>,
     params: &DiffDriveParams,
@@ -342,6 +364,29 @@ pub fn filter_spikes(
     period_s: f64,
     settings: &FilterSettings,
 ) -> Result<Filtered, PipelineError> {
+    let fixed = vec![false; input.len()];
+    filter_spikes_keeping(input, &fixed, params, limits, period_s, settings)
+}
+
+/// [`filter_spikes`], keeping every sample marked in `fixed` (one flag per
+/// input sample) where it is: no window re-interpolates across one (a
+/// window may end on it), so an operator's goal keeps its place, heading
+/// and dwell; re-timing only ever slows it.
+pub fn filter_spikes_keeping(
+    input: &[PathSample],
+    fixed: &[bool],
+    params: &DiffDriveParams,
+    limits: &WheelLimits,
+    period_s: f64,
+    settings: &FilterSettings,
+) -> Result<Filtered, PipelineError> {
+    if fixed.len() != input.len() {
+        return Err(PipelineError::Infeasible(format!(
+            "{} flags for {} samples",
+            fixed.len(),
+            input.len()
+        )));
+    }
     limits.validate()?;
     if !(period_s.is_finite() && period_s > 0.0) {
         return Err(PipelineError::Value(
@@ -354,8 +399,15 @@ pub fn filter_spikes(
     let mut samples = input.to_vec();
     let mut commands = recompute(&mut samples, params);
     let first_spikes = find_spikes(&samples, &commands, limits);
-    // Which samples were re-interpolated (for the windows reported).
-    let mut touched = vec![false; samples.len()];
+    // Which samples were re-interpolated (for the windows reported), and
+    // which stay where they are.
+    let mut touched: Vec<Marks> = fixed
+        .iter()
+        .map(|&fixed| Marks {
+            touched: false,
+            fixed,
+        })
+        .collect();
     let mut width = settings.window_samples.max(1);
     let mut iterations = 0;
     let mut spikes = first_spikes.clone();
@@ -388,23 +440,44 @@ pub fn filter_spikes(
         let last = samples.len() - 1;
         let mut spans: Vec<(usize, usize)> = Vec::new();
         for s in &spikes {
-            let lo = s.segment.saturating_sub(width);
-            let hi = (s.segment + 1 + width).min(last);
+            // No kept sample inside a window: it ends on the nearest.
+            let lo = (s.segment.saturating_sub(width)..=s.segment)
+                .rev()
+                .find(|&k| touched[k].fixed)
+                .unwrap_or(s.segment.saturating_sub(width));
+            let hi = (s.segment + 1..=(s.segment + 1 + width).min(last))
+                .find(|&k| touched[k].fixed)
+                .unwrap_or((s.segment + 1 + width).min(last));
+            // Windows that only touch stay apart (the sample between them
+            // may be kept).
             match spans.last_mut() {
-                Some(prev) if lo <= prev.1 => prev.1 = prev.1.max(hi),
+                Some(prev) if lo < prev.1 => prev.1 = prev.1.max(hi),
                 _ => spans.push((lo, hi)),
             }
         }
         // New geometry in each window, spread evenly over its old time span.
         let mut out: Vec<PathSample> = Vec::with_capacity(samples.len() + 64);
-        let mut out_touched: Vec<bool> = Vec::with_capacity(samples.len() + 64);
+        let mut out_touched: Vec<Marks> = Vec::with_capacity(samples.len() + 64);
         let mut next = 0;
         for &(a, b) in &spans {
             out.extend_from_slice(&samples[next..a]);
             out_touched.extend_from_slice(&touched[next..a]);
             let geometry = reinterpolate(&samples, a, b, settings);
             out.extend_from_slice(&geometry[..geometry.len() - 1]);
-            out_touched.extend(std::iter::repeat_n(true, geometry.len() - 1));
+            // The window's first sample is `a` as it was; what lies between
+            // is kept only inside a kept stretch.
+            let inside = touched[a].fixed && touched[b].fixed;
+            out_touched.push(Marks {
+                touched: true,
+                fixed: touched[a].fixed,
+            });
+            out_touched.extend(std::iter::repeat_n(
+                Marks {
+                    touched: true,
+                    fixed: inside,
+                },
+                geometry.len() - 2,
+            ));
             next = b;
         }
         out.extend_from_slice(&samples[next..]);
@@ -418,12 +491,12 @@ pub fn filter_spikes(
     }
     let mut windows: Vec<(f64, f64)> = Vec::new();
     for (k, p) in samples.iter().enumerate() {
-        if !touched[k] {
+        if !touched[k].touched {
             continue;
         }
         let end = samples.get(k + 1).map_or(p.t_s, |q| q.t_s);
         match windows.last_mut() {
-            Some(w) if k > 0 && touched[k - 1] => w.1 = end,
+            Some(w) if k > 0 && touched[k - 1].touched => w.1 = end,
             _ => windows.push((p.t_s, end)),
         }
     }
@@ -433,6 +506,7 @@ pub fn filter_spikes(
         spikes: first_spikes,
         windows,
         iterations,
+        fixed: touched.iter().map(|m| m.fixed).collect(),
     })
 }
 
@@ -458,21 +532,56 @@ pub fn time_optimal(
     limits: &WheelLimits,
     period_s: f64,
 ) -> Result<(Vec<PathSample>, Vec<WheelCommand>), PipelineError> {
+    time_optimal_keeping(input, &vec![false; input.len()], params, limits, period_s)
+}
+
+/// [`time_optimal`], where the robot stands still between two samples
+/// marked in `fixed` (an operator's dwell at a goal) it stands as long as
+/// before.
+pub fn time_optimal_keeping(
+    input: &[PathSample],
+    fixed: &[bool],
+    params: &DiffDriveParams,
+    limits: &WheelLimits,
+    period_s: f64,
+) -> Result<(Vec<PathSample>, Vec<WheelCommand>), PipelineError> {
     limits.validate()?;
+    // Kept samples: every sample that moves a wheel, and a dwell's samples
+    // all (a long standstill as one segment would let the re-timing
+    // stretch it; as the control periods it was, it keeps its time).
     let mut kept: Vec<PathSample> = Vec::with_capacity(input.len());
-    for p in input {
+    let mut kept_fixed: Vec<bool> = Vec::with_capacity(input.len());
+    for (p, &f) in input.iter().zip(fixed) {
         match kept.last() {
-            Some(q) if increments(q, p, params).iter().all(|v| v.abs() < 1e-9) => {}
-            _ => kept.push(*p),
+            Some(q)
+                if !(f && kept_fixed.last() == Some(&true))
+                    && increments(q, p, params).iter().all(|v| v.abs() < 1e-9) => {}
+            _ => {
+                kept.push(*p);
+                kept_fixed.push(f);
+            }
         }
     }
     if kept.len() < 2 {
         let commands = recompute(&mut kept, params);
         return Ok((kept, commands));
     }
-    let mins = vec![0.0; kept.len() - 1];
+    let mins: Vec<f64> = kept
+        .windows(2)
+        .zip(kept_fixed.windows(2))
+        .map(|(w, f)| {
+            let standing = increments(&w[0], &w[1], params)
+                .iter()
+                .all(|v| v.abs() < 1e-9);
+            if f[0] && f[1] && standing {
+                w[1].t_s - w[0].t_s
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let (commands, spikes) = retime_checked(&mut kept, &mins, params, limits)?;
-    let mut flags = vec![false; kept.len()];
+    let mut flags = vec![Marks::default(); kept.len()];
     let (commands, spikes) = if spikes.is_empty() {
         make_executable(&mut kept, &mut flags, period_s, commands, params, limits)?
     } else {
@@ -485,4 +594,48 @@ pub fn time_optimal(
         )));
     }
     Ok((kept, commands))
+}
+
+#[cfg(test)]
+mod dwell_tests {
+    use super::*;
+
+    /// A straight drive that stops for 3 s (the stop marked as kept): the
+    /// time-optimal re-timing stands there 3 s (a few control periods more
+    /// at most, where it eases in and out).
+    #[test]
+    fn the_time_optimal_re_timing_keeps_a_dwell_as_long_as_it_was() {
+        let params = DiffDriveParams::new(0.066, 0.066, 0.26);
+        let limits = WheelLimits {
+            max_speed_rad_s: 10.0,
+            max_accel_rad_s2: 20.0,
+        };
+        let mut path = Vec::new();
+        let mut fixed = Vec::new();
+        let mut t = 0.0;
+        let mut x = 0.0;
+        for k in 0..700 {
+            let standing = (200..500).contains(&k);
+            path.push(PathSample {
+                t_s: t,
+                pose: Pose::new(x, 0.0, 0.0),
+                v_m_s: 0.0,
+                omega_rad_s: 0.0,
+            });
+            fixed.push((195..505).contains(&k));
+            t += 0.01;
+            if !standing {
+                x += 0.002;
+            }
+        }
+        let (out, _) = time_optimal_keeping(&path, &fixed, &params, &limits, 0.01).unwrap();
+        let standing: f64 = out
+            .windows(2)
+            .filter(|w| {
+                (w[1].pose.x_m - w[0].pose.x_m).abs() < 1e-12 && (w[1].pose.x_m - 0.4).abs() < 1e-9
+            })
+            .map(|w| w[1].t_s - w[0].t_s)
+            .sum();
+        assert!((2.99..3.2).contains(&standing), "stood {standing} s");
+    }
 }

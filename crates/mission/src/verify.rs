@@ -499,6 +499,52 @@ pub struct Verdict {
     pub max_deviation_m: f64,
     /// Why the plan failed, one sentence each (empty when it passed).
     pub reasons: Vec<String>,
+    /// What each reason is, for the advice on mending it.
+    #[serde(skip)]
+    pub causes: Vec<Cause>,
+}
+
+/// What kind of failure a reason is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cause {
+    /// A replay touched the twin's walls or closed the bumper.
+    Contact,
+    /// The plan starts in contact and does not come clear.
+    StartsInContact,
+    /// The plan's path or a replay enters a keep-out zone.
+    KeepOut,
+    /// A replay leaves the plan's corridor.
+    Corridor,
+    /// A replay departs from the plan's path or ends off its end.
+    Departs,
+    /// The plan misses one of the operator's goals.
+    Goal,
+}
+
+impl Cause {
+    /// What the operator can do about it.
+    pub fn advice(self) -> &'static str {
+        match self {
+            Cause::Contact => {
+                "the robot would touch the site: rehearse again keeping clear of walls and obstacles"
+            }
+            Cause::StartsInContact => {
+                "the robot starts touching something: place it clear of the walls before the plan starts"
+            }
+            Cause::KeepOut => {
+                "the way enters a keep-out zone: rehearse a way around it (`rehearse --goals ... --freedom FREEDOM.toml` keeps out of the zones) or draw the zone where the robot does not go, then plan again"
+            }
+            Cause::Corridor => {
+                "the robot would leave its corridor: widen the corridor (`plan --freedom` with a [[corridor]] region) or calibrate the robot and plan with its calibration"
+            }
+            Cause::Departs => {
+                "the robot would depart from the plan's path on its own odometry: calibrate the robot and plan with --calibration, and rehearse without contacts"
+            }
+            Cause::Goal => {
+                "the plan misses one of the operator's goals: plan again from the rehearsal from goals (`rehearse --goals`), or rehearse again"
+            }
+        }
+    }
 }
 
 impl Verdict {
@@ -528,23 +574,28 @@ impl Verdict {
         // A NaN distance is beyond any tolerance.
         let beyond = |d: f64| d.is_nan() || d > tol;
         let mut reasons = Vec::new();
+        let mut causes = Vec::new();
         for &(name, r) in replays {
             if r.collisions > 0 {
+                causes.push(Cause::Contact);
                 reasons.push(format!(
                     "{name}: {} collision(s) with the twin's walls",
                     r.collisions
                 ));
             }
             if r.bumps > 0 {
+                causes.push(Cause::Contact);
                 reasons.push(format!("{name}: the bumper closed {} time(s)", r.bumps));
             }
             if r.start_contact_s > MAX_START_CONTACT_S {
+                causes.push(Cause::StartsInContact);
                 reasons.push(format!(
                     "{name}: stays in contact at its start for {:.1} s (at most {MAX_START_CONTACT_S:.1} s to come clear)",
                     r.start_contact_s
                 ));
             }
             if !r.keep_out_entered.is_empty() {
+                causes.push(Cause::KeepOut);
                 reasons.push(format!(
                     "{name}: enters keep-out zone(s) {}",
                     r.keep_out_entered
@@ -560,12 +611,14 @@ impl Verdict {
             // directed driving) by no more than that tolerance. A NaN
             // excess is outside any corridor.
             if beyond(r.corridor_excess_m) {
+                causes.push(Cause::Corridor);
                 reasons.push(format!(
                     "{name}: leaves the plan's corridor by {:.3} m (tolerance {tol:.3} m)",
                     r.corridor_excess_m
                 ));
             }
             if beyond(r.max_deviation_m) {
+                causes.push(Cause::Departs);
                 reasons.push(format!(
                     "{name}: departs {:.3} m from the plan's path (tolerance {tol:.3} m)",
                     r.max_deviation_m
@@ -573,6 +626,7 @@ impl Verdict {
             }
         }
         if beyond(closed.final_error_m) {
+            causes.push(Cause::Departs);
             reasons.push(format!(
                 "closed loop: ends {:.3} m from the plan's end (tolerance {tol:.3} m)",
                 closed.final_error_m
@@ -582,7 +636,20 @@ impl Verdict {
             passed: reasons.is_empty(),
             max_deviation_m: tol,
             reasons,
+            causes,
         }
+    }
+
+    /// What to do about each kind of failure, one sentence each, in the
+    /// order the reasons come.
+    pub fn advice(&self) -> Vec<&'static str> {
+        let mut out = Vec::new();
+        for c in &self.causes {
+            if !out.contains(&c.advice()) {
+                out.push(c.advice());
+            }
+        }
+        out
     }
 
     /// One line for people: `passed (...)` or `FAILED: reason; reason`.
@@ -636,28 +703,78 @@ pub fn verify(
     let open = open?;
     let mut verdict = Verdict::judge(&open.report, &closed.report, criteria);
     // The plan's own path, beside its replays: the operator's zones are
-    // never crossed on purpose.
-    if let Some((s, zone)) = samples
-        .iter()
-        .find_map(|s| freedom.zone_hit([s.x_m, s.y_m]).map(|z| (s, z)))
-    {
+    // never crossed on purpose, and the operator's goals are kept.
+    let mut own = Vec::new();
+    if let Some(entry) = zone_entry(plan) {
+        own.push((Cause::KeepOut, entry.to_string()));
+    }
+    own.extend(
+        goals_missed(plan, scenario)
+            .into_iter()
+            .map(|m| (Cause::Goal, m)),
+    );
+    if !own.is_empty() {
         verdict.passed = false;
-        verdict.reasons.insert(
-            0,
-            format!(
-                "the plan's own path enters keep-out zone `{}` at {:.2} s ({:.2}, {:.2})",
-                zone.name,
-                s.t_s - samples[0].t_s,
-                s.x_m,
-                s.y_m
-            ),
-        );
+        verdict.causes.splice(0..0, own.iter().map(|(c, _)| *c));
+        verdict
+            .reasons
+            .splice(0..0, own.into_iter().map(|(_, r)| r));
     }
     Ok(PlanVerification {
         open_loop: open,
         closed_loop: closed,
         verdict,
     })
+}
+
+/// Where a plan's own path first enters one of its keep-out zones.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZoneEntry {
+    pub zone: String,
+    /// Plan time (s from its start) and place.
+    pub t_s: f64,
+    pub at: [f64; 2],
+}
+
+impl std::fmt::Display for ZoneEntry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "the plan's own path enters keep-out zone `{}` at {:.2} s ({:.2}, {:.2})",
+            self.zone, self.t_s, self.at[0], self.at[1]
+        )
+    }
+}
+
+/// Where `plan`'s own path (the robot's footprint along it) first enters
+/// one of its keep-out zones, if it does.
+pub fn zone_entry(plan: &MissionPlan) -> Option<ZoneEntry> {
+    let freedom = FreedomMap::of_plan(plan);
+    let t0 = plan.samples.first().map_or(0.0, |s| s.t_s);
+    plan.samples.iter().find_map(|s| {
+        freedom.zone_hit([s.x_m, s.y_m]).map(|z| ZoneEntry {
+            zone: z.name.clone(),
+            t_s: s.t_s - t0,
+            at: [s.x_m, s.y_m],
+        })
+    })
+}
+
+/// The operator's goals `plan`'s own path misses on the twin's site, in
+/// their words.
+pub fn goals_missed(plan: &MissionPlan, scenario: &Scenario) -> Vec<String> {
+    if plan.header.goals.is_empty() {
+        return Vec::new();
+    }
+    let path: Vec<(f64, Pose)> = plan.samples.iter().map(|s| (s.t_s, s.pose())).collect();
+    crate::kept::goals_kept(
+        &plan.header.goals,
+        &path,
+        &scenario.world,
+        plan.header.robot.footprint_radius_m,
+        &plan.header.freedom.keep_out,
+    )
+    .missed()
 }
 
 #[cfg(test)]
@@ -771,6 +888,21 @@ mod tests {
             assert_eq!(v.reasons.len(), 1, "{v:?}");
             assert!(v.reasons[0].contains(reason), "{v:?}");
             assert!(v.summary().starts_with("FAILED: "), "{}", v.summary());
+            // The advice is the cause's own.
+            assert_eq!(v.causes.len(), 1, "{v:?}");
+            let advice = v.advice().join(" ");
+            let says = if reason.contains("keep-out") {
+                "keep-out zone"
+            } else if reason.contains("corridor") {
+                "widen the corridor"
+            } else if reason.contains("in contact at its start") {
+                "place it clear"
+            } else if reason.contains("collision") || reason.contains("bumper") {
+                "keeping clear"
+            } else {
+                "calibrate the robot"
+            };
+            assert!(advice.contains(says), "{reason}: {advice}");
         }
     }
 }

@@ -25,9 +25,12 @@
 
 pub mod ros;
 pub mod session;
+pub mod tls_check;
+pub mod tls_log;
 pub mod transport;
 
 pub use session::{SessionOptions, plain_error};
+pub use tls_log::TlsRefusals;
 pub use transport::{MemoryBus, Network};
 
 use std::cmp::Reverse;

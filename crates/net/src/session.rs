@@ -13,10 +13,20 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use crate::tls_check::{self, Finding, TlsIdentity};
+
 /// How long opening a session may take before it is an error: a TLS
 /// handshake with a router that never answers (a plain TCP client on a TLS
 /// port) would otherwise hang.
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(15);
+
+/// How long a probe of an endpoint that would not take this process may
+/// take ([`tls_check::probe`]).
+const PROBE_TIME: Duration = Duration::from_secs(5);
+
+/// While a peer waits for its endpoints, they are probed after this long
+/// without a connection, and again as often.
+const PROBE_EVERY: Duration = Duration::from_secs(2);
 
 /// The TLS settings that name files (zenoh's `transport/link/tls`).
 const TLS_FILES: [&str; 5] = [
@@ -145,32 +155,59 @@ fn strings(items: &[serde_json::Value]) -> Vec<String> {
 /// [`OPEN_TIMEOUT`]; while nothing answers at the endpoints to connect to
 /// (a router not up yet, a network still coming up) it tries again every
 /// second for up to `options.patience`, and any other failure (a port in
-/// use, a refused configuration) ends it at once. A robot that boots
-/// before its link does not give up at the first try, and one that can
-/// never connect says so and stops.
+/// use, a refused configuration) ends it at once. An endpoint whose TLS
+/// refuses this process (no certificate, another CA's, plain TCP on a TLS
+/// port) ends it too, as soon as a probe of the endpoint
+/// ([`tls_check::probe`]) finds out why: zenoh only says it could not
+/// connect. A robot that boots before its link does not give up at the
+/// first try, and one that can never connect says so and stops.
 pub(crate) async fn open_session(options: &SessionOptions) -> anyhow::Result<zenoh::Session> {
     let started = Instant::now();
     let mut said = false;
     loop {
         let config = options.config()?;
+        let probe = Probe::of(&config);
         // A peer opens without waiting for the endpoints it connects to
         // (zenoh goes on trying in the background): wait here, within the
         // patience, until one of them is connected.
         let peer_connecting = endpoints(&config, "connect");
         let peer_connecting =
             (mode_of(&config) == "peer" && !peer_connecting.is_empty()).then_some(peer_connecting);
-        match open_config(config).await {
+        match open_config(config, &probe).await {
             Ok(s) => {
                 if let Some(connect) = peer_connecting {
                     let limit = options.patience.max(OPEN_TIMEOUT);
+                    let waiting = Instant::now();
+                    let mut probing: Option<tokio::task::JoinHandle<Option<String>>> = None;
+                    let mut probed_at: Option<Instant> = None;
                     while !connected(&s).await {
                         if started.elapsed() > limit {
                             let _ = s.close().await;
                             anyhow::bail!(
-                                "connecting to {}: connected to nothing after {:.0} s; is the other process (or the router) running and listening there, and does the endpoint's protocol (tcp/, tls/, quic/) match its (a TLS router never completes a plain TCP handshake)?",
+                                "connecting to {}: connected to nothing after {:.0} s; is the other process (or the router) running and listening there, and does the endpoint's protocol (tcp/, tls/, quic/) match its?",
                                 connect.join(", "),
                                 started.elapsed().as_secs_f64()
                             );
+                        }
+                        // zenoh keeps trying in the background and says
+                        // nothing of a TLS refusal: ask the endpoints.
+                        match probing.take() {
+                            Some(h) if h.is_finished() => {
+                                if let Some(why) = h.await.ok().flatten() {
+                                    let _ = s.close().await;
+                                    anyhow::bail!(why);
+                                }
+                            }
+                            Some(h) => probing = Some(h),
+                            None if waiting.elapsed() >= PROBE_EVERY
+                                && probed_at.is_none_or(|t| t.elapsed() >= PROBE_EVERY) =>
+                            {
+                                let probe = probe.clone();
+                                probing =
+                                    Some(tokio::task::spawn_blocking(move || probe.refusal()));
+                                probed_at = Some(Instant::now());
+                            }
+                            None => {}
                         }
                         tokio::time::sleep(Duration::from_millis(100)).await;
                     }
@@ -201,7 +238,83 @@ pub(crate) async fn open_session(options: &SessionOptions) -> anyhow::Result<zen
     }
 }
 
-async fn open_config(config: zenoh::Config) -> Result<zenoh::Session, SessionError> {
+/// What a probe of a configuration's endpoints needs: the endpoints to
+/// connect to and the TLS files it names.
+#[derive(Debug, Clone)]
+struct Probe {
+    connect: Vec<String>,
+    /// `None`: the configuration holds certificates in itself (base64),
+    /// which a probe does not read.
+    identity: Option<TlsIdentity>,
+}
+
+impl Probe {
+    fn of(config: &zenoh::Config) -> Self {
+        Self {
+            connect: endpoints(config, "connect"),
+            identity: tls_identity(config),
+        }
+    }
+
+    /// Why the first endpoint that refuses this process does (the whole
+    /// message), if a probe finds one. Blocking: at most [`PROBE_TIME`]
+    /// an endpoint.
+    fn refusal(&self) -> Option<String> {
+        let identity = self.identity.as_ref()?;
+        self.connect
+            .iter()
+            .find_map(|e| match tls_check::probe(e, identity, PROBE_TIME) {
+                Finding::Refused(r) => Some(r.message(e)),
+                Finding::NotListening(_) | Finding::NothingFound => None,
+            })
+    }
+
+    async fn refusal_async(&self) -> Option<String> {
+        if self.connect.is_empty() {
+            return None;
+        }
+        let probe = self.clone();
+        tokio::task::spawn_blocking(move || probe.refusal())
+            .await
+            .ok()
+            .flatten()
+    }
+}
+
+/// The TLS files `config` names (paths as [`load_config`] made them), as
+/// zenoh reads them: a client certificate only with `enable_mtls`, the
+/// router's name checked unless `verify_name_on_connect` is false. `None`
+/// when it holds certificates or keys in itself (`*_base64`).
+fn tls_identity(config: &zenoh::Config) -> Option<TlsIdentity> {
+    let get = |key: &str| {
+        config
+            .get_json(&format!("transport/link/tls/{key}"))
+            .ok()
+            .and_then(|v| serde_json::from_str::<serde_json::Value>(&v).ok())
+            .filter(|v| !v.is_null())
+    };
+    let inline = [
+        "root_ca_certificate_base64",
+        "connect_certificate_base64",
+        "connect_private_key_base64",
+    ];
+    if inline.iter().any(|k| get(k).is_some()) {
+        return None;
+    }
+    let path = |key: &str| get(key).and_then(|v| v.as_str().map(PathBuf::from));
+    let flag = |key: &str, default: bool| get(key).and_then(|v| v.as_bool()).unwrap_or(default);
+    Some(TlsIdentity {
+        root_ca: path("root_ca_certificate"),
+        certificate: if flag("enable_mtls", false) {
+            path("connect_certificate").zip(path("connect_private_key"))
+        } else {
+            None
+        },
+        verify_name: flag("verify_name_on_connect", true),
+    })
+}
+
+async fn open_config(config: zenoh::Config, probe: &Probe) -> Result<zenoh::Session, SessionError> {
     let listen = endpoints(&config, "listen");
     let connect = endpoints(&config, "connect");
     let what = match (listen.is_empty(), connect.is_empty()) {
@@ -219,6 +332,10 @@ async fn open_config(config: zenoh::Config) -> Result<zenoh::Session, SessionErr
         Ok(Err(e)) => {
             let why = plain_error(&e.to_string());
             if why.contains("Unable to connect") {
+                // Something may listen there and refuse this process's TLS.
+                if let Some(refused) = probe.refusal_async().await {
+                    return Err(SessionError::Failed(refused));
+                }
                 Err(SessionError::Unreachable(format!(
                     "{what}: nothing answered ({why}); is the router (or the other process) running and listening there, and does the endpoint's protocol (tcp/, tls/, quic/) match its?"
                 )))
@@ -230,10 +347,13 @@ async fn open_config(config: zenoh::Config) -> Result<zenoh::Session, SessionErr
                 Err(SessionError::Failed(format!("{what}: {why}")))
             }
         }
-        Err(_) => Err(SessionError::Failed(format!(
-            "{what}: no session after {} s (a TLS endpoint reached over plain TCP, or a router that refuses this client's certificate, never completes the handshake)",
-            OPEN_TIMEOUT.as_secs()
-        ))),
+        Err(_) => match probe.refusal_async().await {
+            Some(refused) => Err(SessionError::Failed(refused)),
+            None => Err(SessionError::Failed(format!(
+                "{what}: no session after {} s (a TLS endpoint reached over plain TCP, or a router that refuses this client's certificate, never completes the handshake)",
+                OPEN_TIMEOUT.as_secs()
+            ))),
+        },
     }
 }
 

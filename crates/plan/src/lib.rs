@@ -28,7 +28,9 @@ use twindrive_kinematics::{DiffDriveParams, Pose};
 pub use twindrive_kinematics::{RangeSensorInfo, SensorKind};
 
 mod freedom;
+pub mod goals;
 pub use freedom::{CorridorStretch, Freedom, KeepOutZone, check_polygon};
+pub use goals::{GoalArea, GoalWaypoint, PlanGoals};
 
 /// A plan that cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -81,8 +83,8 @@ pub const PLAN_FORMAT: &str = "twindrive-mission-plan";
 /// Bumped whenever the meaning of a field changes (3: each range sensor
 /// says its kind, which the plan's hash covers, so a version-2 plan is
 /// refused by version rather than read as damaged; the header carries the
-/// robot's [`Freedom`]).
-pub const PLAN_VERSION: u32 = 3;
+/// robot's [`Freedom`]; 4: the header carries the operator's [`PlanGoals`]).
+pub const PLAN_VERSION: u32 = 4;
 
 /// The robot the plan is for.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -119,6 +121,10 @@ pub struct PlanHeader {
     /// Where the robot may go on its own (its corridor), where never
     /// (keep-out zones), and how much a detour may cost; see [`Freedom`].
     pub freedom: Freedom,
+    /// The operator's goals the plan keeps (a plan from a rehearsal from
+    /// goals; empty for a manual one).
+    #[serde(default, skip_serializing_if = "PlanGoals::is_empty")]
+    pub goals: PlanGoals,
     /// SHA-256 (hex) of the source log files.
     pub source_log_sha256: String,
     /// The pipeline's settings, as given.
@@ -455,6 +461,7 @@ mod tests {
                 max_extra_time_s: 20.0,
                 max_extra_distance_m: 3.0,
             },
+            goals: Default::default(),
             source_log_sha256: sha256_hex(b"log"),
             settings: serde_json::json!({ "pinch_distance_m": 0.1 }),
             summary: serde_json::json!({ "loops_removed": 2 }),
@@ -535,7 +542,9 @@ mod tests {
         old.sha256 = old.content_hash();
         let err = old.validate().unwrap_err().to_string();
         assert!(
-            err.contains("version 2, expected `twindrive-mission-plan` version 3"),
+            err.contains(&format!(
+                "version 2, expected `twindrive-mission-plan` version {PLAN_VERSION}"
+            )),
             "{err}"
         );
     }

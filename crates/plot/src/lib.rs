@@ -5,12 +5,19 @@
 //!
 //! Time plots look after their reader: the y range ignores a few outliers
 //! (see [`robust_range`]) and says so, a series that would hide exactly
-//! under another is drawn dashed with marked points and says so, a series
-//! of one point is drawn as a point, and x values without a y go in a named
-//! strip above the axis. World figures draw reference paths as pale bands
-//! under the paths measured against them. For either kind, `misleading`
-//! rasterises each layer as the PNG draws it and names every legend entry
-//! with nothing drawn or hidden under what is drawn after it.
+//! under another is drawn dashed with marked points over the other drawn
+//! wide and says so, a series of one point is drawn as a point, and x
+//! values without a y go in a named strip above the axis. World figures
+//! draw reference paths as pale bands under the paths measured against
+//! them, a path on another's points dashed over it, and
+//! [`WaypointFigure`] numbered waypoints with their headings. For either
+//! kind the legend goes where it covers no drawn pixel (inside the axes
+//! when a spot is free, else under the chart), and `write` first
+//! rasterises each layer as the PNG draws it and refuses the figure
+//! ([`PlotError::Misleading`]) when the legend lies over anything drawn or
+//! a legend entry has nothing drawn or hides under what is drawn after it
+//! (`misleading` says what it finds).
+//! [`MapPicture`] draws an occupancy map's cells with a drive on it.
 
 use std::path::{Path, PathBuf};
 
@@ -23,6 +30,9 @@ use plotters::style::FontStyle;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 pub use plotters::style::RGBColor;
+
+pub mod map_picture;
+pub use map_picture::MapPicture;
 
 /// Colours used across the project's figures.
 pub mod palette {
@@ -61,7 +71,8 @@ pub enum PlotError {
     },
 }
 
-/// A line through points.
+/// A line through points; a non-finite point breaks it (the pieces of one
+/// thing under one legend entry).
 #[derive(Debug, Clone, Copy)]
 pub struct Series<'a> {
     pub label: &'a str,
@@ -105,6 +116,71 @@ pub struct Region<'a> {
     /// The corners in order; the last joins the first.
     pub corners: &'a [(f64, f64)],
     pub color: RGBColor,
+}
+
+/// Goals in order over a world figure: each a disc with its number (from
+/// 1) inside and, where it has one, its heading as an arrow from it.
+#[derive(Debug, Clone, Copy)]
+pub struct Waypoints<'a> {
+    pub label: &'a str,
+    pub points: &'a [(f64, f64)],
+    /// Each point's heading (rad, counter-clockwise from x), where one is
+    /// given; missing entries have none.
+    pub headings_rad: &'a [Option<f64>],
+    pub color: RGBColor,
+}
+
+/// A [`WorldFigure`] with [`Waypoints`] drawn over its paths and markers
+/// (a route through goals).
+#[derive(Debug, Clone, Copy)]
+pub struct WaypointFigure<'a> {
+    pub world: WorldFigure<'a>,
+    pub waypoints: Waypoints<'a>,
+}
+
+impl<'a> WaypointFigure<'a> {
+    fn spec(&self) -> Result<(ChartSpec<'a>, (u32, u32)), PlotError> {
+        let (mut spec, size) = self.world.spec_with(self.waypoints.points)?;
+        spec.waypoints = Some(self.waypoints);
+        Ok((spec, size))
+    }
+
+    /// Writes `<base>.svg` and `<base>.png` as [`WorldFigure::write`] does,
+    /// checked the same way.
+    pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+        let (spec, size) = self.spec()?;
+        Checked::new(self.world.title, spec, size)?.write(base)
+    }
+
+    /// What would mislead in the figure (see [`Misleading`]).
+    pub fn misleading(&self) -> Result<Vec<Misleading>, PlotError> {
+        let (spec, size) = self.spec()?;
+        Ok(Checked::new(self.world.title, spec, size)?.found)
+    }
+
+    /// Where the world point `p` lands in the PNG, in pixels from its top
+    /// left corner.
+    pub fn pixel_of(&self, p: (f64, f64)) -> Result<(i32, i32), PlotError> {
+        let (spec, size) = self.spec()?;
+        pixel_of(self.world.title, &spec, size, p)
+    }
+}
+
+/// Where `p` lands on a chart of `size` drawn from `spec`.
+fn pixel_of(
+    what: &str,
+    spec: &ChartSpec,
+    size: (u32, u32),
+    p: (f64, f64),
+) -> Result<(i32, i32), PlotError> {
+    register_fonts();
+    let mut buf = vec![255u8; (size.0 * size.1 * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut buf, size).into_drawing_area();
+    let chart = frame(&root, spec).map_err(|message| PlotError::Data {
+        what: what.into(),
+        message,
+    })?;
+    Ok(chart.backend_coord(&p))
 }
 
 /// A top-down view of walls, regions, paths, markers and outlines, axes
@@ -416,6 +492,11 @@ const REFERENCE_PX: u32 = 7;
 /// How much wider each reference is than the one drawn after it.
 const REFERENCE_STEP_PX: u32 = 6;
 const REFERENCE_ALPHA: f64 = 0.35;
+/// A time series another runs dashed along is drawn this wide under it;
+/// a world path, as wide as the dashes (a path may circle many times: a
+/// wide one would blot the circles out), so the two alternate along it.
+const UNDER_PX: u32 = 6;
+const UNDER_PATH_PX: u32 = 2;
 
 /// Shapes of marked points.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -432,9 +513,11 @@ struct Line {
     color: RGBColor,
     pieces: Vec<Vec<(f64, f64)>>,
     dashed: bool,
-    /// A pale band this many pixels wide (a reference path, drawn under
-    /// the others); 0 for a line.
+    /// A band this many pixels wide (a reference path, drawn under the
+    /// others; a line another runs dashed along); 0 for a line.
     band_px: u32,
+    /// The band's opacity.
+    band_alpha: f64,
     vertices: Option<Shape>,
 }
 
@@ -481,6 +564,11 @@ impl<'a> WorldFigure<'a> {
     /// What is drawn and the figure's size in pixels. Paths are thinned to
     /// about four pixels between points.
     fn spec(&self) -> Result<(ChartSpec<'a>, (u32, u32)), PlotError> {
+        self.spec_with(&[])
+    }
+
+    /// [`WorldFigure::spec`] with `more` points inside the axes.
+    fn spec_with(&self, more: &[(f64, f64)]) -> Result<(ChartSpec<'a>, (u32, u32)), PlotError> {
         let all = self
             .walls
             .iter()
@@ -493,7 +581,8 @@ impl<'a> WorldFigure<'a> {
                     .flat_map(|s| s.points.iter()),
             )
             .chain(self.markers.iter().flat_map(|m| m.points.iter()))
-            .chain(self.outlines.iter().flat_map(|o| o.corners.iter()));
+            .chain(self.outlines.iter().flat_map(|o| o.corners.iter()))
+            .chain(more);
         let ((x0, x1), (y0, y1)) = bounds(all).ok_or_else(|| PlotError::Data {
             what: self.title.into(),
             message: "nothing to draw".into(),
@@ -509,19 +598,48 @@ impl<'a> WorldFigure<'a> {
         let line = |s: &Series, band_px: u32| Line {
             label: s.label.to_string(),
             color: s.color,
-            pieces: vec![decimate(s.points, step)],
+            pieces: s
+                .points
+                .split(|p| !(p.0.is_finite() && p.1.is_finite()))
+                .filter(|piece| !piece.is_empty())
+                .map(|piece| decimate(piece, step))
+                .collect(),
             dashed: false,
             band_px,
+            band_alpha: REFERENCE_ALPHA,
             vertices: (s.points.len() == 1).then_some(Shape::Circle),
         };
         // Each reference narrower than the one before: one that follows
         // another (a continuation along the plan) runs inside it.
         let n = self.references.len() as u32;
-        let lines = (0..n)
+        let mut lines: Vec<Line> = (0..n)
             .zip(self.references)
             .map(|(k, s)| line(s, REFERENCE_PX + REFERENCE_STEP_PX * (n - 1 - k)))
-            .chain(self.paths.iter().map(|s| line(s, 0)))
             .collect();
+        // A path with the points of one drawn before it (two runs that
+        // went the same way) is drawn dashed over it, which shows between
+        // the dashes, and says so.
+        let tol = 1e-9 * ((x1 - x0) + (y1 - y0));
+        let first = lines.len();
+        for (j, s) in self.paths.iter().enumerate() {
+            let mut l = line(s, 0);
+            let under = self.paths[..j]
+                .iter()
+                .enumerate()
+                .find(|(_, a)| overlap(a.points, s.points, tol) == Some(Overlap::Same));
+            if let Some((i, a)) = under {
+                let under = a.label;
+                if !lines[first + i].dashed {
+                    lines[first + i].band_px = UNDER_PATH_PX;
+                    lines[first + i].band_alpha = 1.0;
+                }
+                l.dashed = true;
+                if !s.label.is_empty() {
+                    l.label = format!("{} (dashed: same path as {under})", s.label);
+                }
+            }
+            lines.push(l);
+        }
         let shades = self
             .regions
             .iter()
@@ -544,43 +662,84 @@ impl<'a> WorldFigure<'a> {
             outlines: self.outlines,
             beyond: None,
             strip: None,
+            waypoints: None,
             marker_radius: 5,
+            along_x: false,
         };
         Ok((spec, size))
     }
 
-    /// Writes `<base>.svg` and `<base>.png`.
+    /// Writes `<base>.svg` and `<base>.png`, the legend where it covers
+    /// nothing drawn; refused with [`PlotError::Misleading`] when
+    /// [`WorldFigure::misleading`] finds anything.
     pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
         let (spec, size) = self.spec()?;
-        write_both(
-            base,
-            size,
-            |r| draw_chart(&r, &spec),
-            |r| draw_chart(&r, &spec),
-        )
+        Checked::new(self.title, spec, size)?.write(base)
     }
 
     /// Every legend entry that shows nothing or hides under what is drawn
-    /// after it (see [`Misleading`]), as the PNG would draw them.
+    /// after it, and a legend over anything drawn (see [`Misleading`]), as
+    /// [`WorldFigure::write`] would draw them.
     pub fn misleading(&self) -> Result<Vec<Misleading>, PlotError> {
         let (spec, size) = self.spec()?;
-        misleading(&spec, size).map_err(|message| PlotError::Data {
-            what: self.title.into(),
+        Ok(Checked::new(self.title, spec, size)?.found)
+    }
+
+    /// Where the world point `p` lands in the PNG, in pixels from its top
+    /// left corner.
+    pub fn pixel_of(&self, p: (f64, f64)) -> Result<(i32, i32), PlotError> {
+        let (spec, size) = self.spec()?;
+        pixel_of(self.title, &spec, size, p)
+    }
+}
+
+/// A chart laid out (its legend placed) and checked, ready to draw.
+struct Checked<'a> {
+    what: String,
+    spec: ChartSpec<'a>,
+    /// The chart's size without a legend under it.
+    size: (u32, u32),
+    layout: Layout,
+    found: Vec<Misleading>,
+}
+
+impl<'a> Checked<'a> {
+    fn new(what: &str, mut spec: ChartSpec<'a>, size: (u32, u32)) -> Result<Self, PlotError> {
+        let (layout, found) = lay_out(&mut spec, size).map_err(|message| PlotError::Data {
+            what: what.into(),
             message,
+        })?;
+        Ok(Checked {
+            what: what.into(),
+            spec,
+            size,
+            layout,
+            found,
         })
     }
 
-    /// [`WorldFigure::write`], refused with [`PlotError::Misleading`] when
-    /// [`WorldFigure::misleading`] finds anything.
-    pub fn write_checked(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
-        let found = self.misleading()?;
-        if !found.is_empty() {
-            return Err(PlotError::Misleading {
-                what: self.title.into(),
-                found,
-            });
+    /// The error that refuses the chart, if anything in it would mislead.
+    fn refusal(&self) -> Result<(), PlotError> {
+        if self.found.is_empty() {
+            Ok(())
+        } else {
+            Err(PlotError::Misleading {
+                what: self.what.clone(),
+                found: self.found.clone(),
+            })
         }
-        self.write(base)
+    }
+
+    /// Writes `<base>.svg` and `<base>.png` when nothing misleads.
+    fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
+        self.refusal()?;
+        let size = (self.size.0, self.size.1 + self.layout.below_px);
+        write_both(
+            base,
+            size,
+            |r| draw_chart(&r, &self.spec, &self.layout, self.size.1),
+            |r| draw_chart(&r, &self.spec, &self.layout, self.size.1),
+        )
     }
 }
 
@@ -601,31 +760,53 @@ pub struct Panels<'a> {
     pub panels: &'a [TimeFigure<'a>],
 }
 
+/// The size of one of [`Panels`] in pixels (without a legend under it).
+const PANEL_PX: (u32, u32) = (700, 450);
+
 impl Panels<'_> {
-    /// Writes `<base>.svg` and `<base>.png`.
+    /// Writes `<base>.svg` and `<base>.png`, each panel checked as
+    /// [`TimeFigure::write`] checks a figure; refused with
+    /// [`PlotError::Misleading`] (naming the panel) when one would mislead.
     pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
-        let specs = self
+        let charts = self
             .panels
             .iter()
-            .map(TimeFigure::spec)
+            .map(|p| Checked::new(p.title, p.spec()?, PANEL_PX))
             .collect::<Result<Vec<_>, _>>()?;
-        let n = specs.len().max(1) as u32;
+        for c in &charts {
+            c.refusal()?;
+        }
+        let n = charts.len().max(1) as u32;
+        let below = charts.iter().map(|c| c.layout.below_px).max().unwrap_or(0);
         write_both(
             base,
-            (700 * n, 450),
-            |r| draw_panels(r, &specs),
-            |r| draw_panels(r, &specs),
+            (PANEL_PX.0 * n, PANEL_PX.1 + below),
+            |r| draw_panels(r, &charts),
+            |r| draw_panels(r, &charts),
         )
+    }
+
+    /// What would mislead in each panel (see [`Misleading`]), as
+    /// [`Panels::write`] would draw them, with the panel's title.
+    pub fn misleading(&self) -> Result<Vec<(String, Vec<Misleading>)>, PlotError> {
+        self.panels
+            .iter()
+            .map(|p| Ok((p.title.to_string(), p.misleading()?)))
+            .collect()
     }
 }
 
 fn draw_panels<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
-    specs: &[ChartSpec],
+    charts: &[Checked],
 ) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
-    for (area, spec) in root.split_evenly((1, specs.len().max(1))).iter().zip(specs) {
-        draw_chart(area, spec)?;
+    for (area, c) in root
+        .split_evenly((1, charts.len().max(1)))
+        .iter()
+        .zip(charts)
+    {
+        draw_chart(area, &c.spec, &c.layout, c.size.1)?;
     }
     Ok(())
 }
@@ -681,9 +862,17 @@ impl<'a> TimeFigure<'a> {
             off_axis(s.points, s.color);
             let hidden = self.series[..j]
                 .iter()
-                .find_map(|a| overlap(a.points, s.points, tol).map(|o| (a.label, o)));
+                .enumerate()
+                .find_map(|(i, a)| overlap(a.points, s.points, tol).map(|o| (i, a.label, o)));
             let (label, dashed, vertices) = match hidden {
-                Some((under, o)) => {
+                Some((i, under, o)) => {
+                    // The line under it drawn wide, so it shows either
+                    // side of the dashes (unless dashed itself, over
+                    // another).
+                    if !lines[i].dashed {
+                        lines[i].band_px = UNDER_PX;
+                        lines[i].band_alpha = 1.0;
+                    }
                     let shape = [Shape::Triangle, Shape::Square, Shape::Cross][rank % 3];
                     rank += 1;
                     let how = match o {
@@ -709,6 +898,7 @@ impl<'a> TimeFigure<'a> {
                 pieces: clip_y(s.points, lo, hi),
                 dashed,
                 band_px: 0,
+                band_alpha: 1.0,
                 vertices,
             });
         }
@@ -800,7 +990,9 @@ impl<'a> TimeFigure<'a> {
             outlines: &[],
             beyond,
             strip,
+            waypoints: None,
             marker_radius: 3,
+            along_x: true,
         })
     }
 }
@@ -809,25 +1001,18 @@ impl<'a> TimeFigure<'a> {
 const TIME_FIGURE_PX: (u32, u32) = (1100, 450);
 
 impl TimeFigure<'_> {
-    /// Writes `<base>.svg` and `<base>.png`.
+    /// Writes `<base>.svg` and `<base>.png`, the legend where it covers
+    /// nothing drawn; refused with [`PlotError::Misleading`] when
+    /// [`TimeFigure::misleading`] finds anything.
     pub fn write(&self, base: &Path) -> Result<Vec<PathBuf>, PlotError> {
-        let spec = self.spec()?;
-        write_both(
-            base,
-            TIME_FIGURE_PX,
-            |r| draw_chart(&r, &spec),
-            |r| draw_chart(&r, &spec),
-        )
+        Checked::new(self.title, self.spec()?, TIME_FIGURE_PX)?.write(base)
     }
 
     /// Every legend entry that shows nothing or hides under what is drawn
-    /// after it (see [`Misleading`]), as [`TimeFigure::write`] draws them.
+    /// after it, and a legend over anything drawn (see [`Misleading`]), as
+    /// [`TimeFigure::write`] draws them.
     pub fn misleading(&self) -> Result<Vec<Misleading>, PlotError> {
-        let spec = self.spec()?;
-        misleading(&spec, TIME_FIGURE_PX).map_err(|message| PlotError::Data {
-            what: self.title.into(),
-            message,
-        })
+        Ok(Checked::new(self.title, self.spec()?, TIME_FIGURE_PX)?.found)
     }
 }
 
@@ -844,7 +1029,10 @@ struct ChartSpec<'a> {
     outlines: &'a [Outline<'a>],
     beyond: Option<Beyond>,
     strip: Option<StripSpec>,
+    waypoints: Option<Waypoints<'a>>,
     marker_radius: i32,
+    /// Read along the x axis (a time figure), not along paths.
+    along_x: bool,
 }
 
 type Chart<'c, DB> = ChartContext<'c, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
@@ -887,6 +1075,7 @@ enum Layer {
     Shade(usize),
     Line(usize),
     Dots(usize),
+    Waypoints,
     Beyond,
     Outline(usize),
 }
@@ -898,6 +1087,7 @@ fn layers(spec: &ChartSpec) -> Vec<Layer> {
     all.extend((0..spec.shades.len()).map(Layer::Shade));
     all.extend((0..spec.lines.len()).map(Layer::Line));
     all.extend((0..spec.dots.len()).map(Layer::Dots));
+    all.extend(spec.waypoints.as_ref().map(|_| Layer::Waypoints));
     all.push(Layer::Beyond);
     all.extend((0..spec.outlines.len()).map(Layer::Outline));
     all
@@ -920,6 +1110,11 @@ fn legend_label<'s>(spec: &'s ChartSpec, layer: Layer) -> Option<&'s str> {
             let m = &spec.dots[i];
             (!m.points.is_empty()).then_some(m.label.as_str())
         }
+        Layer::Waypoints => spec
+            .waypoints
+            .as_ref()
+            .filter(|w| !w.points.is_empty())
+            .map(|w| w.label),
         Layer::Beyond => spec
             .beyond
             .as_ref()
@@ -964,15 +1159,14 @@ fn frame<'a, DB: DrawingBackend>(
     Ok(chart)
 }
 
-/// Draws one layer, with its legend entry when `legend`.
+/// Draws one layer (its legend entry is [`draw_symbol`]'s).
 fn draw_layer<'c, DB: DrawingBackend + 'c>(
     chart: &mut Chart<'c, DB>,
     spec: &ChartSpec,
     layer: Layer,
-    legend: bool,
 ) -> Result<(), String> {
-    let label = legend_label(spec, layer).filter(|_| legend);
     let radius = spec.marker_radius;
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     match layer {
         Layer::Walls => {
             chart
@@ -981,7 +1175,7 @@ fn draw_layer<'c, DB: DrawingBackend + 'c>(
                         .iter()
                         .map(|w| PathElement::new(vec![w[0], w[1]], palette::WALL.stroke_width(3))),
                 )
-                .map_err(|e| e.to_string())?;
+                .map_err(err)?;
         }
         Layer::Strip => {
             let Some(strip) = &spec.strip else {
@@ -993,13 +1187,13 @@ fn draw_layer<'c, DB: DrawingBackend + 'c>(
                     [(x0, strip.from_y), (x1, y1)],
                     RGBColor(225, 225, 225).mix(0.6).filled(),
                 )))
-                .map_err(|e| e.to_string())?;
+                .map_err(err)?;
             chart
                 .draw_series(std::iter::once(PathElement::new(
                     vec![(x0, strip.from_y), (x1, strip.from_y)],
                     BLACK.stroke_width(1),
                 )))
-                .map_err(|e| e.to_string())?;
+                .map_err(err)?;
             // The strip's name where its numbers would be (in pixels from
             // the plotting area's corner).
             let (left, mid) = chart.backend_coord(&(x0, 0.5 * (strip.from_y + y1)));
@@ -1013,37 +1207,22 @@ fn draw_layer<'c, DB: DrawingBackend + 'c>(
                 .plotting_area()
                 .strip_coord_spec()
                 .draw(&Text::new(strip.name.clone(), (left - 6, mid), font))
-                .map_err(|e| e.to_string())?;
+                .map_err(err)?;
         }
         Layer::Shade(i) => {
             let b = &spec.shades[i];
             let color = b.color;
             let fill = Polygon::new(b.outline.clone(), color.mix(0.25).filled());
-            let drawn = if b.edge {
-                chart
-                    .draw_series(std::iter::once(fill))
-                    .map_err(|e| e.to_string())?;
+            chart.draw_series(std::iter::once(fill)).map_err(err)?;
+            if b.edge {
                 let mut ring = b.outline.clone();
                 ring.extend(b.outline.first().copied());
-                chart.draw_series(std::iter::once(PathElement::new(
-                    ring,
-                    color.stroke_width(2),
-                )))
-            } else {
-                chart.draw_series(std::iter::once(fill))
-            }
-            .map_err(|e| e.to_string())?;
-            if let Some(label) = label {
-                let edge: ShapeStyle = if b.edge {
-                    color.stroke_width(2)
-                } else {
-                    color.mix(0.25).stroke_width(2)
-                };
-                drawn.label(label).legend(move |(x, y)| {
-                    EmptyElement::at((x, y))
-                        + Rectangle::new([(0, -5), (20, 5)], color.mix(0.25).filled())
-                        + Rectangle::new([(0, -5), (20, 5)], edge)
-                });
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        ring,
+                        color.stroke_width(2),
+                    )))
+                    .map_err(err)?;
             }
         }
         Layer::Line(i) => {
@@ -1052,9 +1231,26 @@ fn draw_layer<'c, DB: DrawingBackend + 'c>(
             // legend entry (several pieces of one thing).
             let s = &spec.lines[i];
             let color = s.color;
-            let band_px = s.band_px;
-            let drawn = if band_px > 0 {
-                let style = color.mix(REFERENCE_ALPHA).stroke_width(band_px);
+            if s.band_px > 0 && s.band_alpha >= 1.0 {
+                // Opaque: segment by segment with round joins (a wide
+                // polyline's sharp turns draw as spikes).
+                let style = color.filled().stroke_width(s.band_px);
+                let r = (s.band_px / 2) as i32;
+                chart
+                    .draw_series(s.pieces.iter().flat_map(|piece| {
+                        piece
+                            .windows(2)
+                            .map(move |w| PathElement::new(w.to_vec(), style))
+                    }))
+                    .map_err(err)?;
+                chart.draw_series(
+                    s.pieces
+                        .iter()
+                        .flatten()
+                        .map(|&p| Circle::new(p, r, color.filled())),
+                )
+            } else if s.band_px > 0 {
+                let style = color.mix(s.band_alpha).stroke_width(s.band_px);
                 chart.draw_series(
                     s.pieces
                         .iter()
@@ -1071,54 +1267,62 @@ fn draw_layer<'c, DB: DrawingBackend + 'c>(
                         .map(|piece| PathElement::new(piece.clone(), color.stroke_width(1))),
                 )
             }
-            .map_err(|e| e.to_string())?;
-            if let (Some(label), true) = (label, band_px > 0) {
-                drawn.label(label).legend(move |(x, y)| {
-                    PathElement::new(
-                        vec![(x, y), (x + 20, y)],
-                        color.mix(REFERENCE_ALPHA).stroke_width(band_px.min(10)),
-                    )
-                });
-            } else if let Some(label) = label {
-                let dash = if s.dashed { 5 } else { 100 };
-                let mark: Vec<(i32, i32)> = match s.vertices {
-                    None => vec![],
-                    Some(Shape::Circle) => vec![(8, -2), (12, -2), (12, 2), (8, 2), (8, -2)],
-                    Some(Shape::Triangle) => vec![(10, -5), (14, 3), (6, 3), (10, -5)],
-                    Some(Shape::Square) => vec![(6, -4), (14, -4), (14, 4), (6, 4), (6, -4)],
-                    Some(Shape::Cross) => vec![(6, -4), (14, 4), (10, 0), (14, -4), (6, 4)],
-                };
-                drawn.label(label).legend(move |(x, y)| {
-                    EmptyElement::at((x, y))
-                        + DashedPathElement::new(
-                            vec![(0, 0), (20, 0)],
-                            dash,
-                            3,
-                            color.stroke_width(2),
-                        )
-                        + PathElement::new(mark.clone(), color.stroke_width(2))
-                });
-            }
+            .map_err(err)?;
             if let Some(shape) = s.vertices {
                 let points: Vec<(f64, f64)> = s.pieces.concat();
-                draw_shapes(chart, &points, shape, color, radius)?;
+                // Under another's marked points: larger, to show round
+                // them; the marks of lines on the same points nest (a
+                // triangle in a square in a cross), so none hides another.
+                let size = if s.band_px > 0 {
+                    radius + 5
+                } else {
+                    match shape {
+                        Shape::Circle | Shape::Triangle => radius,
+                        Shape::Square => radius + 4,
+                        Shape::Cross => radius + 7,
+                    }
+                };
+                draw_shapes(chart, &points, shape, color, size)?;
             }
         }
         Layer::Dots(i) => {
             let m = &spec.dots[i];
             let color = m.color;
-            let drawn = chart
+            chart
                 .draw_series(
                     m.points
                         .iter()
                         .map(|&p| Circle::new(p, radius, color.filled())),
                 )
-                .map_err(|e| e.to_string())?;
-            if let Some(label) = label {
-                drawn
-                    .label(label)
-                    .legend(move |(x, y)| Circle::new((x + 10, y), radius, color.filled()));
-            }
+                .map_err(err)?;
+        }
+        Layer::Waypoints => {
+            let Some(w) = &spec.waypoints else {
+                return Ok(());
+            };
+            let color = w.color;
+            let number = ("sans-serif", 12)
+                .into_font()
+                .style(FontStyle::Bold)
+                .color(&WHITE)
+                .pos(Pos::new(HPos::Center, VPos::Center));
+            let heading = |k: usize| w.headings_rad.get(k).copied().flatten();
+            // The arrows first: each starts under its disc.
+            chart
+                .draw_series(w.points.iter().enumerate().filter_map(|(k, &p)| {
+                    heading(k).map(|h| {
+                        let (shaft, head) = arrow(h, HEADING_ARROW_PX, color);
+                        EmptyElement::at(p) + shaft + head
+                    })
+                }))
+                .map_err(err)?;
+            chart
+                .draw_series(w.points.iter().enumerate().map(|(k, &p)| {
+                    EmptyElement::at(p)
+                        + Circle::new((0, 0), WAYPOINT_RADIUS_PX, color.filled())
+                        + Text::new((k + 1).to_string(), (0, 1), number.clone())
+                }))
+                .map_err(err)?;
         }
         Layer::Beyond => {
             let Some(b) = &spec.beyond else {
@@ -1135,56 +1339,211 @@ fn draw_layer<'c, DB: DrawingBackend + 'c>(
             };
             chart
                 .draw_series(b.down.iter().map(|&(c, color)| down(c, color)))
-                .map_err(|e| e.to_string())?;
-            let drawn = chart
+                .map_err(err)?;
+            chart
                 .draw_series(b.up.iter().map(|&(c, color)| up(c, color)))
-                .map_err(|e| e.to_string())?;
-            if let Some(label) = label {
-                drawn.label(label).legend(move |(x, y)| {
-                    EmptyElement::at((x + 10, y))
-                        + Polygon::new(vec![(-5, 4), (5, 4), (0, -6)], BLACK.filled())
-                });
-            }
+                .map_err(err)?;
         }
         Layer::Outline(i) => {
             let o = &spec.outlines[i];
             let color = o.color;
             let mut ring = o.corners.to_vec();
             ring.extend(o.corners.first().copied());
-            let drawn = chart
+            chart
                 .draw_series(
                     ring.windows(2)
                         .map(|w| DashedPathElement::new(w.to_vec(), 6, 4, color.stroke_width(3))),
                 )
-                .map_err(|e| e.to_string())?;
-            if let Some(label) = label {
-                drawn.label(label).legend(move |(x, y)| {
-                    Rectangle::new([(x + 2, y - 5), (x + 18, y + 5)], color.stroke_width(2))
-                });
-            }
+                .map_err(err)?;
         }
     }
     Ok(())
 }
 
+/// Draws the legend's symbol of `layer` on `area`, its left end at `(x, y)`
+/// (pixels in `area`), in a [`LEGEND_SYMBOL_PX`] wide column.
+fn draw_symbol<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    spec: &ChartSpec,
+    layer: Layer,
+    (x, y): (i32, i32),
+) -> Result<(), String> {
+    let radius = spec.marker_radius;
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    match layer {
+        Layer::Walls | Layer::Strip => {}
+        Layer::Shade(i) => {
+            let b = &spec.shades[i];
+            let color = b.color;
+            let edge: ShapeStyle = if b.edge {
+                color.stroke_width(2)
+            } else {
+                color.mix(0.25).stroke_width(2)
+            };
+            area.draw(
+                &(EmptyElement::at((x, y))
+                    + Rectangle::new([(0, -5), (20, 5)], color.mix(0.25).filled())
+                    + Rectangle::new([(0, -5), (20, 5)], edge)),
+            )
+            .map_err(err)?;
+        }
+        Layer::Line(i) => {
+            let s = &spec.lines[i];
+            let color = s.color;
+            if s.band_px > 0 {
+                area.draw(&PathElement::new(
+                    vec![(x, y), (x + 20, y)],
+                    color.mix(s.band_alpha).stroke_width(s.band_px.min(10)),
+                ))
+                .map_err(err)?;
+            } else {
+                let dash = if s.dashed { 5 } else { 100 };
+                let mark: Vec<(i32, i32)> = match s.vertices {
+                    None => vec![],
+                    Some(Shape::Circle) => vec![(8, -2), (12, -2), (12, 2), (8, 2), (8, -2)],
+                    Some(Shape::Triangle) => vec![(10, -5), (14, 3), (6, 3), (10, -5)],
+                    Some(Shape::Square) => vec![(6, -4), (14, -4), (14, 4), (6, 4), (6, -4)],
+                    Some(Shape::Cross) => vec![(6, -4), (14, 4), (10, 0), (14, -4), (6, 4)],
+                };
+                area.draw(
+                    &(EmptyElement::at((x, y))
+                        + DashedPathElement::new(
+                            vec![(0, 0), (20, 0)],
+                            dash,
+                            3,
+                            color.stroke_width(2),
+                        )
+                        + PathElement::new(mark, color.stroke_width(2))),
+                )
+                .map_err(err)?;
+            }
+        }
+        Layer::Dots(i) => {
+            area.draw(&Circle::new(
+                (x + 10, y),
+                radius,
+                spec.dots[i].color.filled(),
+            ))
+            .map_err(err)?;
+        }
+        Layer::Waypoints => {
+            if let Some(w) = &spec.waypoints {
+                let (shaft, head) = arrow(0.0, 22, w.color);
+                area.draw(
+                    &(EmptyElement::at((x + 6, y))
+                        + shaft
+                        + head
+                        + Circle::new((0, 0), 6, w.color.filled())),
+                )
+                .map_err(err)?;
+            }
+        }
+        Layer::Beyond => {
+            area.draw(
+                &(EmptyElement::at((x + 10, y))
+                    + Polygon::new(vec![(-5, 4), (5, 4), (0, -6)], BLACK.filled())),
+            )
+            .map_err(err)?;
+        }
+        Layer::Outline(i) => {
+            area.draw(&Rectangle::new(
+                [(x + 2, y - 5), (x + 18, y + 5)],
+                spec.outlines[i].color.stroke_width(2),
+            ))
+            .map_err(err)?;
+        }
+    }
+    Ok(())
+}
+
+/// Draws the legend as plotters lays one out (a box, a column of symbols,
+/// a line of text each) at `b`, the axes' top left corner at `origin`
+/// (pixels in `area`).
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    spec: &ChartSpec,
+    b: LegendBox,
+    origin: (i32, i32),
+) -> Result<(), String> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let (x, y) = (origin.0 + b.x, origin.1 + b.y);
+    let corners = [(x, y), (x + b.w, y + b.h)];
+    area.draw(&Rectangle::new(corners, WHITE.mix(0.85).filled()))
+        .map_err(err)?;
+    area.draw(&Rectangle::new(corners, BLACK)).map_err(err)?;
+    let m = LEGEND_MARGIN_PX as i32;
+    let font = legend_font();
+    let entries: Vec<(Layer, &str)> = layers(spec)
+        .into_iter()
+        .filter_map(|l| legend_label(spec, l).map(|label| (l, label)))
+        .collect();
+    let mut text = plotters::element::MultiLineText::<_, &str>::new(
+        (x + m + LEGEND_SYMBOL_PX as i32, y + m),
+        &font,
+    );
+    for (_, label) in &entries {
+        text.push_line(*label);
+    }
+    area.draw(&text).map_err(err)?;
+    let lines = text.compute_line_layout().map_err(|e| e.to_string())?;
+    for (((_, y0), (_, y1)), (layer, _)) in lines.into_iter().zip(entries) {
+        draw_symbol(area, spec, layer, (x + m, (y0 + y1) / 2))?;
+    }
+    Ok(())
+}
+
+/// A waypoint's disc: this radius in pixels, its number inside.
+pub const WAYPOINT_RADIUS_PX: i32 = 9;
+/// A waypoint's heading: an arrow this long from the disc's centre.
+pub const HEADING_ARROW_PX: i32 = 36;
+
+/// An arrow's shaft and head, in pixels from its tail.
+type Arrow = (PathElement<(i32, i32)>, Polygon<(i32, i32)>);
+
+/// An arrow from (0, 0) along `heading_rad` (counter-clockwise from the
+/// x axis; pixels' y runs down), `length_px` long.
+fn arrow(heading_rad: f64, length_px: i32, color: RGBColor) -> Arrow {
+    let (c, s) = (heading_rad.cos(), -heading_rad.sin());
+    let at = |along: f64, across: f64| {
+        (
+            (along * c - across * s).round() as i32,
+            (along * s + across * c).round() as i32,
+        )
+    };
+    let len = f64::from(length_px);
+    (
+        PathElement::new(vec![(0, 0), at(len - 8.0, 0.0)], color.stroke_width(3)),
+        Polygon::new(
+            vec![at(len, 0.0), at(len - 11.0, 6.0), at(len - 11.0, -6.0)],
+            color.filled(),
+        ),
+    )
+}
+
+/// Draws a chart on `root`: the chart itself on its top `chart_h` pixels,
+/// its legend where `layout` puts it (under the chart: in the rest).
 fn draw_chart<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     spec: &ChartSpec,
+    layout: &Layout,
+    chart_h: u32,
 ) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let mut chart = frame(root, spec)?;
+    let area = if root.dim_in_pixel().1 > chart_h {
+        root.split_vertically(chart_h).0
+    } else {
+        root.clone()
+    };
+    let mut chart = frame(&area, spec)?;
     // Outlines last: nothing may hide them.
     for layer in layers(spec) {
-        draw_layer(&mut chart, spec, layer, true)?;
+        draw_layer(&mut chart, spec, layer)?;
     }
-    let position = legend_position(&chart, spec)?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(position)
-        .draw()
-        .map_err(|e| e.to_string())?;
+    if let Some(b) = layout.legend {
+        let (xs, ys) = chart.plotting_area().get_pixel_range();
+        let base = root.get_base_pixel();
+        draw_legend(root, spec, b, (xs.start - base.0, ys.start - base.1))?;
+    }
     root.present().map_err(|e| e.to_string())
 }
 
@@ -1194,12 +1553,15 @@ pub enum Misleading {
     /// The legend names it, but nothing of it (fewer than [`MIN_PIXELS`])
     /// shows inside the axes.
     NothingDrawn { label: String },
-    /// Almost all of it lies under what is drawn after it.
+    /// Almost all of it lies under what is drawn after it (the legend
+    /// included).
     Hidden {
         label: String,
         /// The fraction of its pixels still seen.
         visible_fraction: f64,
     },
+    /// The legend's box lies over this many pixels of what is drawn.
+    LegendOverData { pixels: usize },
 }
 
 impl std::fmt::Display for Misleading {
@@ -1216,21 +1578,103 @@ impl std::fmt::Display for Misleading {
                 "\"{label}\" is hidden under what is drawn after it ({:.0} % of it shows)",
                 100.0 * visible_fraction
             ),
+            Misleading::LegendOverData { pixels } => {
+                write!(f, "the legend covers {pixels} drawn pixel(s)")
+            }
         }
     }
 }
 
 /// A legend entry is hidden when less than this fraction of its pixels
-/// shows; a pixel next to one drawn later counts as covered (a line a pixel
-/// beside another merges with it).
+/// shows (a pixel next to one drawn later counts as covered: a line a pixel
+/// beside another merges with it) and it shows in less than
+/// [`MIN_VISIBLE_SPREAD`] of the places it is drawn in.
 pub const MIN_VISIBLE_FRACTION: f64 = 0.15;
+
+/// A legend entry that shows in at least this share of the places it is
+/// drawn in is seen, however little of each place shows (a noisy series
+/// whose peaks stand out of another's all along the time axis). Places are
+/// [`SPREAD_PX`] wide columns of a time figure (read along its time axis)
+/// and squares of that side in a world figure (read along a path).
+pub const MIN_VISIBLE_SPREAD: f64 = 0.5;
+pub const SPREAD_PX: usize = 16;
+
+/// The share of the places `mask` is drawn in (see [`MIN_VISIBLE_SPREAD`])
+/// where some of it is not under `above`.
+fn spread(mask: &[bool], above: &[bool], w: usize, along_x: bool) -> f64 {
+    let h = mask.len() / w.max(1);
+    let (cw, ch) = (SPREAD_PX, if along_x { h.max(1) } else { SPREAD_PX });
+    let nx = w.div_ceil(cw);
+    let mut drawn = vec![false; nx * h.div_ceil(ch)];
+    let mut seen = drawn.clone();
+    for (i, (&m, &a)) in mask.iter().zip(above).enumerate() {
+        if m {
+            let place = (i / w / ch) * nx + (i % w) / cw;
+            drawn[place] = true;
+            seen[place] |= !a;
+        }
+    }
+    let count = |v: &[bool]| v.iter().filter(|&&x| x).count();
+    count(&seen) as f64 / count(&drawn).max(1) as f64
+}
 
 /// A legend entry with fewer pixels than this inside the axes shows
 /// nothing a reader can find.
 pub const MIN_PIXELS: usize = 9;
 
-/// The pixels of the plot area that `layer` covers, drawn alone at `size`.
-fn layer_mask(spec: &ChartSpec, size: (u32, u32), layer: Layer) -> Result<Vec<bool>, String> {
+/// The legend as plotters draws it: a symbol column this wide, a margin
+/// this wide all round, text in this font.
+const LEGEND_SYMBOL_PX: u32 = 30;
+const LEGEND_MARGIN_PX: u32 = 10;
+fn legend_font() -> TextStyle<'static> {
+    ("sans-serif", 12).into_font().into()
+}
+
+/// The legend keeps this far from anything drawn and from the axes' edges.
+const LEGEND_CLEAR_PX: i32 = 4;
+
+/// A chart's layers rasterised one by one as the PNG draws them, each
+/// alone: the pixels of the plot area each one covers.
+struct Raster {
+    /// The chart's size and its plot area's pixels within it.
+    size: (u32, u32),
+    xs: std::ops::Range<i32>,
+    ys: std::ops::Range<i32>,
+    /// Per layer of [`layers`], row by row over the plot area.
+    masks: Vec<Vec<bool>>,
+}
+
+impl Raster {
+    fn plot_size(&self) -> (usize, usize) {
+        (
+            (self.xs.end - self.xs.start).max(0) as usize,
+            (self.ys.end - self.ys.start).max(0) as usize,
+        )
+    }
+
+    /// Everything drawn.
+    fn union(&self) -> Vec<bool> {
+        let (w, h) = self.plot_size();
+        let mut all = vec![false; w * h];
+        for mask in &self.masks {
+            for (a, &m) in all.iter_mut().zip(mask) {
+                *a |= m;
+            }
+        }
+        all
+    }
+}
+
+/// The plot area's pixels across and down.
+type PixelRanges = (std::ops::Range<i32>, std::ops::Range<i32>);
+
+/// The pixels of the plot area that `layer` covers, drawn alone at `size`,
+/// and the plot area's pixel ranges.
+fn layer_mask(
+    spec: &ChartSpec,
+    size: (u32, u32),
+    layer: Layer,
+) -> Result<(Vec<bool>, PixelRanges), String> {
     let (w, h) = size;
     let mut buf = vec![255u8; (w * h * 3) as usize];
     let (xs, ys) = {
@@ -1239,44 +1683,218 @@ fn layer_mask(spec: &ChartSpec, size: (u32, u32), layer: Layer) -> Result<Vec<bo
         // The frame drawn, then wiped: only the layer's own pixels count.
         let range = chart.plotting_area().get_pixel_range();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        draw_layer(&mut chart, spec, layer, false)?;
+        draw_layer(&mut chart, spec, layer)?;
         root.present().map_err(|e| e.to_string())?;
         range
     };
-    let mut mask = vec![false; (w * h) as usize];
-    for y in ys.start.max(0)..ys.end.min(h as i32) {
-        for x in xs.start.max(0)..xs.end.min(w as i32) {
+    let (x0, x1) = (xs.start.max(0), xs.end.min(w as i32));
+    let (y0, y1) = (ys.start.max(0), ys.end.min(h as i32));
+    let mut mask = Vec::with_capacity(((x1 - x0).max(0) * (y1 - y0).max(0)) as usize);
+    for y in y0..y1 {
+        for x in x0..x1 {
             let i = (y as u32 * w + x as u32) as usize;
-            mask[i] = buf[3 * i..3 * i + 3] != [255, 255, 255];
+            mask.push(buf[3 * i..3 * i + 3] != [255, 255, 255]);
         }
     }
-    Ok(mask)
+    Ok((mask, (x0..x1, y0..y1)))
 }
 
-/// Every legend entry of `spec`, drawn at `size`, that shows nothing in the
-/// axes or lies almost wholly under what is drawn after it; found on the
-/// rasterised layers, so widths, dashes and markers count as drawn.
-fn misleading(spec: &ChartSpec, size: (u32, u32)) -> Result<Vec<Misleading>, String> {
+fn rasterise(spec: &ChartSpec, size: (u32, u32)) -> Result<Raster, String> {
     register_fonts();
-    let all = layers(spec);
-    let masks = all
-        .iter()
-        .map(|&l| layer_mask(spec, size, l))
-        .collect::<Result<Vec<_>, _>>()?;
-    let (w, h) = (size.0 as usize, size.1 as usize);
-    // What is drawn above the current layer, grown by a pixel each way.
+    let mut raster = Raster {
+        size,
+        xs: 0..0,
+        ys: 0..0,
+        masks: Vec::new(),
+    };
+    for layer in layers(spec) {
+        let (mask, (xs, ys)) = layer_mask(spec, size, layer)?;
+        raster.masks.push(mask);
+        (raster.xs, raster.ys) = (xs, ys);
+    }
+    Ok(raster)
+}
+
+/// Where a chart's legend goes, in pixels from its plot area's top left
+/// corner (plotters' `SeriesLabelPosition::Coordinate`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LegendBox {
+    x: i32,
+    y: i32,
+    w: i32,
+    h: i32,
+    /// Under the chart, in pixels added to the figure's height.
+    below: bool,
+}
+
+/// A chart's legend: inside the axes where it covers nothing drawn, else
+/// under the chart; `below_px` is what the figure grows by for it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Layout {
+    legend: Option<LegendBox>,
+    below_px: u32,
+}
+
+/// The legend's size in pixels, as plotters lays it out; `None` when it
+/// has no entries.
+fn legend_size(spec: &ChartSpec) -> Result<Option<(i32, i32)>, String> {
+    register_fonts();
+    let font = legend_font();
+    let mut text = plotters::element::MultiLineText::<_, &str>::new((0, 0), &font);
+    let mut any = false;
+    for layer in layers(spec) {
+        if let Some(label) = legend_label(spec, layer) {
+            text.push_line(label);
+            any = true;
+        }
+    }
+    if !any {
+        return Ok(None);
+    }
+    let (w, h) = text.estimate_dimension().map_err(|e| e.to_string())?;
+    let m = LEGEND_MARGIN_PX as i32;
+    Ok(Some((w + LEGEND_SYMBOL_PX as i32 + 2 * m, h + 2 * m)))
+}
+
+/// The legend's place: the spot inside the axes nearest one of their
+/// corners (upper right, upper left, lower right, lower left first) where
+/// its box keeps [`LEGEND_CLEAR_PX`] from every pixel drawn; under the
+/// chart, left-aligned with the axes, when there is none.
+fn place_legend(spec: &ChartSpec, raster: &Raster) -> Result<Layout, String> {
+    let Some((w, h)) = legend_size(spec)? else {
+        return Ok(Layout {
+            legend: None,
+            below_px: 0,
+        });
+    };
+    let (pw, ph) = raster.plot_size();
+    let (pw, ph) = (pw as i32, ph as i32);
+    let c = LEGEND_CLEAR_PX;
+    let (x_max, y_max) = (pw - w - c - 1, ph - h - c - 1);
+    if x_max > c && y_max > c {
+        let drawn = Summed::new(&raster.union(), pw as usize, ph as usize);
+        let corners = [
+            (x_max, c + 1),
+            (c + 1, c + 1),
+            (x_max, y_max),
+            (c + 1, y_max),
+        ];
+        let mut best: Option<(i32, (i32, i32))> = None;
+        let xs = (c + 1..=x_max).step_by(4).chain(std::iter::once(x_max));
+        for x in xs {
+            let ys = (c + 1..=y_max).step_by(4).chain(std::iter::once(y_max));
+            for y in ys {
+                // Nearest corner first; among equals, the corners' order.
+                let d = corners
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &(cx, cy))| 4 * ((x - cx).abs() + (y - cy).abs()) + k as i32)
+                    .min()
+                    .unwrap_or(0);
+                if best.is_some_and(|(b, _)| b <= d) {
+                    continue;
+                }
+                if drawn.count(x - c, y - c, x + w + c, y + h + c) == 0 {
+                    best = Some((d, (x, y)));
+                }
+            }
+        }
+        if let Some((_, (x, y))) = best {
+            return Ok(Layout {
+                legend: Some(LegendBox {
+                    x,
+                    y,
+                    w,
+                    h,
+                    below: false,
+                }),
+                below_px: 0,
+            });
+        }
+    }
+    // Under the x axis' label, from the axes' left edge.
+    let y = raster.size.1 as i32 - raster.ys.start + 2;
+    Ok(Layout {
+        legend: Some(LegendBox {
+            x: 0,
+            y,
+            w,
+            h,
+            below: true,
+        }),
+        below_px: (h + 8) as u32,
+    })
+}
+
+/// A summed-area table of a mask: how many pixels of a rectangle are set.
+struct Summed {
+    w: usize,
+    h: usize,
+    sums: Vec<u32>,
+}
+
+impl Summed {
+    fn new(mask: &[bool], w: usize, h: usize) -> Self {
+        let mut sums = vec![0u32; (w + 1) * (h + 1)];
+        for y in 0..h {
+            let mut row = 0u32;
+            for x in 0..w {
+                row += u32::from(mask[y * w + x]);
+                sums[(y + 1) * (w + 1) + x + 1] = sums[y * (w + 1) + x + 1] + row;
+            }
+        }
+        Summed { w, h, sums }
+    }
+
+    /// Set pixels with x0 <= x < x1 and y0 <= y < y1 (clipped to the mask).
+    fn count(&self, x0: i32, y0: i32, x1: i32, y1: i32) -> u32 {
+        let cx = |x: i32| x.clamp(0, self.w as i32) as usize;
+        let cy = |y: i32| y.clamp(0, self.h as i32) as usize;
+        let (x0, x1, y0, y1) = (cx(x0), cx(x1), cy(y0), cy(y1));
+        if x0 >= x1 || y0 >= y1 {
+            return 0;
+        }
+        let at = |x: usize, y: usize| self.sums[y * (self.w + 1) + x];
+        at(x1, y1) + at(x0, y0) - at(x0, y1) - at(x1, y0)
+    }
+}
+
+/// Every legend entry of `spec` that shows nothing in the axes or lies
+/// almost wholly under what is drawn after it or under the legend, and the
+/// legend itself when it lies over anything drawn; found on the rasterised
+/// layers, so widths, dashes and markers count as drawn.
+fn findings(spec: &ChartSpec, raster: &Raster, layout: &Layout) -> Vec<Misleading> {
+    let (w, h) = raster.plot_size();
+    // What is drawn above the current layer, grown by a pixel each way;
+    // the legend is drawn above everything.
     let mut above = vec![false; w * h];
     let mut found = Vec::new();
-    for (layer, mask) in all.iter().zip(&masks).rev() {
+    if let Some(b) = layout.legend.filter(|b| !b.below) {
+        let mut covered = 0;
+        for y in b.y.max(0)..(b.y + b.h + 1).min(h as i32) {
+            for x in b.x.max(0)..(b.x + b.w + 1).min(w as i32) {
+                let i = y as usize * w + x as usize;
+                above[i] = true;
+                covered += usize::from(raster.masks.iter().any(|m| m[i]));
+            }
+        }
+        if covered > 0 {
+            found.push(Misleading::LegendOverData { pixels: covered });
+        }
+    }
+    let mut per_layer = Vec::new();
+    for (layer, mask) in layers(spec).iter().zip(&raster.masks).rev() {
         if let Some(label) = legend_label(spec, *layer) {
             let drawn = mask.iter().filter(|&&m| m).count();
             let seen = mask.iter().zip(&above).filter(|&(&m, &a)| m && !a).count();
             if drawn < MIN_PIXELS {
-                found.push(Misleading::NothingDrawn {
+                per_layer.push(Misleading::NothingDrawn {
                     label: label.to_string(),
                 });
-            } else if (seen as f64) < MIN_VISIBLE_FRACTION * drawn as f64 {
-                found.push(Misleading::Hidden {
+            } else if (seen as f64) < MIN_VISIBLE_FRACTION * drawn as f64
+                && spread(mask, &above, w, spec.along_x) < MIN_VISIBLE_SPREAD
+            {
+                per_layer.push(Misleading::Hidden {
                     label: label.to_string(),
                     visible_fraction: seen as f64 / drawn as f64,
                 });
@@ -1291,97 +1909,100 @@ fn misleading(spec: &ChartSpec, size: (u32, u32)) -> Result<Vec<Misleading>, Str
             }
         }
     }
-    found.reverse();
-    Ok(found)
+    per_layer.reverse();
+    found.extend(per_layer);
+    found
 }
 
-/// Where the legend goes: the emptiest corner of the values' area, which
-/// ends below a strip (a legend at the top would cover the strip's marks).
-fn legend_position<DB: DrawingBackend>(
-    chart: &Chart<'_, DB>,
-    spec: &ChartSpec,
-) -> Result<SeriesLabelPosition, String> {
-    let corner = emptiest_corner(spec);
-    let Some(strip) = &spec.strip else {
-        return Ok(corner);
-    };
-    let area = chart.plotting_area();
-    let (xs, ys) = area.get_pixel_range();
-    let top = chart.backend_coord(&(spec.range.0, strip.from_y)).1 - ys.start + 8;
-    // plotters' legend: a 30 pixel symbol, 10 pixel margins, 12 pixel text.
-    let font: TextStyle = ("sans-serif", 12).into_font().into();
-    let mut text_w = 0;
-    for layer in layers(spec) {
-        if let Some(label) = legend_label(spec, layer) {
-            let (w, _) = area
-                .estimate_text_size(label, &font)
-                .map_err(|e| e.to_string())?;
-            text_w = text_w.max(w as i32);
-        }
+/// A chart laid out and checked: a line hidden under one drawn after it
+/// restyled (see [`dash_lines_along_others`]), its legend's place, and
+/// what would mislead in it.
+fn lay_out(spec: &mut ChartSpec, size: (u32, u32)) -> Result<(Layout, Vec<Misleading>), String> {
+    let mut raster = rasterise(spec, size)?;
+    if dash_lines_along_others(spec, &raster) {
+        raster = rasterise(spec, size)?;
     }
-    let legend_w = text_w + 30 + 2 * 10;
-    Ok(match corner {
-        SeriesLabelPosition::UpperLeft => SeriesLabelPosition::Coordinate(8, top),
-        SeriesLabelPosition::UpperRight => {
-            SeriesLabelPosition::Coordinate(xs.end - xs.start - legend_w - 8, top)
-        }
-        lower => lower,
+    let layout = place_legend(spec, &raster)?;
+    let found = findings(spec, &raster, &layout);
+    Ok((layout, found))
+}
+
+/// A line with a legend entry that lies almost wholly under one line drawn
+/// after it (two runs a pixel apart, as drawn: not the same points, which
+/// the figures find beforehand) is drawn wide under it, and that one
+/// dashed, its legend entry saying along which: as for lines on the same
+/// points. Whether any line was restyled.
+fn dash_lines_along_others(spec: &mut ChartSpec, raster: &Raster) -> bool {
+    let hidden: Vec<String> = findings(
+        spec,
+        raster,
+        &Layout {
+            legend: None,
+            below_px: 0,
+        },
+    )
+    .into_iter()
+    .filter_map(|m| match m {
+        Misleading::Hidden { label, .. } => Some(label),
+        _ => None,
     })
-}
-
-/// The corner of the chart with the least drawn in it, for the legend
-/// (segments sampled along their length); with a strip, of the values'
-/// area below it.
-fn emptiest_corner(spec: &ChartSpec) -> SeriesLabelPosition {
-    let (x0, x1, y0, y1) = spec.range;
-    let y1 = spec.strip.as_ref().map_or(y1, |s| s.from_y);
-    let mut drawn: Vec<(f64, f64)> = Vec::new();
-    let mut path = |points: &[(f64, f64)]| {
-        for w in points.windows(2) {
-            drawn.extend((0..8).map(|i| {
-                let t = i as f64 / 8.0;
-                (
-                    w[0].0 + t * (w[1].0 - w[0].0),
-                    w[0].1 + t * (w[1].1 - w[0].1),
-                )
-            }));
-        }
-        drawn.extend(points.last().copied());
+    .collect();
+    if hidden.is_empty() {
+        return false;
+    }
+    let (w, h) = raster.plot_size();
+    let all = layers(spec);
+    let plain = |spec: &ChartSpec, layer: Layer| match layer {
+        Layer::Line(i) if spec.lines[i].band_px == 0 && !spec.lines[i].dashed => Some(i),
+        _ => None,
     };
-    for w in spec.walls {
-        path(w);
-    }
-    for l in &spec.lines {
-        l.pieces.iter().for_each(|p| path(p));
-    }
-    for b in &spec.shades {
-        path(&b.outline);
-    }
-    for m in &spec.dots {
-        m.points.iter().for_each(|&p| path(&[p]));
-    }
-    if let Some(b) = &spec.beyond {
-        b.up.iter().chain(&b.down).for_each(|(c, _)| path(&[*c]));
-    }
-    let (wx, wy) = (0.45 * (x1 - x0), 0.4 * (y1 - y0));
-    // Upper right, upper left, lower right, lower left.
-    let mut count = [0usize; 4];
-    for (x, y) in drawn {
-        let (right, left) = (x >= x1 - wx, x <= x0 + wx);
-        let (up, low) = (y >= y1 - wy && y <= y1, y <= y0 + wy);
-        for (k, inside) in [up && right, up && left, low && right, low && left]
-            .into_iter()
+    // How many of `mask`'s pixels lie within a pixel of `over`'s.
+    let covered = |mask: &[bool], over: &[bool]| {
+        (0..w * h)
+            .filter(|&i| {
+                let (x, y) = (i % w, i / w);
+                mask[i]
+                    && (y.saturating_sub(1)..(y + 2).min(h))
+                        .any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| over[yy * w + xx]))
+            })
+            .count()
+    };
+    let mut changed = false;
+    for (a, &layer) in all.iter().enumerate() {
+        let Some(i) = plain(spec, layer) else {
+            continue;
+        };
+        if !hidden.contains(&spec.lines[i].label) {
+            continue;
+        }
+        let drawn = raster.masks[a].iter().filter(|&&m| m).count();
+        let over = all
+            .iter()
             .enumerate()
+            .skip(a + 1)
+            .filter_map(|(b, &l)| {
+                plain(spec, l).map(|k| (covered(&raster.masks[a], &raster.masks[b]), k))
+            })
+            .max_by_key(|&(c, _)| c);
+        if let Some((c, k)) = over
+            && 10 * c >= 8 * drawn
         {
-            count[k] += usize::from(inside);
+            let under = spec.lines[i].label.clone();
+            spec.lines[i].band_px = if spec.along_x {
+                UNDER_PX
+            } else {
+                UNDER_PATH_PX
+            };
+            spec.lines[i].band_alpha = 1.0;
+            let l = &mut spec.lines[k];
+            l.dashed = true;
+            if !l.label.is_empty() {
+                l.label = format!("{} (dashed: within a pixel of {under})", l.label);
+            }
+            changed = true;
         }
     }
-    match (0..4).min_by_key(|&k| count[k]) {
-        Some(1) => SeriesLabelPosition::UpperLeft,
-        Some(2) => SeriesLabelPosition::LowerRight,
-        Some(3) => SeriesLabelPosition::LowerLeft,
-        _ => SeriesLabelPosition::UpperRight,
-    }
+    changed
 }
 
 /// Height of one lane in pixels.
@@ -1531,6 +2152,8 @@ mod tests {
         // Something other than white was drawn.
         assert!(png.to_rgb8().pixels().any(|p| p.0 != [255, 255, 255]));
 
+        let shifted =
+            |dy: f64| -> Vec<(f64, f64)> { path.iter().map(|&(x, y)| (x, y + dy)).collect() };
         let files = TimeFigure {
             title: "series",
             x_label: "t [s]",
@@ -1543,8 +2166,8 @@ mod tests {
             markers: &[],
             bands: &[Band {
                 label: "band",
-                lower: &path,
-                upper: &path,
+                lower: &shifted(-0.3),
+                upper: &shifted(0.3),
                 color: palette::TRUTH,
             }],
             strip: None,
@@ -1784,6 +2407,20 @@ mod tests {
             points: &follower,
             color: palette::TRUTH,
         };
+        // The robot's lap in two halves, two paths.
+        let (first, second) = follower.split_at(follower.len() / 2);
+        let halves = [
+            Series {
+                label: "robot, first half",
+                points: first,
+                color: palette::TRUTH,
+            },
+            Series {
+                label: "robot, second half",
+                points: second,
+                color: palette::GOOD,
+            },
+        ];
         let figure = |paths: &[Series], references: &[Series]| {
             WorldFigure {
                 title: "hidden",
@@ -1797,13 +2434,17 @@ mod tests {
             .misleading()
             .unwrap()
         };
-        // The plan drawn first, the robot over it: the plan is lost.
-        let found = figure(&[plan, robot], &[]);
+        // The plan drawn first, the halves over it: the plan is lost.
+        let both = [plan, halves[0], halves[1]];
+        let found = figure(&both, &[]);
         assert!(
             matches!(&found[..], [Misleading::Hidden { label, visible_fraction }]
                 if label == "plan" && *visible_fraction < 0.1),
             "{found:?}"
         );
+        // Under one path a pixel off, it is drawn wide under it, the robot
+        // dashed, and both show.
+        assert_eq!(figure(&[plan, robot], &[]), vec![]);
         // The plan as a reference, a band under the robot: both show.
         assert_eq!(figure(&[robot], &[plan]), vec![]);
         // Apart, nothing hides.
@@ -1815,19 +2456,24 @@ mod tests {
         assert_eq!(figure(&[plan, apart], &[]), vec![]);
         // The check refuses to write a figure that hides its plan.
         let dir = tempfile::tempdir().unwrap();
-        let err = WorldFigure {
-            title: "hidden",
-            walls: &[],
-            regions: &[],
-            paths: &[plan, robot],
-            references: &[],
-            markers: &[],
-            outlines: &[],
-        }
-        .write_checked(&dir.path().join("hidden"))
-        .unwrap_err();
+        let written = |paths: &[Series], name: &str| {
+            WorldFigure {
+                title: "hidden",
+                walls: &[],
+                regions: &[],
+                paths,
+                references: &[],
+                markers: &[],
+                outlines: &[],
+            }
+            .write(&dir.path().join(name))
+        };
+        let err = written(&both, "hidden").unwrap_err();
         assert!(err.to_string().contains("\"plan\" is hidden"), "{err}");
         assert!(!dir.path().join("hidden.png").exists());
+        let files = written(&[plan, robot], "along").unwrap();
+        let svg = std::fs::read_to_string(&files[0]).unwrap();
+        assert!(svg.contains("robot (dashed: within a pixel of plan)"));
     }
 
     #[test]
@@ -1945,5 +2591,465 @@ mod tests {
         let count = |c: RGBColor| png.pixels().filter(|p| p.0 == [c.0, c.1, c.2]).count();
         // The instant is a tick across its row and a dot, not a speck.
         assert!(count(palette::BAD) > 150, "{}", count(palette::BAD));
+    }
+
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Pixels of exactly `c` in the PNG at `path` within x0..x1, y0..y1
+    /// and outside `skip` (x0, y0, x1, y1).
+    fn pixels_of(
+        png: &image::RgbImage,
+        c: RGBColor,
+        area: (i32, i32, i32, i32),
+        skip: Option<(i32, i32, i32, i32)>,
+    ) -> usize {
+        let (x0, y0, x1, y1) = area;
+        let mut n = 0;
+        for y in y0.max(0)..y1.min(png.height() as i32) {
+            for x in x0.max(0)..x1.min(png.width() as i32) {
+                let in_skip = skip.is_some_and(|(a, b, c, d)| x >= a && x <= c && y >= b && y <= d);
+                if !in_skip && png.get_pixel(x as u32, y as u32).0 == [c.0, c.1, c.2] {
+                    n += 1;
+                }
+            }
+        }
+        n
+    }
+
+    /// Random time figures, one to four random walks each over a random
+    /// part of the x range, some dense enough to fill the axes: the legend
+    /// lies where nothing is drawn (inside the axes when a spot is free,
+    /// else under the chart, which grows for it), the check finds nothing,
+    /// and in the PNG every series shows pixels of its own colour in the
+    /// axes outside the legend's box.
+    #[test]
+    fn the_legend_never_covers_what_is_drawn() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5401);
+        let dir = tempfile::tempdir().unwrap();
+        let colors = [palette::TRUTH, palette::ALT, palette::GOOD, palette::PURPLE];
+        let labels = ["first", "second series", "a third, longer name", "4th"];
+        let (mut inside, mut below) = (0, 0);
+        for case in 0..16 {
+            let dense = rng.random_bool(0.3);
+            let n = rng.random_range(1..=4);
+            let walks: Vec<Vec<(f64, f64)>> = (0..n)
+                .map(|k| {
+                    let (a, b) = if dense {
+                        (0.0, 100.0)
+                    } else {
+                        let a = rng.random_range(0.0..70.0);
+                        (a, a + rng.random_range(10.0..30.0))
+                    };
+                    let count = if dense {
+                        2000
+                    } else {
+                        rng.random_range(3..200)
+                    };
+                    let mut y = 10.0 * k as f64;
+                    (0..count)
+                        .map(|i| {
+                            // Dense: noise in bands that together fill the
+                            // axes.
+                            if dense {
+                                y = 2.0 * k as f64 + rng.random_range(-1.0..1.0);
+                            } else {
+                                y += rng.random_range(-1.0..1.0);
+                            }
+                            (a + (b - a) * i as f64 / (count - 1) as f64, y)
+                        })
+                        .collect()
+                })
+                .collect();
+            let series: Vec<Series> = walks
+                .iter()
+                .enumerate()
+                .map(|(k, w)| Series {
+                    label: labels[k],
+                    points: w,
+                    color: colors[k],
+                })
+                .collect();
+            let figure = TimeFigure {
+                title: "random walks",
+                x_label: "t",
+                y_label: "y",
+                series: &series,
+                markers: &[],
+                bands: &[],
+                strip: None,
+            };
+            let spec = figure.spec().unwrap();
+            let raster = rasterise(&spec, TIME_FIGURE_PX).unwrap();
+            let layout = place_legend(&spec, &raster).unwrap();
+            let b = layout.legend.unwrap();
+            let drawn = raster.union();
+            let (w, h) = raster.plot_size();
+            let under: usize = (b.y.max(0)..(b.y + b.h + 1).min(h as i32))
+                .flat_map(|y| (b.x.max(0)..(b.x + b.w + 1).min(w as i32)).map(move |x| (x, y)))
+                .filter(|&(x, y)| drawn[y as usize * w + x as usize])
+                .count();
+            if b.below {
+                below += 1;
+                assert!(layout.below_px >= b.h as u32, "{layout:?}");
+                assert!(b.y > h as i32, "{layout:?}");
+            } else {
+                inside += 1;
+                assert_eq!(layout.below_px, 0);
+                assert_eq!(under, 0, "case {case}: {layout:?}");
+            }
+            assert_eq!(figure.misleading().unwrap(), vec![], "case {case}");
+            let files = figure
+                .write(&dir.path().join(format!("walk{case}")))
+                .unwrap();
+            let png = image::open(&files[1]).unwrap().to_rgb8();
+            assert_eq!(
+                (png.width(), png.height()),
+                (TIME_FIGURE_PX.0, TIME_FIGURE_PX.1 + layout.below_px)
+            );
+            let area = (
+                raster.xs.start,
+                raster.ys.start,
+                raster.xs.end,
+                raster.ys.end,
+            );
+            let (lx, ly) = (raster.xs.start + b.x, raster.ys.start + b.y);
+            for s in &series {
+                let seen = pixels_of(&png, s.color, area, Some((lx, ly, lx + b.w, ly + b.h)));
+                assert!(
+                    seen >= MIN_PIXELS,
+                    "case {case}: {} shows {seen} pixel(s)",
+                    s.label
+                );
+            }
+        }
+        assert!(inside > 0 && below > 0, "{inside} inside, {below} below");
+    }
+
+    /// The check itself: a legend put over a line is found, with how much
+    /// it covers, and an entry drawn only where the legend lies is hidden.
+    #[test]
+    fn a_legend_over_data_and_an_entry_under_the_legend_are_found() {
+        let across: Vec<(f64, f64)> = (0..=100).map(|i| (i as f64, 10.0)).collect();
+        let low: Vec<(f64, f64)> = (0..=100).map(|i| (i as f64, 0.0)).collect();
+        // A short line in the upper left corner of the axes.
+        let corner = [(0.0, 9.6), (3.0, 9.6)];
+        let series = [
+            Series {
+                label: "across the top",
+                points: &across,
+                color: palette::TRUTH,
+            },
+            Series {
+                label: "along the bottom",
+                points: &low,
+                color: palette::ALT,
+            },
+            Series {
+                label: "in the corner",
+                points: &corner,
+                color: palette::BAD,
+            },
+        ];
+        let figure = TimeFigure {
+            title: "forced legend",
+            x_label: "t",
+            y_label: "y",
+            series: &series,
+            markers: &[],
+            bands: &[],
+            strip: None,
+        };
+        let spec = figure.spec().unwrap();
+        let raster = rasterise(&spec, TIME_FIGURE_PX).unwrap();
+        // Where `write` puts it: over nothing, every entry seen.
+        let placed = place_legend(&spec, &raster).unwrap();
+        assert!(!placed.legend.unwrap().below, "{placed:?}");
+        assert_eq!(findings(&spec, &raster, &placed), vec![]);
+        // The same legend in the upper left corner, over the top line and
+        // the corner's line.
+        let (w, h) = legend_size(&spec).unwrap().unwrap();
+        let forced = Layout {
+            legend: Some(LegendBox {
+                x: 0,
+                y: 0,
+                w,
+                h,
+                below: false,
+            }),
+            below_px: 0,
+        };
+        let found = findings(&spec, &raster, &forced);
+        assert!(
+            matches!(&found[..], [Misleading::LegendOverData { pixels }, Misleading::Hidden { label, visible_fraction }]
+                if *pixels > 10 && label == "in the corner" && *visible_fraction == 0.0),
+            "{found:?}"
+        );
+        assert!(found[0].to_string().contains("the legend covers"));
+    }
+
+    /// Random rooms with waypoints at least 0.8 m apart, some with a
+    /// heading: in the PNG each waypoint is a disc of its colour where
+    /// `pixel_of` puts it, and each heading an arrow of its colour along
+    /// the heading (none the other way); nothing misleads.
+    #[test]
+    fn waypoints_are_numbered_discs_at_their_places_with_their_headings() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5402);
+        let dir = tempfile::tempdir().unwrap();
+        for case in 0..6 {
+            let (w, h) = (rng.random_range(4.0..9.0), rng.random_range(4.0..9.0));
+            let walls = [
+                [(0.0, 0.0), (w, 0.0)],
+                [(w, 0.0), (w, h)],
+                [(w, h), (0.0, h)],
+                [(0.0, h), (0.0, 0.0)],
+            ];
+            let mut points: Vec<(f64, f64)> = Vec::new();
+            while points.len() < rng.random_range(2..6) {
+                let p = (
+                    rng.random_range(0.5..w - 0.5),
+                    rng.random_range(0.5..h - 0.5),
+                );
+                if points.iter().all(|q| (p.0 - q.0).hypot(p.1 - q.1) > 0.8) {
+                    points.push(p);
+                }
+            }
+            let headings: Vec<Option<f64>> = points
+                .iter()
+                .map(|_| rng.random_bool(0.6).then(|| rng.random_range(-3.1..3.1)))
+                .collect();
+            // The way through them, from a start in a corner.
+            let mut way = vec![(0.3, 0.3)];
+            way.extend(&points);
+            let figure = WaypointFigure {
+                world: WorldFigure {
+                    title: "goals",
+                    walls: &walls,
+                    regions: &[],
+                    paths: &[],
+                    references: &[Series {
+                        label: "the way",
+                        points: &way,
+                        color: palette::TRUTH,
+                    }],
+                    markers: &[],
+                    outlines: &[],
+                },
+                waypoints: Waypoints {
+                    label: "waypoint (in order; arrow: heading)",
+                    points: &points,
+                    headings_rad: &headings,
+                    color: palette::BAD,
+                },
+            };
+            assert_eq!(figure.misleading().unwrap(), vec![], "case {case}");
+            let files = figure
+                .write(&dir.path().join(format!("goals{case}")))
+                .unwrap();
+            let png = image::open(&files[1]).unwrap().to_rgb8();
+            let is_color = |x: f64, y: f64| {
+                png.get_pixel(x.round() as u32, y.round() as u32).0
+                    == [palette::BAD.0, palette::BAD.1, palette::BAD.2]
+            };
+            for (k, (&p, heading)) in points.iter().zip(&headings).enumerate() {
+                let (cx, cy) = figure.pixel_of(p).unwrap();
+                let (cx, cy) = (f64::from(cx), f64::from(cy));
+                // The disc: its rim 7 pixels out, all round but where its
+                // arrow leaves it.
+                let rim = (0..16)
+                    .filter(|&i| {
+                        let a = i as f64 * std::f64::consts::TAU / 16.0;
+                        is_color(cx + 7.0 * a.cos(), cy - 7.0 * a.sin())
+                    })
+                    .count();
+                assert!(rim >= 15, "case {case}, waypoint {}: rim {rim}/16", k + 1);
+                if let Some(h) = heading {
+                    let along = |d: f64| is_color(cx + d * h.cos(), cy - d * h.sin());
+                    assert!(
+                        (13..=26).all(|d| along(f64::from(d))),
+                        "case {case}, waypoint {}: no arrow along {h}",
+                        k + 1
+                    );
+                    assert!(
+                        !(13..=26).all(|d| along(-f64::from(d))),
+                        "case {case}, waypoint {}: an arrow backwards",
+                        k + 1
+                    );
+                }
+            }
+        }
+    }
+
+    /// Two runs that went the same way (the same points, a random wiggly
+    /// path): the later is drawn dashed over the earlier drawn wide, both
+    /// show and the legend names whose path the dashed one shares; a path
+    /// a hair off the first (not the same points, the same pixels) is
+    /// found by its pixels, drawn so and said so.
+    #[test]
+    fn a_world_path_on_the_points_of_another_is_dashed_over_it() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5404);
+        let dir = tempfile::tempdir().unwrap();
+        let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, 0.0f64);
+        let path: Vec<(f64, f64)> = (0..3000)
+            .map(|_| {
+                heading += rng.random_range(-0.2..0.2);
+                (x, y) = (x + 0.005 * heading.cos(), y + 0.005 * heading.sin());
+                (x, y)
+            })
+            .collect();
+        let hair: Vec<(f64, f64)> = path.iter().map(|&(x, y)| (x + 1e-6, y)).collect();
+        // What the check finds, and what writing it gives.
+        let figure = |second: &[(f64, f64)], name: &str| {
+            let paths = [
+                Series {
+                    label: "hold-last",
+                    points: &path,
+                    color: palette::BAD,
+                },
+                Series {
+                    label: "watchdog",
+                    points: second,
+                    color: palette::ALT,
+                },
+            ];
+            let figure = WorldFigure {
+                title: "two runs",
+                walls: &[],
+                regions: &[],
+                paths: &paths,
+                references: &[],
+                markers: &[],
+                outlines: &[],
+            };
+            (
+                figure.misleading().unwrap(),
+                figure.write(&dir.path().join(name)),
+            )
+        };
+        let (found, written) = figure(&path, "same");
+        assert_eq!(found, vec![]);
+        let svg = std::fs::read_to_string(&written.unwrap()[0]).unwrap();
+        assert!(svg.contains("watchdog (dashed: same path as hold-last)"));
+        let (found, written) = figure(&hair, "hair");
+        assert_eq!(found, vec![]);
+        let svg = std::fs::read_to_string(&written.unwrap()[0]).unwrap();
+        assert!(svg.contains("watchdog (dashed: within a pixel of hold-last)"));
+    }
+
+    /// Random noise over a time span, and slightly smaller noise over it
+    /// drawn after it: the first's peaks stand out of the second all along
+    /// the time axis, so it is seen though most of its pixels lie under the
+    /// second; under two series a hair off it, each along half of it, it
+    /// is hidden.
+    #[test]
+    fn a_noisy_series_whose_peaks_show_all_along_is_seen() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5405);
+        let noise = |rng: &mut ChaCha8Rng, a: f64| -> Vec<(f64, f64)> {
+            (0..4000)
+                .map(|i| (i as f64 * 0.03, rng.random_range(-a..a)))
+                .collect()
+        };
+        let big = noise(&mut rng, 1.0);
+        let small = noise(&mut rng, 0.95);
+        // A hair off x, in two halves: neither lies along most of x.
+        let hair: Vec<(f64, f64)> = big.iter().map(|&(t, v)| (t, v + 1e-4)).collect();
+        let (first, second) = hair.split_at(hair.len() / 2);
+        let figure = |over: &[&[(f64, f64)]]| -> Vec<Misleading> {
+            let mut series = vec![Series {
+                label: "x",
+                points: &big,
+                color: palette::TRUTH,
+            }];
+            let labels = ["y", "y, later"];
+            for (k, points) in over.iter().enumerate() {
+                series.push(Series {
+                    label: labels[k],
+                    points,
+                    color: [palette::ALT, palette::GOOD][k],
+                });
+            }
+            let figure = TimeFigure {
+                title: "innovations",
+                x_label: "t",
+                y_label: "m",
+                series: &series,
+                markers: &[],
+                bands: &[],
+                strip: None,
+            };
+            let spec = figure.spec().unwrap();
+            let raster = rasterise(&spec, TIME_FIGURE_PX).unwrap();
+            // Most of x lies under what follows: the share alone would call
+            // it hidden.
+            let x_layer = layers(&spec)
+                .iter()
+                .position(|l| *l == Layer::Line(0))
+                .unwrap();
+            let (w, h) = raster.plot_size();
+            let x_mask = &raster.masks[x_layer];
+            let after = &raster.masks[x_layer + 1..x_layer + 1 + over.len()];
+            let drawn = x_mask.iter().filter(|&&m| m).count();
+            // Not next to a pixel drawn after it, as the check counts it.
+            let free = (0..w * h)
+                .filter(|&i| {
+                    let (px, py) = (i % w, i / w);
+                    x_mask[i]
+                        && !(py.saturating_sub(1)..(py + 2).min(h)).any(|yy| {
+                            (px.saturating_sub(1)..(px + 2).min(w))
+                                .any(|xx| after.iter().any(|m| m[yy * w + xx]))
+                        })
+                })
+                .count();
+            assert!(
+                drawn > 10_000 && (free as f64) < MIN_VISIBLE_FRACTION * drawn as f64,
+                "{free} of {drawn}"
+            );
+            figure.misleading().unwrap()
+        };
+        assert_eq!(figure(&[&small]), vec![]);
+        let found = figure(&[first, second]);
+        assert!(
+            matches!(&found[..], [Misleading::Hidden { label, .. }] if label == "x"),
+            "{found:?}"
+        );
+    }
+
+    #[test]
+    fn lines_through_one_point_all_show() {
+        let one = [(0.0, 1.0)];
+        let two = [(0.0, 1.0), (2.0, 1.0)];
+        let zero = [(0.0, 0.0), (2.0, 0.0)];
+        let series = [
+            Series {
+                label: "hold-last",
+                points: &one,
+                color: palette::BAD,
+            },
+            Series {
+                label: "watchdog",
+                points: &one,
+                color: palette::ALT,
+            },
+            Series {
+                label: "move-and-wait",
+                points: &two,
+                color: palette::PURPLE,
+            },
+            Series {
+                label: "decoupled",
+                points: &zero,
+                color: palette::GOOD,
+            },
+        ];
+        let figure = TimeFigure {
+            title: "contacts",
+            x_label: "latency",
+            y_label: "contacts",
+            series: &series,
+            markers: &[],
+            bands: &[],
+            strip: None,
+        };
+        assert_eq!(figure.misleading().unwrap(), vec![]);
     }
 }

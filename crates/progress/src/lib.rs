@@ -8,6 +8,9 @@ use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle, TermLike};
 
+pub mod stages;
+pub use stages::{StageProgress, StageTime, Stages, process_cpu_s};
+
 /// A progress line on a pipe at most this often.
 pub const PIPED_EVERY: Duration = Duration::from_secs(3);
 

@@ -14,6 +14,7 @@
 //! | `/tf` | `tf2_msgs/msg/TFMessage`: `odom` → `base_link`; `map` → `odom` from the tracker | encoder / tracker samples |
 //! | `/imu` | `sensor_msgs/msg/Imu` in `imu_link`: the gyro's yaw rate as `angular_velocity.z`, no orientation or acceleration (covariance −1) | each gyro sample, when the log has a gyro |
 //! | `/tf_static` | `base_link` → `<sensor>_link`, and `imu_link` (identity) with a gyro | once, latched |
+//! | `/robot_description` | `std_msgs/msg/String`: the robot's URDF ([`crate::urdf::describe`]): the wheels with the nominal parameters on `wheel_left_joint` and `wheel_right_joint`, the footprint, the `/tf_static` frames | once, latched |
 //! | `/map` | `nav_msgs/msg/OccupancyGrid` | once, latched |
 //! | `/plan` | `nav_msgs/msg/Path` | once, latched, when a plan is given |
 //!
@@ -26,8 +27,8 @@ use twindrive_log::{MissionLog, SensorKind, WorldMap};
 use crate::bag::{BagWriter, WriteError};
 use crate::msgs::{
     Covariance, Distro, HazardDetection, HazardDetectionVector, Header, Imu, JointState, LaserScan,
-    MapMetaData, OccupancyGrid, Odometry, Path, PoseStamped, PoseWithCovariance, Range, TFMessage,
-    Time, TransformStamped, Twist, TwistWithCovariance,
+    MapMetaData, OccupancyGrid, Odometry, Path, PoseStamped, PoseWithCovariance, Range, StringMsg,
+    TFMessage, Time, TransformStamped, Twist, TwistWithCovariance,
 };
 use crate::qos::Qos;
 
@@ -94,6 +95,7 @@ pub fn write_log_bag(
 
     // Latched topics first, at the start time, so a player sends them first.
     let tf_static = bag.topic::<TFMessage>("/tf_static", Qos::LATCHED)?;
+    let description = bag.topic::<StringMsg>(crate::extract::ROBOT_DESCRIPTION, Qos::LATCHED)?;
     let map_topic = match options.map {
         Some(_) => Some(bag.topic::<OccupancyGrid>("/map", Qos::LATCHED)?),
         None => None,
@@ -150,7 +152,29 @@ pub fn write_log_bag(
             0.0,
         ));
     }
+    // The URDF's frames: those of /tf_static.
+    let mut frames: Vec<(String, Pose)> = h
+        .range_sensors
+        .iter()
+        .map(|s| (format!("{}_link", s.name), s.mount))
+        .collect();
+    if imu.is_some() {
+        frames.push((IMU_FRAME.to_string(), Pose::new(0.0, 0.0, 0.0)));
+    }
     bag.write(tf_static, t0, &TFMessage { transforms })?;
+    bag.write(
+        description,
+        t0,
+        &StringMsg {
+            data: crate::urdf::describe(
+                &h.scenario,
+                &nominal,
+                h.footprint_radius_m,
+                [LEFT_WHEEL_JOINT, RIGHT_WHEEL_JOINT],
+                &frames,
+            ),
+        },
+    )?;
     if let (Some(topic), Some(map)) = (map_topic, options.map) {
         bag.write(topic, t0, &occupancy_grid(map, t0))?;
     }
@@ -462,6 +486,7 @@ mod tests {
                 name: "gyro".into(),
                 rate_hz: 50.0,
             }),
+            goals: Default::default(),
         });
         for k in 0..10u64 {
             log.steps.push(twindrive_log::StepRecord {

@@ -18,6 +18,7 @@
 //! are found by name in the definition stored in the file, so a message only
 //! has to have the fields, not a particular version of the type.
 
+mod description;
 mod imu;
 mod scan;
 #[cfg(test)]
@@ -25,6 +26,7 @@ mod sensor_tests;
 mod speeds;
 mod tf;
 
+pub use description::{ROBOT_DESCRIPTION, robot_description};
 pub use imu::{IMU, ImuRateTrack, imu_rate_track};
 pub use scan::{LASER_SCAN, ScanData, ScanTrack, scan_track};
 pub use speeds::{NumberField, number_track};

@@ -15,6 +15,7 @@ mod qos;
 pub mod rmw_zenoh;
 mod schema;
 mod type_hash;
+pub mod urdf;
 mod value;
 
 pub use bag::{

@@ -425,6 +425,7 @@ impl Scenario {
             start: self.robot.start,
             range_sensors: self.range_sensors.iter().map(|s| s.info.clone()).collect(),
             gyro: self.gyro.as_ref().map(|g| g.info.clone()),
+            goals: Default::default(),
         }
     }
 }

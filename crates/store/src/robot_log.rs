@@ -87,23 +87,21 @@ fn comparison_figures(
         .iter()
         .map(|s| (s.ground_truth.x_m, s.ground_truth.y_m))
         .collect();
+    // The prediction a pale band: the robot's path runs along it.
     WorldFigure {
         title: "predicted (the plan) against real (the robot)",
         regions: &[],
-        references: &[],
+        references: &[Series {
+            label: "predicted",
+            points: &predicted,
+            color: palette::ALT,
+        }],
         walls: &[],
-        paths: &[
-            Series {
-                label: "predicted",
-                points: &predicted,
-                color: palette::ALT,
-            },
-            Series {
-                label: "real",
-                points: &real,
-                color: palette::TRUTH,
-            },
-        ],
+        paths: &[Series {
+            label: "real",
+            points: &real,
+            color: palette::TRUTH,
+        }],
         markers: &[],
         outlines: &[],
     }

@@ -1178,7 +1178,8 @@ pub struct CalibrateArgs {
     /// Encoder ticks per wheel revolution (for tick counts).
     #[arg(long, value_parser = usage::ticks_per_rev)]
     pub ticks_per_rev: Option<u32>,
-    /// Initial guess DL,DR,B in metres (default for logs: their nominal values).
+    /// Initial guess DL,DR,B in metres (default for logs: their nominal
+    /// values; for a bag: the wheels of its /robot_description, said so).
     #[arg(long, value_name = "DL,DR,B")]
     pub initial: Option<String>,
     /// -1 for a left counter that runs backwards when driving forward.
@@ -1258,7 +1259,9 @@ pub struct MapArgs {
     /// robot's motion from its odometry (--odom-topic), its wheel joints
     /// (--left-joint/--right-joint) or its wheel speeds
     /// (--left-speed-topic/--right-speed-topic); wheels need --calibration,
-    /// or the nominal --wheel-diameter-m and --wheelbase-m.
+    /// or the nominal --wheel-diameter-m and --wheelbase-m, else the
+    /// recording's robot description (/robot_description, a URDF) gives
+    /// them, and says so.
     #[arg(
         long,
         value_name = "BAG",
@@ -1313,7 +1316,8 @@ pub struct MapArgs {
     pub calibration: Option<PathBuf>,
     /// The nominal wheel diameter when neither --calibration nor --mission
     /// gives the wheels: site.toml's robot's, and the dead reckoning's when
-    /// mapping from wheel joints or speeds.
+    /// mapping from wheel joints or speeds. A bag without it (or without
+    /// --wheelbase-m) takes what is missing from its /robot_description.
     #[arg(long, value_parser = usage::positive)]
     pub wheel_diameter_m: Option<f64>,
     /// The nominal wheelbase when neither --calibration nor --mission gives
@@ -1337,7 +1341,8 @@ pub struct MapArgs {
     /// The wheels' acceleration limit for site.toml (bags; a log gives its own).
     #[arg(long, default_value_t = 20.0, value_parser = usage::positive)]
     pub max_wheel_accel_rad_s2: f64,
-    /// Output directory (map.pgm, map.yaml, site.toml, poses.tum, map_report.json).
+    /// Output directory (map.pgm, map.yaml, map.png: a picture of the map
+    /// with the drive on it, site.toml, poses.tum, map_report.json).
     #[arg(long)]
     pub out: PathBuf,
 }

@@ -10,6 +10,8 @@ use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
 
 use clap::{CommandFactory, FromArgMatches};
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
 
 fn main() -> ExitCode {
     let matches = usage::negative_numbers_as_values(cli::Args::command()).get_matches();
@@ -27,10 +29,21 @@ fn main() -> ExitCode {
                 ))
             }),
         );
+    // A TLS listener's refused clients said in words and counted, not
+    // zenoh's "increase the system open file limit" for each.
+    let refusals = twindrive_net::TlsRefusals::new();
     if terminal {
-        subscriber.with_writer(std::io::stderr).init();
+        subscriber
+            .with_writer(std::io::stderr)
+            .finish()
+            .with(refusals)
+            .init();
     } else {
-        subscriber.with_writer(|| PlainStderr).init();
+        subscriber
+            .with_writer(|| PlainStderr)
+            .finish()
+            .with(refusals)
+            .init();
     }
     match commands::run(args) {
         Ok(()) => ExitCode::SUCCESS,

@@ -219,6 +219,37 @@ async fn loaded(c: &Client, url: &str) {
     .await;
 }
 
+/// Opens the page again (the cookie carries the token) and waits for it.
+async fn reload(c: &Client) {
+    c.refresh().await.unwrap();
+    wait_js(
+        c,
+        "return !!(window.twindrive && window.twindrive.S.connected && window.twindrive.S.state && window.twindrive.S.world)",
+        30.0,
+        "the page to connect again",
+    )
+    .await;
+}
+
+/// The route status (where a goals refusal shows) is right under the row
+/// of Show the way and Drive it, in the twin's panel.
+async fn beside_the_goals_buttons(c: &Client) {
+    let [route, drive, status] =
+        rects(c, &["#btn-route", "#btn-drive-route", "#route-status"]).await[..]
+    else {
+        unreachable!()
+    };
+    let below = status[1] - route[3].max(drive[3]);
+    assert!(
+        (0.0..24.0).contains(&below) && status[3] > status[1],
+        "the status {status:?} is not right under the buttons {route:?} {drive:?}"
+    );
+    assert_eq!(
+        js(c, "return document.getElementById('twin-panel').contains(document.getElementById('route-status'))").await,
+        true
+    );
+}
+
 /// The text of the element `id`.
 async fn text(c: &Client, id: &str) -> String {
     c.find(Locator::Id(id)).await.unwrap().text().await.unwrap()
@@ -1155,10 +1186,14 @@ async fn foxglove_clients_get_the_map_the_twin_and_the_robots() {
 }
 
 /// The goal workflow in the page: a goal on a wall is refused with the
-/// reason (the blocking cell on the map); waypoints clicked on the map (the
+/// reason (the blocking cell on the map) beside the goals' buttons and in
+/// the event list, and a page opened again shows the same; a keep-out zone
+/// that crosses itself is refused by its name; Clear forgets the refusal,
+/// on this page and on one opened again; waypoints clicked on the map (the
 /// last dragged for its heading) give the way, drawn with its length and
-/// clearance; the twin drives it recording the rehearsal, which ends at the
-/// goal; the plan made from it verifies, goes to the robot and the mission
+/// clearance, and with "come home" one more stop; the twin drives it
+/// recording the rehearsal, which ends at the goal; the plan made from it
+/// says the goals it keeps, verifies, goes to the robot and the mission
 /// completes.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn goals_clicked_on_the_map_become_a_mission_the_robot_completes() {
@@ -1183,7 +1218,73 @@ async fn goals_clicked_on_the_map_become_a_mission_the_robot_completes() {
         status.contains("no way: waypoint 1 at (4.50, 1.50)"),
         "{status}"
     );
+    beside_the_goals_buttons(c).await;
+    wait_js(
+        c,
+        "return document.getElementById('events').innerText.includes('waypoint 1 at (4.50, 1.50)')",
+        5.0,
+        "the refusal in the event list",
+    )
+    .await;
+    // A page opened again shows what the console has: the same refusal.
+    reload(c).await;
+    assert_eq!(text(c, "route-status").await, status);
+    assert_eq!(
+        js(c, "return window.twindrive.S.waypoints.length").await,
+        1,
+        "the page takes the goals up"
+    );
+    // A keep-out zone clicked corner by corner across itself, named
+    // "flowers": the goals are refused by the zone's name, not its index.
+    click(c, "btn-zone").await;
+    for p in [(0.5, 3.5), (1.5, 4.5), (1.5, 3.5), (0.5, 4.5), (0.5, 3.5)] {
+        drag_on_map(c, p, p).await;
+    }
+    js(
+        c,
+        "const e = document.querySelector('#zones input[data-f=name]'); e.value = 'flowers'; \
+         e.dispatchEvent(new Event('change', { bubbles: true })); return true",
+    )
+    .await;
+    click(c, "btn-route").await;
+    wait_js(
+        c,
+        "return document.getElementById('route-status').innerText.includes('flowers')",
+        10.0,
+        "the zone's refusal",
+    )
+    .await;
+    let status = text(c, "route-status").await;
+    assert!(
+        status.contains("the outline of the keep-out zone 'flowers': its sides 1 and 3 cross"),
+        "{status}"
+    );
+    assert!(
+        !status.contains('`') && !status.contains("keep_out"),
+        "{status}"
+    );
+    beside_the_goals_buttons(c).await;
+    js(
+        c,
+        "document.querySelector('#zones button[data-remove]').click(); return true",
+    )
+    .await;
+    // Clear: the refusal goes, and stays gone on a page opened again.
     click(c, "btn-goals-clear").await;
+    wait_js(
+        c,
+        "const s = window.twindrive.S.state; return !s.route && !s.refusals.goals && \
+         document.getElementById('route-status').innerText === ''",
+        5.0,
+        "the route status cleared",
+    )
+    .await;
+    reload(c).await;
+    assert_eq!(text(c, "route-status").await, "");
+    assert_eq!(
+        js(c, "return window.twindrive.S.state.route").await,
+        Value::Null
+    );
     click(c, "btn-waypoint").await;
     drag_on_map(c, (1.5, 1.0), (1.5, 1.0)).await;
     drag_on_map(c, (1.1, 2.2), (1.1, 2.6)).await;
@@ -1206,6 +1307,32 @@ async fn goals_clicked_on_the_map_become_a_mission_the_robot_completes() {
     assert!(status.starts_with("way: "), "{status}");
     let route = js(c, "return window.twindrive.S.state.route").await;
     assert!(route["min_clearance_m"].as_f64().unwrap() >= 0.1, "{route}");
+    assert_eq!(route["waypoints"].as_array().unwrap().len(), 2, "{route}");
+    // Come home: the goals say so, and home is one more stop.
+    click(c, "goal-home").await;
+    click(c, "btn-route").await;
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.route; return !!(r && r.points && r.goals.return_home)",
+        10.0,
+        "the way home",
+    )
+    .await;
+    let home = js(c, "return window.twindrive.S.state.route").await;
+    assert_eq!(home["waypoints"].as_array().unwrap().len(), 3, "{home}");
+    assert!(
+        home["length_m"].as_f64().unwrap() > route["length_m"].as_f64().unwrap() + 0.5,
+        "{home}"
+    );
+    click(c, "goal-home").await;
+    click(c, "btn-route").await;
+    wait_js(
+        c,
+        "const r = window.twindrive.S.state.route; return !!(r && r.points && !r.goals.return_home)",
+        10.0,
+        "the way without home",
+    )
+    .await;
     shot(c, "11_way_to_the_goals").await;
     click(c, "btn-drive-route").await;
     wait_js(
@@ -1227,6 +1354,12 @@ async fn goals_clicked_on_the_map_become_a_mission_the_robot_completes() {
         "a plan that verified",
     )
     .await;
+    // The plan says the goals it keeps.
+    let kept = text(c, "plan-goals").await;
+    assert!(
+        kept.contains("waypoint 1 within") && kept.contains("waypoint 2 within"),
+        "{kept}"
+    );
     wait_js(
         c,
         "return !document.getElementById('btn-upload').disabled",
@@ -1248,5 +1381,311 @@ async fn goals_clicked_on_the_map_become_a_mission_the_robot_completes() {
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
     shot(c, "12_goal_mission_completed").await;
+    c.clone().close().await.unwrap();
+}
+
+/// Sets the page's viewport (the window less the browser's own) to
+/// `width` x `height` CSS pixels.
+async fn viewport(c: &Client, width: u32, height: u32) {
+    c.set_window_size(width, height).await.unwrap();
+    let inner: [f64; 2] =
+        serde_json::from_value(js(c, "return [innerWidth, innerHeight]").await).unwrap();
+    c.set_window_size(
+        width + (width as f64 - inner[0]).max(0.0) as u32,
+        height + (height as f64 - inner[1]).max(0.0) as u32,
+    )
+    .await
+    .unwrap();
+    wait_js(
+        c,
+        &format!("return innerWidth === {width} && innerHeight === {height}"),
+        10.0,
+        &format!("a {width} x {height} viewport"),
+    )
+    .await;
+}
+
+/// Nothing covers the map: the joystick, the legend and the time cursor
+/// lie outside the map's canvas and inside the window.
+async fn nothing_over_the_map(c: &Client, size: &str) {
+    let boxes = rects(c, &["#map", "#joystick", "#legend", "#cursor-bar"]).await;
+    let inner: [f64; 2] =
+        serde_json::from_value(js(c, "return [innerWidth, innerHeight]").await).unwrap();
+    let map = boxes[0];
+    assert!(
+        map[2] - map[0] > 300.0 && map[3] - map[1] > 300.0,
+        "{size}: the map is {map:?}"
+    );
+    for (name, b) in ["joystick", "legend", "time cursor"]
+        .iter()
+        .zip(&boxes[1..])
+    {
+        assert!(
+            !overlap(map, *b),
+            "{size}: the {name} {b:?} covers the map {map:?}"
+        );
+        assert!(
+            b[0] >= 0.0 && b[1] >= 0.0 && b[2] <= inner[0] + 0.5 && b[3] <= inner[1] + 0.5,
+            "{size}: the {name} {b:?} is not all in the window {inner:?}"
+        );
+    }
+}
+
+/// Whether segments ab and cd cross (touching at an end does not count).
+fn cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+    let side = |o: [f64; 2], p: [f64; 2], q: [f64; 2]| {
+        (p[0] - o[0]) * (q[1] - o[1]) - (p[1] - o[1]) * (q[0] - o[0])
+    };
+    side(c, d, a) * side(c, d, b) < 0.0 && side(a, b, c) * side(a, b, d) < 0.0
+}
+
+/// The page shows the state the console has, where the operator looks:
+/// at 1280 x 800, 1920 x 1080 and 1024 x 768 nothing covers the map; a
+/// plan made before a rehearsal and a robot placed on a wall are refused
+/// beside their buttons, a corridor narrower than the robot beside the
+/// freedom's; on the office's occupancy map, a plan from goals through its
+/// door says the goals it keeps, and its corridor (1.5 m wide each side
+/// where the rooms are open) is
+/// drawn only where its path sees: every spoke of the band the page got
+/// starts on the plan's path within its half width and crosses no wall nor
+/// ends in an occupied cell, and no occupied cell on screen is drawn in
+/// the corridor's colour.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_shows_refusals_beside_their_controls_and_the_corridor_in_free_space() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = repo().join("scenarios/office_drive.toml");
+    let con = console(port(), tmp.path(), &["--scenario", s(&scenario)]);
+    let b = browser().await;
+    let c = &b.client;
+    loaded(c, &con.url).await;
+    for (w, h) in [(1280, 800), (1920, 1080), (1024, 768)] {
+        viewport(c, w, h).await;
+        nothing_over_the_map(c, &format!("{w} x {h}")).await;
+        shot(c, &format!("13_layout_{w}x{h}")).await;
+    }
+    viewport(c, 1280, 800).await;
+
+    // Refusals beside the buttons that caused them, and in the event list.
+    click(c, "btn-plan").await;
+    wait_js(
+        c,
+        "return document.getElementById('refusal-plan').innerText.includes('record a rehearsal first')",
+        10.0,
+        "the plan's refusal beside its button",
+    )
+    .await;
+    let [plan_button, plan_refusal] = rects(c, &["#btn-plan", "#refusal-plan"]).await[..] else {
+        unreachable!()
+    };
+    assert!(
+        (0.0..24.0).contains(&(plan_refusal[1] - plan_button[3])),
+        "{plan_refusal:?} under {plan_button:?}"
+    );
+    click(c, "btn-place").await;
+    drag_on_map(c, (4.5, 5.0), (4.5, 5.0)).await;
+    wait_js(
+        c,
+        "return document.getElementById('refusal-twin').innerText.includes('inside an obstacle')",
+        10.0,
+        "the placing's refusal in the twin's panel",
+    )
+    .await;
+    let events = text(c, "events").await;
+    assert!(
+        events.contains("record a rehearsal first") && events.contains("inside an obstacle"),
+        "{events}"
+    );
+
+    // Through the door, on to the far room: the rehearsal, then the plan.
+    speed_32(c).await;
+    for (i, (x, y)) in [(2.5, 2.5), (5.0, 2.4), (6.8, 3.5)].iter().enumerate() {
+        js(
+            c,
+            &format!("window.twindrive.S.waypoints.push({{x_m: {x}, y_m: {y}, dwell_s: {}}}); return true", i + 1),
+        )
+        .await;
+    }
+    click(c, "btn-drive-route").await;
+    wait_js(
+        c,
+        "const t = window.twindrive.S.state.twin; return t.rehearsal_rev > 0 && t.drive === 'idle'",
+        90.0,
+        "the rehearsal through the door",
+    )
+    .await;
+    click(c, "btn-plan").await;
+    wait_js(c, "return !!window.twindrive.S.plan", 90.0, "the plan").await;
+    assert_eq!(
+        text(c, "refusal-plan").await,
+        "",
+        "a plan made clears the refusal"
+    );
+    // The plan from a goals rehearsal says the goals it keeps.
+    let kept = text(c, "plan-goals").await;
+    assert!(
+        [
+            "waypoint 1 within",
+            "waypoint 2 within",
+            "waypoint 3 within",
+            "standing"
+        ]
+        .iter()
+        .all(|w| kept.contains(w)),
+        "{kept}"
+    );
+    let plan = js(c, "return window.twindrive.S.plan").await;
+    let world = js(c, "return window.twindrive.S.world").await;
+    let col = |k: &str| -> Vec<f64> {
+        plan["plan"][k]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    let (xs, ys) = (col("x"), col("y"));
+    let widths: Vec<f64> = plan["freedom"]["corridor_half_width_m"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        widths.iter().any(|&w| w >= 1.0),
+        "a corridor wide enough to reach the walls: {widths:?}"
+    );
+    let walls: Vec<[f64; 4]> = serde_json::from_value(world["segments"].clone()).unwrap();
+    assert!(
+        walls.len() > 10,
+        "the map's cells as walls: {}",
+        walls.len()
+    );
+    let grid = &world["grid"];
+    let (gw, res) = (
+        grid["width"].as_u64().unwrap() as i64,
+        grid["resolution_m"].as_f64().unwrap(),
+    );
+    let (gh, origin) = (
+        grid["height"].as_u64().unwrap() as i64,
+        [
+            grid["origin"][0].as_f64().unwrap(),
+            grid["origin"][1].as_f64().unwrap(),
+        ],
+    );
+    let cells = grid["cells"].as_str().unwrap().as_bytes();
+    let occupied = |p: [f64; 2]| {
+        let (col, row) = (
+            ((p[0] - origin[0]) / res).floor() as i64,
+            ((p[1] - origin[1]) / res).floor() as i64,
+        );
+        (0..gw).contains(&col) && (0..gh).contains(&row) && cells[(row * gw + col) as usize] == b'1'
+    };
+    let band: Vec<f64> = plan["freedom"]["corridor_band"]
+        .as_array()
+        .expect("the corridor's band")
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(band.len() >= 400, "{} numbers in the band", band.len());
+    let mut clipped = 0;
+    for spoke in band.chunks(4) {
+        let (from, to) = ([spoke[0], spoke[1]], [spoke[2], spoke[3]]);
+        let length = (to[0] - from[0]).hypot(to[1] - from[1]);
+        let from_path = (0..xs.len())
+            .any(|i| xs[i] == from[0] && ys[i] == from[1] && length <= widths[i] + 2e-4);
+        assert!(
+            from_path,
+            "the spoke {spoke:?} does not start on the path within its half width"
+        );
+        // Short of its end by 1 mm (it may end on a wall).
+        let t = ((length - 1e-3) / length).max(0.0);
+        let short = [
+            from[0] + (to[0] - from[0]) * t,
+            from[1] + (to[1] - from[1]) * t,
+        ];
+        for w in &walls {
+            assert!(
+                !cross(from, short, [w[0], w[1]], [w[2], w[3]]),
+                "the spoke {spoke:?} crosses the wall {w:?}"
+            );
+        }
+        assert!(
+            !occupied(short),
+            "the spoke {spoke:?} ends in an occupied cell"
+        );
+        let (i, _) = xs
+            .iter()
+            .enumerate()
+            .find(|(i, x)| **x == from[0] && ys[*i] == from[1])
+            .unwrap();
+        if length < widths[i] - 0.01 {
+            clipped += 1;
+        }
+    }
+    assert!(
+        clipped > 20,
+        "{clipped} spokes cut short by the walls: the walls are within reach"
+    );
+    // On screen: no occupied cell in the corridor's colour, and the
+    // corridor there.
+    let drawn = js(
+        c,
+        r#"const { S, map, COLORS } = window.twindrive;
+        map.renderStatic(); map.draw();
+        const cv = map.canvas, d = map.dpr, img = cv.getContext('2d').getImageData(0, 0, cv.width, cv.height).data;
+        const hex = COLORS.corridor, want = [1, 3, 5].map((k) => parseInt(hex.slice(k, k + 2), 16));
+        const is = (k) => Math.abs(img[k] - want[0]) <= 2 && Math.abs(img[k + 1] - want[1]) <= 2 && Math.abs(img[k + 2] - want[2]) <= 2;
+        let corridor = 0;
+        for (let k = 0; k < img.length; k += 4) if (is(k)) corridor++;
+        const g = S.world.grid, w = cv.width / d, h = cv.height / d;
+        let cellsOnScreen = 0, covered = [];
+        for (let row = 0; row < g.height; row++) for (let col = 0; col < g.width; col++) {
+          if (g.cells[row * g.width + col] !== '1') continue;
+          const x = g.origin[0] + (col + 0.5) * g.resolution_m, y = g.origin[1] + (row + 0.5) * g.resolution_m;
+          const px = Math.round((w / 2 + (x - map.cx) * map.scale) * d), py = Math.round((h / 2 - (y - map.cy) * map.scale) * d);
+          if (px < 0 || py < 0 || px >= cv.width || py >= cv.height) continue;
+          cellsOnScreen++;
+          if (is((py * cv.width + px) * 4)) covered.push([col, row]);
+        }
+        return { corridor, cellsOnScreen, covered };"#,
+    )
+    .await;
+    assert!(drawn["corridor"].as_u64().unwrap() > 5000, "{drawn}");
+    assert!(drawn["cellsOnScreen"].as_u64().unwrap() > 500, "{drawn}");
+    assert_eq!(
+        drawn["covered"],
+        json!([]),
+        "occupied cells under the corridor"
+    );
+    shot(c, "14_corridor_in_free_space").await;
+
+    // A corridor region narrower than the robot: refused beside the
+    // freedom's controls, in words.
+    let width = c.find(Locator::Id("corridor-width")).await.unwrap();
+    width.clear().await.unwrap();
+    width.send_keys("0.05").await.unwrap();
+    click(c, "btn-corridor").await;
+    drag_on_map(c, (2.0, 2.0), (3.0, 3.0)).await;
+    click(c, "btn-plan").await;
+    wait_js(
+        c,
+        "return document.getElementById('refusal-freedom').innerText.includes('the half width of corridor region 1')",
+        10.0,
+        "the freedom's refusal beside it",
+    )
+    .await;
+    let refusal = text(c, "refusal-freedom").await;
+    assert!(
+        !refusal.contains('`') && !refusal.contains("corridor[0]"),
+        "{refusal}"
+    );
+    let [zones, freedom_refusal] = rects(c, &["#zones", "#refusal-freedom"]).await[..] else {
+        unreachable!()
+    };
+    assert!(
+        (0.0..24.0).contains(&(freedom_refusal[1] - zones[3])),
+        "{freedom_refusal:?} under the zones {zones:?}"
+    );
+    shot(c, "15_freedom_refused").await;
     c.clone().close().await.unwrap();
 }

@@ -1,12 +1,11 @@
-//! A field team's first deployment, as the README tells it: the TLS recipe
-//! run as it is written (its shell block, through bash, with the built
-//! binary on PATH), and what happens when an endpoint is wrong: a process
-//! that cannot listen, or cannot reach its router, says why and exits 1
-//! within a bounded time, with no Rust source path in what it prints.
+//! A field team's first deployment: the fleet's certificates where they
+//! are copied, and what happens when an endpoint is wrong: a process that
+//! cannot listen, or cannot reach its router, says why and exits 1 within
+//! a bounded time, with no Rust source path in what it prints. (The
+//! README's TLS recipe runs as written in tests/recipes.rs.)
 
 mod common;
 
-use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -15,49 +14,6 @@ use common::{Proc, fixture, python, repo, text, twindrive};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// The shell block that follows README's `tls-recipe` marker.
-fn readme_tls_recipe() -> String {
-    let readme = std::fs::read_to_string(repo().join("README.md")).unwrap();
-    let from = readme
-        .find("<!-- tls-recipe")
-        .expect("README marks its TLS recipe");
-    let block = &readme[from..];
-    let start = block.find("```sh\n").expect("a sh block after the marker") + 6;
-    let end = start + block[start..].find("```").unwrap();
-    block[start..end].to_string()
-}
-
-/// A shell and everything it starts, killed as a process group when
-/// dropped.
-struct Group(std::process::Child);
-
-impl Group {
-    /// Waits (bounded: a test fails rather than hangs) for the shell.
-    fn wait(&mut self, limit_s: f64) -> Option<i32> {
-        let start = Instant::now();
-        loop {
-            if let Some(status) = self.0.try_wait().unwrap() {
-                return status.code();
-            }
-            assert!(
-                start.elapsed().as_secs_f64() < limit_s,
-                "the recipe did not finish in {limit_s} s"
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    }
-}
-
-impl Drop for Group {
-    fn drop(&mut self) {
-        let pgid = self.0.id().to_string();
-        let _ = Command::new("kill")
-            .args(["-KILL", "--", &format!("-{pgid}")])
-            .status();
-        let _ = self.0.wait();
-    }
 }
 
 /// Whether something on 127.0.0.1 accepts connections on `port`.
@@ -123,81 +79,6 @@ fn capture(
         ),
         60.0,
     )
-}
-
-#[test]
-fn the_readme_tls_recipe_runs_as_written() {
-    let recipe = readme_tls_recipe();
-    assert!(recipe.contains("twindrive certs"), "{recipe}");
-    // The recipe's router takes certs' default port on loopback.
-    assert!(
-        !listening(7447),
-        "127.0.0.1:7447 is taken: the README's recipe needs it free"
-    );
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    // Where the recipe runs: a checkout's scenarios, and a plan where the
-    // demo writes one (the fixture's 30 s plan stands in for the demo's).
-    std::os::unix::fs::symlink(repo().join("scenarios"), d.join("scenarios")).unwrap();
-    std::fs::create_dir_all(d.join("twindrive-out/plan")).unwrap();
-    std::fs::copy(
-        fixture().path("plan/plan.json"),
-        d.join("twindrive-out/plan/plan.json"),
-    )
-    .unwrap();
-    let bin_dir = Path::new(env!("CARGO_BIN_EXE_twindrive")).parent().unwrap();
-    let path = format!(
-        "{}:{}",
-        bin_dir.display(),
-        std::env::var("PATH").unwrap_or_default()
-    );
-    let log = d.join("recipe.log");
-    let shell = Group(
-        Command::new("bash")
-            .args(["-e", "-c", &recipe])
-            .current_dir(d)
-            .env("PATH", path)
-            .stdin(Stdio::null())
-            .stdout(std::fs::File::create(&log).unwrap())
-            .stderr(std::fs::File::create(d.join("recipe.err")).unwrap())
-            .process_group(0)
-            .spawn()
-            .unwrap(),
-    );
-    // While the recipe's router runs: a client that trusts the fleet's CA
-    // but shows no certificate is refused.
-    let started = Instant::now();
-    while !listening(7447) {
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "the recipe's router never listened on 127.0.0.1:7447: {}",
-            std::fs::read_to_string(d.join("recipe.err")).unwrap_or_default()
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    let (code, err) = capture(
-        "tls/localhost:7447",
-        &d.join("nothing.bin"),
-        &d.join("tls-trial/certs/ca.pem"),
-        None,
-    );
-    assert_eq!(
-        code,
-        Some(3),
-        "a client without a certificate got in: {err}"
-    );
-    let mut shell = shell;
-    let code = shell.wait(400.0);
-    let err = std::fs::read_to_string(d.join("recipe.err")).unwrap_or_default();
-    assert_eq!(code, Some(0), "the recipe failed: {err}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(d.join("tls-trial/master/report.json")).unwrap())
-            .unwrap();
-    assert_eq!(report["outcome"], "completed", "{report}");
-    assert!(
-        !err.contains(".cargo/registry") && !err.contains('\u{1b}'),
-        "{err}"
-    );
 }
 
 #[test]
@@ -316,7 +197,7 @@ fn a_master_that_reaches_nothing_says_why_and_exits_1() {
         (
             "plain TCP to the TLS router",
             vec!["--connect".to_string(), format!("tcp/127.0.0.1:{port}")],
-            "connected to nothing",
+            "TLS refused this process: the peer speaks TLS and this process spoke plain TCP",
         ),
         (
             "TLS to a port where nothing listens",

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{repo, text, twindrive};
+use common::{repo, text, twindrive, twindrive_in};
 
 fn run(args: &[&str]) -> std::process::Output {
     twindrive(args)
@@ -67,12 +67,14 @@ fn a_drive_is_mapped_into_a_site_the_twin_runs_on() {
     for f in [
         "map.pgm",
         "map.yaml",
+        "map.png",
         "site.toml",
         "poses.tum",
         "map_report.json",
     ] {
         assert!(site.join(f).is_file(), "{f}");
     }
+    picture_shows_the_map(&site);
     let yaml = std::fs::read_to_string(site.join("map.yaml")).unwrap();
     assert!(
         yaml.contains("image: map.pgm") && yaml.contains("resolution: 0.05"),
@@ -107,7 +109,13 @@ fn a_drive_is_mapped_into_a_site_the_twin_runs_on() {
     // Same inputs, same bytes (the site's name is its directory's).
     let again = tmp.path().join("again");
     assert!(map(&again, &[]).status.success());
-    for f in ["map.pgm", "map.yaml", "poses.tum", "map_report.json"] {
+    for f in [
+        "map.pgm",
+        "map.yaml",
+        "map.png",
+        "poses.tum",
+        "map_report.json",
+    ] {
         assert!(
             std::fs::read(site.join(f)).unwrap() == std::fs::read(again.join(f)).unwrap(),
             "{f} differs"
@@ -453,8 +461,8 @@ fn tum(path: &Path) -> Vec<(f64, f64, f64)> {
 /// is mapped from the robot's odometry with no calibration, from its
 /// Odometry topic and from TF alike. Nearly every scan matches the map, the
 /// matches' residual is the lidar's centimetre, and the two mappings put
-/// the robot at the same places. Without a motion source, or without
-/// wheels for the site's robot, it is a usage error that writes nothing.
+/// the robot at the same places. Without a motion source it is a usage
+/// error that writes nothing.
 #[test]
 fn a_real_recording_with_odometry_and_no_wheel_joints_is_mapped() {
     let bag =
@@ -530,7 +538,13 @@ fn a_real_recording_with_odometry_and_no_wheel_joints_is_mapped() {
         let out = dir.path().join(format!("wide{radius}"));
         let o = map_from("/odom", &["--footprint-radius-m", radius], &out);
         let err = text(&o.stderr);
-        for kept in ["map.pgm", "map.yaml", "poses.tum", "map_report.json"] {
+        for kept in [
+            "map.pgm",
+            "map.yaml",
+            "map.png",
+            "poses.tum",
+            "map_report.json",
+        ] {
             assert!(out.join(kept).exists(), "{radius}: {kept}: {err}");
         }
         assert!(!err.contains(".twindrive-staging"), "{err}");
@@ -549,8 +563,7 @@ fn a_real_recording_with_odometry_and_no_wheel_joints_is_mapped() {
             );
         }
     }
-    // No motion named (with or without a calibration); wheels the site's
-    // robot needs not given.
+    // No motion named (with or without a calibration).
     let calib = calibration(dir.path());
     for (args, says) in [
         (
@@ -561,7 +574,6 @@ fn a_real_recording_with_odometry_and_no_wheel_joints_is_mapped() {
             vec!["--calibration", calib.to_str().unwrap()],
             "--odom-topic",
         ),
-        (vec!["--odom-topic", "/odom"], "--wheel-diameter-m"),
     ] {
         let out = dir.path().join("refused");
         let mut all = vec!["map", "--bag", bag, "--scan-topic", "/scan"];
@@ -658,10 +670,13 @@ fn a_real_robot_that_publishes_its_wheel_speeds_is_calibrated_and_mapped() {
     let refused = dir.path().join("refused");
     let o = map(&[], &refused);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
     assert!(
-        text(&o.stderr).contains("--wheel-diameter-m"),
-        "{}",
-        text(&o.stderr)
+        err.contains("--wheel-diameter-m")
+            && err.contains(
+                "the bag records no /robot_description (the robot's URDF) to read them from"
+            ),
+        "{err}"
     );
     assert!(!refused.exists());
 }
@@ -849,4 +864,311 @@ fn a_carmen_log_is_mapped_and_scored_on_the_benchmarks_relations() {
         err.contains("bad.relations") && err.contains("line 2: `pitch`: `zero`"),
         "{err}"
     );
+}
+
+/// `map.png` in `site` is a PNG of `map.pgm`'s cells: each a square of
+/// whole pixels (as many as keep the longer side within 1200, 1 to 8),
+/// in the PGM's grey where nothing is drawn over it, with the drive's
+/// path and its ends drawn in colour.
+fn picture_shows_the_map(site: &Path) {
+    let pgm = std::fs::read(site.join("map.pgm")).unwrap();
+    let head = String::from_utf8_lossy(&pgm[..pgm.len().min(40)]).into_owned();
+    let mut fields = head.split_ascii_whitespace();
+    assert_eq!(fields.next(), Some("P5"));
+    let w: usize = fields.next().unwrap().parse().unwrap();
+    let h: usize = fields.next().unwrap().parse().unwrap();
+    assert!(
+        w.max(h) <= 4000,
+        "{w} x {h}: shrunk pictures are not checked here"
+    );
+    let greys = &pgm[pgm.len() - w * h..];
+    let png = image::open(site.join("map.png")).unwrap();
+    assert_eq!(
+        image::ImageFormat::from_path(site.join("map.png")).unwrap(),
+        image::ImageFormat::Png
+    );
+    let png = png.to_rgb8();
+    let zoom = (1200 / w.max(h)).clamp(1, 8);
+    assert_eq!(
+        (png.width() as usize, png.height() as usize),
+        (w * zoom, h * zoom),
+        "a map of {w} x {h} cells"
+    );
+    let (mut same, mut coloured, mut cells) = (0, 0, 0);
+    for row in 0..h {
+        for col in 0..w {
+            let p = png.get_pixel(
+                (col * zoom + zoom / 2) as u32,
+                (row * zoom + zoom / 2) as u32,
+            );
+            cells += 1;
+            if p.0 == [greys[row * w + col]; 3] {
+                same += 1;
+            } else if p.0[0] != p.0[1] || p.0[1] != p.0[2] {
+                coloured += 1;
+            }
+        }
+    }
+    assert!(
+        same * 100 >= cells * 95,
+        "{same} of {cells} cells in the map's grey"
+    );
+    assert!(
+        coloured > 20 && same + coloured == cells,
+        "{coloured} coloured cells of {cells}"
+    );
+}
+
+/// The Neato's recording keeps the robot's URDF on /robot_description:
+/// mapped with the plain command line and no wheel flag, the twin's robot
+/// takes its wheels from it, and the terminal says so. (The URDF is a
+/// TurtleBot 4's, on an iRobot Create 3 base: the wheels are within 1 %
+/// of the 0.03575 m radius and 0.233 m separation the Create 3's own
+/// drive controller is configured with, iRobotEducation/create3_sim
+/// irobot_create_control/config/control.yaml; not the Neato's.) Flags
+/// still win, one by one.
+#[test]
+fn a_recordings_robot_description_gives_the_site_its_wheels() {
+    let bag =
+        repo().join("../shared/data/rosbag2_recordings/comprobo22_neato_macfirst_floor_take_2");
+    if !bag.exists() {
+        eprintln!("SKIPPED: ../shared/data/rosbag2_recordings is absent");
+        return;
+    }
+    let bag = bag.canonicalize().unwrap();
+    let bag = bag.to_str().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // `bag info` names the description and suggests the plain command line.
+    let info = twindrive(&["bag", "info", bag]);
+    assert!(info.status.success(), "{}", text(&info.stderr));
+    let said = text(&info.stdout);
+    assert!(
+        said.contains("robot description: wheels from /robot_description (robot `turtlebot4`)")
+            && said.contains(&format!(
+                "twindrive map --bag {bag} --scan-topic /scan --odom-topic /odom --out site"
+            )),
+        "{said}"
+    );
+    // The literal command, in a fresh directory.
+    let literal = [
+        "map",
+        "--bag",
+        bag,
+        "--scan-topic",
+        "/scan",
+        "--odom-topic",
+        "/odom",
+        "--out",
+        "site",
+    ];
+    let o = twindrive_in(&literal, dir.path());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("wheels from /robot_description (robot `turtlebot4`): diameter "))
+        .unwrap_or_else(|| panic!("not said where the wheels came from: {stdout}"));
+    assert!(
+        line.ends_with("(joints left_wheel_joint, right_wheel_joint)"),
+        "{line}"
+    );
+    // "diameter L m / R m, wheelbase B m": the numbers said.
+    let said: Vec<f64> = line
+        .split([' ', ','])
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    let [left, right, base] = said[..] else {
+        panic!("{line}")
+    };
+    let site = dir.path().join("site");
+    assert!(site.join("site.toml").is_file() && site.join("map.png").is_file());
+    picture_shows_the_map(&site);
+    let scenario = twindrive_sim::Scenario::load(&site.join("site.toml")).unwrap();
+    for p in [scenario.robot.true_params, scenario.robot.nominal_params] {
+        assert!(
+            (p.left_diameter_m - left).abs() < 1e-4
+                && (p.right_diameter_m - right).abs() < 1e-4
+                && (p.wheelbase_m - base).abs() < 1e-4,
+            "{p:?} against {line}"
+        );
+    }
+    assert!((left / 0.0715 - 1.0).abs() < 0.01 && (right / 0.0715 - 1.0).abs() < 0.01);
+    assert!((base / 0.233 - 1.0).abs() < 0.01, "{base}");
+    // A flag wins over its part of the description.
+    let o = twindrive_in(
+        &[
+            &literal[..7],
+            &["--wheelbase-m", "0.248", "--out", "site_b"],
+        ]
+        .concat(),
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains("--wheelbase-m 0.248 given"));
+    let p = twindrive_sim::Scenario::load(&dir.path().join("site_b/site.toml"))
+        .unwrap()
+        .robot
+        .true_params;
+    assert!(
+        p.wheelbase_m == 0.248 && (p.left_diameter_m - left).abs() < 1e-4,
+        "{p:?}"
+    );
+    // Both flags: the description is not read.
+    let o = twindrive_in(
+        &[
+            &literal[..7],
+            &[
+                "--wheel-diameter-m",
+                "0.07",
+                "--wheelbase-m",
+                "0.248",
+                "--out",
+                "site_c",
+            ],
+        ]
+        .concat(),
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        !text(&o.stdout).contains("wheels from"),
+        "{}",
+        text(&o.stdout)
+    );
+}
+
+/// A recording whose description cannot give the wheels: the refusal says
+/// what the URDF lacks, and the flags that give them; nothing is written.
+#[test]
+fn a_description_without_wheels_is_refused_with_what_it_lacks() {
+    use twindrive_ros::msgs::StringMsg;
+    use twindrive_ros::{BagWriter, Distro, Qos};
+    let dir = tempfile::tempdir().unwrap();
+    for (name, urdf, says) in [
+        (
+            "bare",
+            "<robot name=\"bare\"><link name=\"base_link\"/></robot>",
+            "robot `bare` has no continuous or revolute joint",
+        ),
+        (
+            "meshes",
+            "<robot name=\"m\"><link name=\"base_link\"/><link name=\"w\"><visual><geometry>\
+             <mesh filename=\"w.dae\"/></geometry></visual></link>\
+             <joint name=\"wj\" type=\"continuous\"><parent link=\"base_link\"/><child link=\"w\"/>\
+             <origin xyz=\"0 0.1 0\" rpy=\"-1.5708 0 0\"/><axis xyz=\"0 0 1\"/></joint></robot>",
+            "wj (link `w` has no <cylinder> about its axis)",
+        ),
+        ("broken", "<robot name=\"b\"><link>", "not well-formed XML"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::create_dir(&path).unwrap();
+        let mut w = BagWriter::sqlite3(&path.join("b_0.db3"), "b_0.db3", Distro::Humble).unwrap();
+        let topic = w
+            .topic::<StringMsg>("/robot_description", Qos::LATCHED)
+            .unwrap();
+        w.write(
+            topic,
+            1_700_000_000_000_000_000,
+            &StringMsg { data: urdf.into() },
+        )
+        .unwrap();
+        let metadata = w.finish().unwrap();
+        std::fs::write(path.join("metadata.yaml"), metadata).unwrap();
+        let out = dir.path().join(format!("{name}_site"));
+        let o = twindrive(&[
+            "map",
+            "--bag",
+            path.to_str().unwrap(),
+            "--scan-topic",
+            "/scan",
+            "--odom-topic",
+            "/odom",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{name}: {}", text(&o.stderr));
+        let err = text(&o.stderr);
+        assert!(
+            err.contains("--wheel-diameter-m and --wheelbase-m")
+                && err.contains("the bag's /robot_description gives no wheels")
+                && err.contains(says),
+            "{name}: {err}"
+        );
+        assert!(!out.exists());
+    }
+}
+
+/// A drive exported by `twindrive rosbag` carries the robot's URDF (the
+/// nominal wheels): self-calibrating it needs no --initial, mapping it
+/// from its wheel joints no wheel flag, and each says where the wheels
+/// came from.
+#[test]
+fn an_exported_drive_calibrates_and_maps_from_its_description() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = repo().join("scenarios/self_calibration_drive.toml");
+    let sim = tmp.path().join("sim");
+    simulate(&scenario, &sim, "60");
+    let bag = tmp.path().join("bag");
+    let o = run(&[
+        "rosbag",
+        sim.to_str().unwrap(),
+        "--out",
+        bag.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let nominal = twindrive_sim::Scenario::load(&scenario)
+        .unwrap()
+        .robot
+        .nominal_params;
+    let said = format!(
+        "diameter {:.4} m / {:.4} m, wheelbase {:.4} m (joints wheel_left_joint, wheel_right_joint)",
+        nominal.left_diameter_m, nominal.right_diameter_m, nominal.wheelbase_m
+    );
+    let info = text(&run(&["bag", "info", bag.to_str().unwrap()]).stdout);
+    let line = info
+        .lines()
+        .map(str::trim)
+        .find(|l| l.starts_with("twindrive calibrate") && l.contains("--scan-topic"))
+        .unwrap_or_else(|| panic!("no self-calibration line: {info}"));
+    assert!(
+        !line.contains("--initial") && info.contains(&said),
+        "{info}"
+    );
+    let calib = tmp.path().join("cal/calib.json");
+    let joints = [
+        "--left-joint",
+        "wheel_left_joint",
+        "--right-joint",
+        "wheel_right_joint",
+    ];
+    let mut args = vec![
+        "calibrate",
+        "--bag",
+        bag.to_str().unwrap(),
+        "--scan-topic",
+        "/lidar",
+    ];
+    args.extend(joints);
+    args.extend(["--out", calib.to_str().unwrap()]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains(&said), "{}", text(&o.stdout));
+    let site = tmp.path().join("site");
+    let mut args = vec![
+        "map",
+        "--bag",
+        bag.to_str().unwrap(),
+        "--scan-topic",
+        "/lidar",
+    ];
+    args.extend(joints);
+    args.extend(["--out", site.to_str().unwrap()]);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stdout).contains(&said), "{}", text(&o.stdout));
+    let robot = twindrive_sim::Scenario::load(&site.join("site.toml"))
+        .unwrap()
+        .robot;
+    assert_eq!(robot.true_params, nominal);
+    picture_shows_the_map(&site);
 }

@@ -541,6 +541,9 @@ struct RosRobot {
     robot_port: u16,
     /// The plan its master sends.
     plan: PathBuf,
+    /// How long the driver and the robot run (s); the master gives up a
+    /// minute before.
+    run_for_s: f64,
 }
 
 const ROS_SECTION: &str = r#"
@@ -587,6 +590,18 @@ impl RosRobot {
     /// The robot at `site` (a site file without its `[ros]` section) with
     /// `plan` for its master.
     fn start_site(site: &str, world_extra: &str, driver_extra: &[&str], plan: &Path) -> Self {
+        Self::start_site_for(site, world_extra, driver_extra, plan, 150.0)
+    }
+
+    /// [`RosRobot::start_site`], the driver and the robot running for
+    /// `run_for_s`.
+    fn start_site_for(
+        site: &str,
+        world_extra: &str,
+        driver_extra: &[&str],
+        plan: &Path,
+        run_for_s: f64,
+    ) -> Self {
         use std::process::Stdio;
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
@@ -622,7 +637,7 @@ impl RosRobot {
             "--stats",
             s(&d.join("driver.json")),
             "--run-for",
-            "150",
+            &run_for_s.to_string(),
         ]
         .iter()
         .map(|a| a.to_string())
@@ -654,7 +669,7 @@ impl RosRobot {
                     "--listen",
                     &format!("tcp/127.0.0.1:{robot_port}"),
                     "--run-for",
-                    "150",
+                    &run_for_s.to_string(),
                 ])
                 // Says when it first hears each of the robot's topics.
                 .env("RUST_LOG", "warn,twindrive_net::ros=info")
@@ -670,6 +685,7 @@ impl RosRobot {
             robot,
             robot_port,
             plan: plan.to_owned(),
+            run_for_s,
         }
     }
 
@@ -679,6 +695,11 @@ impl RosRobot {
     /// reported stops on a sensor fault at the plan's first step, which a
     /// slow start on a loaded machine would otherwise cause).
     fn master(&self) -> (Option<i32>, Value) {
+        self.master_with(&[])
+    }
+
+    /// [`RosRobot::master`] with `extra` arguments for the master.
+    fn master_with(&self, extra: &[&str]) -> (Option<i32>, Value) {
         let started = std::time::Instant::now();
         let heard = |log: &str| {
             log.lines()
@@ -713,16 +734,17 @@ impl RosRobot {
                     "--out",
                     s(&out),
                     "--timeout",
-                    "90",
+                    &(self.run_for_s - 60.0).to_string(),
                     "--log-wait",
                     "5",
                 ])
+                .args(extra)
                 .stdout(std::process::Stdio::null())
                 .stderr(std::process::Stdio::piped())
                 .spawn()
                 .unwrap(),
         );
-        let (code, err) = common::finish(m, 120.0);
+        let (code, err) = common::finish(m, self.run_for_s - 30.0);
         let report = std::fs::read(out.join("report.json"))
             .map(|b| serde_json::from_slice(&b).unwrap())
             .unwrap_or_else(|_| {
@@ -1174,6 +1196,675 @@ fn a_lidar_robot_on_a_physics_engine_goes_around_a_box_and_keeps_out_of_a_zone()
             "the footprint entered the zone: {to_zone} m"
         );
     }
+}
+
+/// The paper's robot with the lidar (`LIDAR`) in a building drawn from a
+/// map: the site file's text, the map's YAML at `map`, the robot starting
+/// at `start` (x, y, heading).
+fn mapped_site(map: &Path, start: [f64; 3]) -> String {
+    let paper = std::fs::read_to_string(repo().join("scenarios/wall_following.toml")).unwrap();
+    let robot = &paper[paper.find("[robot]\n").unwrap()..];
+    let was = "start = { x_m = 3.0, y_m = 1.05, heading_rad = 3.141592653589793 }";
+    assert!(
+        robot.contains(was),
+        "the paper's robot starts elsewhere now"
+    );
+    let robot = robot.replace(
+        was,
+        &format!(
+            "start = {{ x_m = {}, y_m = {}, heading_rad = {} }}",
+            start[0], start[1], start[2]
+        ),
+    );
+    format!(
+        "name = \"mapped\"\ndescription = \"The paper's robot with a lidar in a mapped building\"\n\n\
+         [simulation]\nduration_s = 60.0\ndt_s = 0.01\nseed = 54\n\n[world]\nmap = \"{}\"\n\n{robot}{LIDAR}",
+        map.display()
+    )
+}
+
+/// The twin's world of the map at `yaml` (a map_server YAML), as a site
+/// on it has it.
+fn mapped_world(yaml: &Path) -> twindrive_sim::World {
+    let grid = twindrive_sim::map::load_map(yaml).unwrap();
+    twindrive_sim::World::new(grid.boundary_segments(), Vec::new(), Some(grid))
+}
+
+/// What MuJoCo's site (`mujoco_site.py`) reads at each of `poses`: the
+/// pose the robot settled at, every beam of every range sensor, and the
+/// model's geom count.
+fn mujoco_readings(
+    site: &Path,
+    poses: &[[f64; 3]],
+    extra: &[&str],
+) -> Vec<([f64; 3], Vec<f64>, u64)> {
+    use std::io::Write;
+    use std::process::Stdio;
+    let mut child = Command::new(python())
+        .arg(repo().join("scripts/ros/mujoco_site.py"))
+        .arg(site)
+        .args(extra)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    for p in poses {
+        writeln!(stdin, "{} {} {}", p[0], p[1], p[2]).unwrap();
+    }
+    drop(stdin);
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "mujoco_site.py: {}", text(&o.stderr));
+    text(&o.stdout)
+        .lines()
+        .map(|l| {
+            let v: Value = serde_json::from_str(l).unwrap();
+            let f = |v: &Value| v.as_f64().unwrap();
+            let pose = v["pose"].as_array().unwrap();
+            (
+                [f(&pose[0]), f(&pose[1]), f(&pose[2])],
+                v["ranges_m"].as_array().unwrap().iter().map(f).collect(),
+                v["geoms"].as_u64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// A site drawn from a map is the same building in MuJoCo as on the twin:
+/// a random floor (walls, blocks, clutter, unknown patches and cells
+/// between the thresholds, which the twin takes as unknown) written as
+/// `twindrive map` writes a map, at a random resolution, origin and yaw;
+/// from random free poses every beam of the robot's side ranger and lidar
+/// reads in MuJoCo what the twin reads (its noise set to zero), within
+/// 1 mm. Built only within a window (`--map-window`), the building ends at
+/// the window's edge: fewer geoms, no beam longer, and every beam that
+/// ends nearer than the window's edge the same.
+#[test]
+fn a_site_drawn_from_a_map_is_the_same_building_in_mujoco() {
+    use rand::{RngExt, SeedableRng};
+    use twindrive_sim::map::{MapImage, encode_map};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(54);
+    let tmp = tempfile::tempdir().unwrap();
+    let (w, h): (usize, usize) = (rng.random_range(90..140), rng.random_range(70..110));
+    let resolution_m = [0.04, 0.05, 0.1][rng.random_range(0..3)];
+    // Occupancy per cell: free, occupied, unknown (None) or between the
+    // thresholds (unknown to the twin).
+    let free = |rng: &mut rand_chacha::ChaCha8Rng| Some(rng.random_range(0.0..0.19));
+    let occupied = |rng: &mut rand_chacha::ChaCha8Rng| Some(rng.random_range(0.66..=1.0));
+    let mut cells: Vec<Option<f64>> = (0..w * h).map(|_| free(&mut rng)).collect();
+    for c in 0..w {
+        for r in [0, 1, h - 2, h - 1] {
+            cells[r * w + c] = occupied(&mut rng);
+        }
+    }
+    for r in 0..h {
+        for c in [0, 1, w - 2, w - 1] {
+            cells[r * w + c] = occupied(&mut rng);
+        }
+    }
+    for k in 0..40 {
+        let (cw, ch) = if k % 2 == 0 {
+            (rng.random_range(1..4), rng.random_range(3..25))
+        } else {
+            (rng.random_range(3..25), rng.random_range(1..4))
+        };
+        let (c0, r0) = (rng.random_range(0..w - cw), rng.random_range(0..h - ch));
+        let unknown = k % 5 == 4;
+        for r in r0..r0 + ch {
+            for c in c0..c0 + cw {
+                cells[r * w + c] = if unknown { None } else { occupied(&mut rng) };
+            }
+        }
+    }
+    for _ in 0..200 {
+        let i = rng.random_range(0..w * h);
+        cells[i] = if rng.random_bool(0.7) {
+            occupied(&mut rng)
+        } else {
+            Some(rng.random_range(0.25..0.6))
+        };
+    }
+    let origin = [rng.random_range(-8.0..8.0), rng.random_range(-8.0..8.0)];
+    let yaw: f64 = rng.random_range(-3.1..3.1);
+    let occupancy = |c: usize, r: usize| cells[r * w + c];
+    let (pgm, yaml) = encode_map(
+        &MapImage {
+            width: w,
+            height: h,
+            resolution_m,
+            origin_m: origin,
+            occupancy: &occupancy,
+        },
+        "map.pgm",
+    );
+    let origin_line = format!("origin: [{}, {}, 0.0]", origin[0], origin[1]);
+    assert!(yaml.contains(&origin_line), "{yaml}");
+    let yaml = yaml.replace(
+        &origin_line,
+        &format!("origin: [{}, {}, {yaw}]", origin[0], origin[1]),
+    );
+    std::fs::write(tmp.path().join("map.pgm"), pgm).unwrap();
+    std::fs::write(tmp.path().join("map.yaml"), yaml).unwrap();
+    // The twin's world on the map, and free poses in it.
+    let building = mapped_world(&tmp.path().join("map.yaml"));
+    let (cos, sin) = (yaw.cos(), yaw.sin());
+    let mut poses = Vec::new();
+    while poses.len() < 30 {
+        let (u, v) = (
+            rng.random_range(0.0..w as f64 * resolution_m),
+            rng.random_range(0.0..h as f64 * resolution_m),
+        );
+        let (x, y) = (origin[0] + cos * u - sin * v, origin[1] + sin * u + cos * v);
+        // The footprint (0.15 m) clear, so that MuJoCo sets it down free.
+        if building.clearance_m(x, y, 1.0) > 0.2 {
+            poses.push([x, y, rng.random_range(-3.1..3.1)]);
+        }
+    }
+    // And ten more near the first (the window below is about it).
+    let c = poses[0];
+    let mut near = 0;
+    while near < 10 {
+        let (x, y) = (
+            c[0] + rng.random_range(-1.2..1.2),
+            c[1] + rng.random_range(-1.2..1.2),
+        );
+        if building.clearance_m(x, y, 1.0) > 0.2 {
+            poses.push([x, y, rng.random_range(-3.1..3.1)]);
+            near += 1;
+        }
+    }
+    let site = tmp.path().join("site.toml");
+    let quiet = mapped_site(&tmp.path().join("map.yaml"), poses[0])
+        .replace("noise_std_m = 0.004", "noise_std_m = 0.0")
+        .replace("noise_std_m = 0.01", "noise_std_m = 0.0");
+    std::fs::write(&site, quiet).unwrap();
+    let twin = twindrive_sim::Scenario::load(&site).unwrap();
+    assert!(
+        twin.range_sensors.iter().all(|s| s.noise_std_m == 0.0),
+        "the site's sensors still have noise"
+    );
+    let mut model = twindrive_sim::SensorModel::new(&twin);
+    let full = mujoco_readings(&site, &poses, &[]);
+    assert_eq!(full.len(), poses.len());
+    let (mut beams, mut within, mut worst) = (0usize, 0usize, 0.0f64);
+    let mut expected = vec![0.0; model.beams()];
+    for (pose, ranges, _) in &full {
+        model.read(
+            &twindrive_kinematics::Pose::new(pose[0], pose[1], pose[2]),
+            &mut expected,
+        );
+        assert_eq!(ranges.len(), expected.len());
+        for (got, want) in ranges.iter().zip(&expected) {
+            let off = (got - want).abs();
+            beams += 1;
+            within += usize::from(off <= 1e-3);
+            worst = worst.max(off);
+        }
+    }
+    let geoms = full[0].2;
+    eprintln!(
+        "{w} x {h} cells of {resolution_m} m, yaw {yaw:.3} rad: {geoms} geoms; {within} of {beams} beams within 1 mm of the twin's, worst {worst:.4} m"
+    );
+    assert_eq!(within, beams, "worst {worst} m");
+    // A window of 3 m about the first pose, in the site's frame.
+    let half_m = 1.5;
+    let window = format!(
+        "--map-window={},{},{},{}",
+        c[0] - half_m,
+        c[1] - half_m,
+        c[0] + half_m,
+        c[1] + half_m
+    );
+    let inside: Vec<[f64; 3]> = poses
+        .iter()
+        .copied()
+        .filter(|p| (p[0] - c[0]).abs().max((p[1] - c[1]).abs()) < half_m - 0.3)
+        .collect();
+    let cropped = mujoco_readings(&site, &inside, &[&window]);
+    let mut same = 0;
+    for (p, (pose, ranges, geoms)) in inside.iter().zip(&cropped) {
+        assert!(*geoms < full[0].2, "{geoms} geoms in the window");
+        let whole = &full[poses.iter().position(|q| q == p).unwrap()].1;
+        // The nearest the window's edge is to a sensor (mounted within
+        // 0.15 m of the centre) less a cell's diagonal.
+        let edge_m = half_m
+            - (pose[0] - c[0]).abs().max((pose[1] - c[1]).abs())
+            - 0.15
+            - resolution_m * std::f64::consts::SQRT_2;
+        for (got, want) in ranges.iter().zip(whole) {
+            assert!(
+                got <= &(want + 1e-3),
+                "{got} m beyond the whole map's {want} m"
+            );
+            if *want < edge_m {
+                assert!(
+                    (got - want).abs() <= 1e-3,
+                    "{got} m, the whole map's {want} m"
+                );
+                same += 1;
+            }
+        }
+    }
+    eprintln!(
+        "window: {} geoms, {same} beams inside it the same from {} poses",
+        cropped[0].2,
+        inside.len()
+    );
+    assert!(same > 100, "{same} beams compared in the window");
+}
+
+/// The point of `region` (`[[x0, y0], [x1, y1]]`, m) on a 5 cm grid where
+/// the robot's footprint clears the most on `planner`'s site, and that
+/// clearance (m).
+fn clearest_in(
+    planner: &twindrive_mission::route::RoutePlanner,
+    region: [[f64; 2]; 2],
+) -> ([f64; 2], f64) {
+    let steps = |lo: f64, hi: f64| {
+        (0..=((hi - lo) / 0.05).round() as usize).map(move |k| lo + 0.05 * k as f64)
+    };
+    let mut best = ([f64::NAN; 2], f64::NEG_INFINITY);
+    for x in steps(region[0][0], region[1][0]) {
+        for y in steps(region[0][1], region[1][1]) {
+            let c = planner.clearance_at([x, y]);
+            if c > best.1 {
+                best = ([x, y], c);
+            }
+        }
+    }
+    best
+}
+
+/// The rows of the fake driver's `ticks`: [s, left, right, x, y, heading].
+fn ticks(stats: &Value) -> Vec<[f64; 6]> {
+    stats["ticks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| std::array::from_fn(|k| t[k].as_f64().unwrap()))
+        .collect()
+}
+
+/// Issue 54's target, end to end on a real building: the first two minutes
+/// of the Freiburg 079 CARMEN log (`../shared/data/slam2d_benchmark/`)
+/// mapped; on that map a goals mission for the paper's robot with a lidar
+/// (two waypoints with headings and dwells, an area in a room, home), its
+/// goals placed where the route planner finds the most clearance in
+/// regions read off this map, each checked reachable; rehearsed on the
+/// twin and planned: the plan keeps every goal (its printed lines and its
+/// header). Then the plan runs through the robot agent on MuJoCo in the
+/// same building (built from the map, within the rehearsal's reach and the
+/// lidar's range): it completes with no contact and no bump, and MuJoCo's
+/// true pose comes within 15 cm of each waypoint and of home in order,
+/// faces each heading, sweeps the area, and ends within 15 cm of home.
+#[test]
+fn a_goals_mission_planned_on_a_mapped_building_completes_on_a_physics_engine() {
+    let data = repo().join("../shared/data/slam2d_benchmark/fr079");
+    if !data.is_dir() {
+        eprintln!("SKIPPED: ../shared/data/slam2d_benchmark is absent");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let building = d.join("building");
+    let o = twindrive(&[
+        "map",
+        "--carmen",
+        s(&data.join("fr079.rebuilt.clf.gz")),
+        "--until-s",
+        "120",
+        "--wheel-diameter-m",
+        "0.2",
+        "--wheelbase-m",
+        "0.4",
+        "--out",
+        s(&building),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let map = building.join("map.yaml");
+    // The goals: in each region read off this map, the point where the
+    // paper's robot's footprint (0.15 m) clears the most. Home in the
+    // corridor's east part; waypoint 1 a metre west, facing the doorway
+    // north; waypoint 2 in front of the door of the room south-east,
+    // facing it; the area inside that room, by its door.
+    let footprint_m = 0.15;
+    let planner = twindrive_mission::route::RoutePlanner::new(
+        &mapped_world(&map),
+        &[],
+        footprint_m,
+        twindrive_mission::route::RouteSettings::default(),
+    )
+    .unwrap();
+    let (home, home_clear) = clearest_in(&planner, [[8.2, -1.4], [8.8, -0.6]]);
+    let (wp1, wp1_clear) = clearest_in(&planner, [[7.2, -1.4], [7.8, -0.4]]);
+    let (wp2, wp2_clear) = clearest_in(&planner, [[9.2, -1.5], [9.6, -0.7]]);
+    let (room, room_clear) = clearest_in(&planner, [[10.5, -2.0], [11.0, -1.0]]);
+    let half_m = 0.4;
+    let area = [
+        [room[0] - half_m, room[1] - half_m],
+        [room[0] + half_m, room[1] + half_m],
+    ];
+    // The area's points on a 5 cm grid.
+    let cells = (2.0 * half_m / 0.05).round() as usize;
+    let area_points: Vec<[f64; 2]> = (0..=cells)
+        .flat_map(|i| (0..=cells).map(move |j| (i, j)))
+        .map(|(i, j)| [area[0][0] + 0.05 * i as f64, area[0][1] + 0.05 * j as f64])
+        .collect();
+    let reachable = planner.reachable_from(home);
+    for (name, p, clear) in [
+        ("home", home, home_clear),
+        ("waypoint 1", wp1, wp1_clear),
+        ("waypoint 2", wp2, wp2_clear),
+        ("the room", room, room_clear),
+    ] {
+        eprintln!(
+            "{name}: ({:.2}, {:.2}), the footprint {clear:.2} m clear",
+            p[0], p[1]
+        );
+        assert!(clear > 0.3, "{name} at {p:?} clears {clear} m");
+        assert!(
+            planner.reaches(&reachable, p),
+            "{name} at {p:?} is shut off"
+        );
+    }
+    // The area is all free ground.
+    for &p in &area_points {
+        assert!(
+            planner.clearance_at(p) + footprint_m > 0.05,
+            "the area's {p:?} is not free ground"
+        );
+    }
+    // Waypoint 1 faces north, waypoint 2 east; each stands 2 s.
+    let headings_rad = [std::f64::consts::FRAC_PI_2, 0.0];
+    let mission = d.join("mission.toml");
+    std::fs::write(
+        &mission,
+        format!(
+            "speed_m_s = 0.25\nreturn_home = true\n\n\
+             [[waypoints]]\nx_m = {}\ny_m = {}\nheading_rad = {}\ndwell_s = 2.0\n\n\
+             [[waypoints]]\nx_m = {}\ny_m = {}\nheading_rad = {}\ndwell_s = 2.0\n\n\
+             [[areas]]\npolygon = [[{a0}, {b0}], [{a1}, {b0}], [{a1}, {b1}], [{a0}, {b1}]]\n",
+            wp1[0],
+            wp1[1],
+            headings_rad[0],
+            wp2[0],
+            wp2[1],
+            headings_rad[1],
+            a0 = area[0][0],
+            b0 = area[0][1],
+            a1 = area[1][0],
+            b1 = area[1][1],
+        ),
+    )
+    .unwrap();
+    let home_heading = 0.0;
+    let site_text = mapped_site(&map, [home[0], home[1], home_heading]);
+    let site = d.join("site.toml");
+    std::fs::write(&site, &site_text).unwrap();
+    let rehearsal = d.join("rehearsal");
+    let o = twindrive(&[
+        "rehearse",
+        s(&site),
+        "--goals",
+        s(&mission),
+        "--out",
+        s(&rehearsal),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let said = text(&o.stdout);
+    assert!(said.contains("route: 2 waypoint(s) and home"), "{said}");
+    eprint!("{said}");
+    let plan = d.join("plan/plan.json");
+    let o = twindrive(&[
+        "plan",
+        s(&rehearsal),
+        "--calibration",
+        s(&fixture().path("calib.json")),
+        "--scenario",
+        s(&site),
+        "--out",
+        s(&plan),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let said = text(&o.stdout);
+    let kept: Vec<&str> = said
+        .lines()
+        .filter(|l| l.starts_with("goal kept: "))
+        .collect();
+    eprintln!("{}", kept.join("\n"));
+    for name in ["waypoint 1 ", "waypoint 2 ", "home "] {
+        let line = kept
+            .iter()
+            .find(|l| l.starts_with(&format!("goal kept: {name}")))
+            .unwrap_or_else(|| panic!("no goal kept for {name}: {said}"));
+        let within_m: f64 = line
+            .split(" within ")
+            .nth(1)
+            .and_then(|t| t.split(" m").next())
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_else(|| panic!("{line}"));
+        assert!(within_m <= 0.05, "{line}");
+    }
+    assert!(
+        kept.iter().any(|l| l.contains(" swept ")),
+        "no area kept: {said}"
+    );
+    // The plan's header carries the goals (signed with it), and the plan
+    // verifies against them.
+    let signed: Value = serde_json::from_slice(&std::fs::read(&plan).unwrap()).unwrap();
+    let carried = &signed["header"]["goals"];
+    eprintln!("the plan's header goals: {carried}");
+    let carried_waypoints: Vec<(&str, f64, f64, f64, f64)> = carried["waypoints"]
+        .as_array()
+        .unwrap_or_else(|| panic!("the plan's header has no goals: {carried}"))
+        .iter()
+        .map(|w| {
+            let f = |k: &str| w[k].as_f64().unwrap();
+            (
+                w["name"].as_str().unwrap(),
+                f("x_m"),
+                f("y_m"),
+                f("heading_rad"),
+                f("dwell_s"),
+            )
+        })
+        .collect();
+    assert_eq!(
+        carried_waypoints,
+        [
+            ("waypoint 1", wp1[0], wp1[1], headings_rad[0], 2.0),
+            ("waypoint 2", wp2[0], wp2[1], headings_rad[1], 2.0),
+            ("home", home[0], home[1], home_heading, 0.0),
+        ]
+    );
+    let carried_areas = carried["areas"].as_array().unwrap();
+    assert_eq!(carried_areas.len(), 1, "{carried}");
+    assert_eq!(carried_areas[0]["name"], "area 1", "{carried}");
+    assert_eq!(carried["ends_at_last_waypoint"], true, "{carried}");
+    let o = twindrive(&[
+        "verify-plan",
+        s(&plan),
+        "--scenario",
+        s(&site),
+        "--out",
+        s(&d.join("verified")),
+    ]);
+    assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
+    // MuJoCo builds the building within the rehearsal's track, the lidar's
+    // range and half a metre about it.
+    let track: Vec<[f64; 2]> = std::fs::read_to_string(rehearsal.join("ground_truth.tum"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+            [v[1], v[2]]
+        })
+        .collect();
+    let reach_m = 3.5 + 0.5;
+    let lo = track
+        .iter()
+        .fold([f64::INFINITY; 2], |a, p| [a[0].min(p[0]), a[1].min(p[1])]);
+    let hi = track.iter().fold([f64::NEG_INFINITY; 2], |a, p| {
+        [a[0].max(p[0]), a[1].max(p[1])]
+    });
+    let window = format!(
+        "--map-window={},{},{},{}",
+        lo[0] - reach_m,
+        lo[1] - reach_m,
+        hi[0] + reach_m,
+        hi[1] + reach_m
+    );
+    let mut r = RosRobot::start_site_for(
+        &site_text,
+        "",
+        &["--physics", "mujoco", &window],
+        &plan,
+        240.0,
+    );
+    // The plan's site is no built-in scenario: the master's twin takes it
+    // from the file.
+    let (code, report) = r.master_with(&["--scenario", s(&site)]);
+    let journal = r.log("robot/journal.jsonl");
+    let robot_log = r.log("robot.log");
+    let stats = r.driver_stats();
+    let truth = ticks(&stats);
+    // How far the physics fell behind the wall clock over any stretch (each
+    // driver tick is 20 ms of physics), and the longest the driver heard
+    // no command: a loaded machine, not the robot.
+    let (mut behind_s, mut earliest) = (0.0f64, f64::INFINITY);
+    for (k, t) in truth.iter().enumerate() {
+        let lag = t[0] - 0.02 * k as f64;
+        earliest = earliest.min(lag);
+        behind_s = behind_s.max(lag - earliest);
+    }
+    let heard: Vec<[f64; 3]> = stats["received"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| std::array::from_fn(|k| c[k].as_f64().unwrap()))
+        .collect();
+    let driven: Vec<f64> = heard
+        .iter()
+        .filter(|c| c[1] != 0.0 || c[2] != 0.0)
+        .map(|c| c[0])
+        .collect();
+    let (first_s, last_s) = (driven[0], *driven.last().unwrap());
+    let silence_s = heard
+        .windows(2)
+        .filter(|w| w[0][0] >= first_s && w[1][0] <= last_s)
+        .map(|w| w[1][0] - w[0][0])
+        .fold(0.0, f64::max);
+    let timing = format!(
+        "MuJoCo's building in {} geoms ({window}); the physics fell at most {behind_s:.3} s behind the wall clock; the longest the driver heard no command while driving {silence_s:.3} s; the plan's largest deviation {:.3} m",
+        stats["geoms"],
+        report["max_deviation_m"].as_f64().unwrap_or(f64::NAN)
+    );
+    eprintln!("{timing}");
+    assert_eq!(
+        code,
+        Some(0),
+        "{report}\n{timing}\nrobot: {robot_log}\njournal: {journal}"
+    );
+    assert_eq!(report["outcome"], "completed", "{report}");
+    assert!(
+        report["handbacks"].as_array().unwrap().is_empty(),
+        "{report}"
+    );
+    assert_eq!(
+        (&report["collisions"], &report["bumps"]),
+        (&0.into(), &0.into()),
+        "{report}"
+    );
+    assert_eq!(stats["physics"], "mujoco");
+    assert_eq!(stats["contact_ticks"], 0, "MuJoCo saw a contact");
+    // MuJoCo's true pose at each goal in order: the first tick within
+    // 15 cm after the last goal's, how close it came while there, and its
+    // longest standstill there (the dwell) and heading then.
+    let dist = |t: &[f64; 6], p: [f64; 2]| (t[3] - p[0]).hypot(t[4] - p[1]);
+    let wrap = |a: f64| {
+        (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+    };
+    let mut from = truth.partition_point(|t| t[0] < first_s);
+    for (name, p, heading, dwell_s) in [
+        ("waypoint 1", wp1, headings_rad[0], 2.0),
+        ("waypoint 2", wp2, headings_rad[1], 2.0),
+        ("home", home, home_heading, 0.0),
+    ] {
+        let Some(k) = truth[from..].iter().position(|t| dist(t, p) <= 0.15) else {
+            let nearest = truth[from..]
+                .iter()
+                .map(|t| dist(t, p))
+                .fold(f64::INFINITY, f64::min);
+            panic!("MuJoCo's robot never came within 15 cm of {name} (nearest {nearest:.3} m)")
+        };
+        let visit = &truth[from + k..];
+        let visit = &visit[..visit.iter().take_while(|t| dist(t, p) <= 0.15).count()];
+        let closest_m = visit
+            .iter()
+            .map(|t| dist(t, p))
+            .fold(f64::INFINITY, f64::min);
+        // Standing: under 0.5 mm and 2 mrad from one tick (20 ms) to the next.
+        let mut still = (0.0, &visit[..1]);
+        let mut start = 0;
+        for i in 1..visit.len() {
+            let (a, b) = (&visit[i - 1], &visit[i]);
+            if (b[3] - a[3]).hypot(b[4] - a[4]) > 5e-4 || wrap(b[5] - a[5]).abs() > 2e-3 {
+                start = i;
+            } else if b[0] - visit[start][0] > still.0 {
+                still = (b[0] - visit[start][0], &visit[start..=i]);
+            }
+        }
+        let facing_rad = still
+            .1
+            .iter()
+            .map(|t| wrap(t[5] - heading).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "{name}: MuJoCo's robot within {closest_m:.3} m at {:.1} s; stood {:.2} s (dwell {dwell_s} s) facing its heading within {facing_rad:.3} rad",
+            visit[0][0] - first_s,
+            still.0
+        );
+        assert!(closest_m <= 0.15);
+        if dwell_s > 0.0 {
+            assert!(
+                still.0 >= dwell_s - 0.5,
+                "{name}: stood {:.2} s of {dwell_s} s",
+                still.0
+            );
+            assert!(
+                facing_rad <= 0.1,
+                "{name}: {facing_rad} rad off its heading"
+            );
+        }
+        from += k + visit.len();
+    }
+    // The area: its free ground within the sweep (the footprint) of
+    // MuJoCo's track, against what the plan sweeps.
+    let planned_percent: f64 = kept
+        .iter()
+        .find_map(|l| l.split(" swept ").nth(1))
+        .and_then(|t| t.split(" %").next())
+        .and_then(|t| t.parse().ok())
+        .unwrap();
+    let swept = area_points
+        .iter()
+        .filter(|&&p| truth.iter().any(|t| dist(t, p) <= footprint_m))
+        .count();
+    let swept_percent = 100.0 * swept as f64 / area_points.len() as f64;
+    eprintln!(
+        "the area: MuJoCo's robot swept {swept_percent:.1} % of it (the plan {planned_percent:.1} %)"
+    );
+    assert!(swept_percent >= planned_percent - 5.0);
+    let end = truth.last().unwrap();
+    let end_m = dist(end, home);
+    eprintln!(
+        "the end: {end_m:.3} m from home, facing {:.3} rad off; driven from {first_s:.1} s to {last_s:.1} s ({:.1} s)",
+        wrap(end[5] - home_heading).abs(),
+        last_s - first_s
+    );
+    assert!(end_m <= 0.15, "the robot ended {end_m} m from home");
 }
 
 /// `twindrive bag info`'s message count and per-topic (type, count).

@@ -457,6 +457,9 @@ fn forged_and_replayed_messages_change_nothing_at_the_master_or_the_robot() {
         bumps: 7,
         collisions: 7,
         refused: 0,
+        deviation_now_m: 0.0,
+        max_deviation_on_detour: false,
+        on_detour: false,
     };
     let handback = Handback {
         plan: transfer,

@@ -213,6 +213,31 @@ pub fn print_summary(
         c.route_length_m,
         s.reversing_m
     )?;
+    for w in &s.goals.waypoints {
+        let heading = w.heading_error_rad.map_or(String::new(), |e| {
+            format!(", facing its heading within {e:.3} rad")
+        });
+        let dwell = if w.dwell_s > 0.0 {
+            format!(", standing {:.1} s of {:.1} s", w.stood_s, w.dwell_s)
+        } else {
+            String::new()
+        };
+        writeln!(
+            o,
+            "goal kept: {} within {:.3} m at {:.1} s{heading}{dwell}",
+            w.name, w.passed_m, w.at_t_s
+        )?;
+    }
+    for a in &s.goals.areas {
+        let rehearsed = a
+            .rehearsed_percent
+            .map_or(String::new(), |r| format!(" (the rehearsal {r:.1} %)"));
+        writeln!(
+            o,
+            "goal kept: {} swept {:.1} % of its free ground{rehearsed}",
+            a.name, a.swept_percent
+        )?;
+    }
     let f = &plan.header.freedom;
     let widths = f
         .corridor

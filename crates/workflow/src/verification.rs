@@ -44,9 +44,10 @@ pub fn check_before_sending(
         let reasons = verdict.reasons.join("; ");
         if !allow_failed {
             bail!(
-                "plan {} failed verification on the twin `{}`: {reasons}. It is not sent: a plan that departs from its own path on the twin hands back (or hits something) on the robot. Fix the plan (calibrate the robot and plan with --calibration; rehearse without contacts), or pass --allow-failed-verification to send it anyway",
+                "plan {} failed verification on the twin `{}`: {reasons}. It is not sent: what fails on the twin fails on the robot. To mend it: {}. Or pass --allow-failed-verification to send it anyway",
                 &plan.sha256[..12],
-                twin.name
+                twin.name,
+                verdict.advice().join("; ")
             );
         }
         eprintln!(

@@ -140,26 +140,29 @@ pub fn write_outputs(
         xy(&v.closed_loop.track),
         xy(&v.open_loop_nominal.track),
     );
+    // The plan and the calibrated open loop pale bands, one inside the
+    // other: the replays that succeed run within a centimetre of the plan.
     WorldFigure {
         title: "Plan replayed on the twin (true parameters and noise)",
         regions: &[],
-        references: &[],
-        walls: &figures::walls(&scenario.world),
-        paths: &[
+        references: &[
             Series {
                 label: "plan",
                 points: &planned,
                 color: palette::WALL,
             },
             Series {
-                label: "open loop, nominal parameters",
-                points: &nominal,
-                color: palette::BAD,
-            },
-            Series {
                 label: "open loop, calibrated plan",
                 points: &open,
                 color: palette::TRUTH,
+            },
+        ],
+        walls: &figures::walls(&scenario.world),
+        paths: &[
+            Series {
+                label: "open loop, nominal parameters",
+                points: &nominal,
+                color: palette::BAD,
             },
             Series {
                 label: "closed loop (trajectory tracking)",

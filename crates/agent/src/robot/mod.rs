@@ -101,7 +101,11 @@ struct Running {
     log: MissionLog,
     /// Backend time of the plan's first tick.
     t0_s: Option<f64>,
+    /// Distance from the plan's pose at the latest tick, and the largest
+    /// since the plan started, with whether it came on a detour.
+    deviation_now_m: f64,
     max_deviation_m: f64,
+    max_deviation_on_detour: bool,
     window: VecDeque<WindowSample>,
     pace: run::WindowPace,
     tick: u64,
@@ -525,6 +529,14 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             ),
             None => ((0, 0), 0.0, f64::NAN, f64::NAN),
         };
+        let (deviation_now_m, max_deviation_on_detour, on_detour) = match &self.running {
+            Some(r) => (
+                r.deviation_now_m,
+                r.max_deviation_on_detour,
+                r.exec.on_a_detour(),
+            ),
+            None => (f64::NAN, false, false),
+        };
         Status {
             plan: self.current.clone(),
             progress,
@@ -540,6 +552,9 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             bumps: self.bumps,
             collisions: self.collisions,
             refused: self.refused,
+            deviation_now_m,
+            max_deviation_on_detour,
+            on_detour,
         }
     }
 

@@ -104,7 +104,9 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
             localized: false,
             log: MissionLog::new(header),
             t0_s: None,
+            deviation_now_m: 0.0,
             max_deviation_m: 0.0,
+            max_deviation_on_detour: false,
             window: VecDeque::new(),
             pace: WindowPace::default(),
             tick: 0,
@@ -169,7 +171,11 @@ impl<B: RobotBackend, S: RobotStore> RobotAgent<B, S> {
         r.log.ranges.extend_from_slice(&reading.fresh_ranges_m);
         let reference = r.exec.reference();
         let deviation = (pose[0] - reference.x_m).hypot(pose[1] - reference.y_m);
-        r.max_deviation_m = r.max_deviation_m.max(deviation);
+        r.deviation_now_m = deviation;
+        if deviation > r.max_deviation_m {
+            r.max_deviation_m = deviation;
+            r.max_deviation_on_detour = r.exec.on_a_detour();
+        }
         let localizer = r.nav.localizer();
         let localized = localizer.localized(reading.t_s);
         let localization_changed = (localized != r.localized && localizer.mode() != Mode::None)

@@ -213,7 +213,7 @@ pub fn run_on_site(
         }],
         outlines: differences,
     }
-    .write_checked(&dir.join("twin"))?;
+    .write(&dir.join("twin"))?;
     timeline_figure(&op.report, &dir.join("timeline"))?;
     staging.commit()?;
     Ok(Decoupled {

@@ -27,6 +27,7 @@ use twindrive_workflow::verify::{self as verify_plan, PlanFailed};
 
 use super::decoupled::{self, Decoupled};
 use super::report::Report;
+use twindrive_progress::Stages;
 
 /// The hidden site: a room with clutter along its walls. Only the
 /// simulator reads its walls; the twin gets what the robot's lidar drew.
@@ -162,14 +163,11 @@ pub struct MappedSite {
 }
 
 /// Runs the section into `out` (the `mapped_site/` directory).
-pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<MappedSite> {
-    let started = std::time::Instant::now();
-    let stage = |name: &str| {
-        tracing::info!(
-            elapsed_s = started.elapsed().as_secs_f64(),
-            "mapped site: {name}"
-        )
-    };
+pub fn run(
+    out: &Path,
+    stdout: &mut impl std::io::Write,
+    stages: &mut Stages,
+) -> anyhow::Result<MappedSite> {
     // 1. The calibration drive on the hidden site: encoders, lidar, gyro.
     let drive_text = scenario_text(
         "hidden_site_calibration_drive",
@@ -185,10 +183,12 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     let true_mount = truth_site.range_sensors[lidar_index].info.mount;
     let tp = truth_site.robot.true_params;
     let np = truth_site.robot.nominal_params;
-    let (summary, log) = simulate_into(drive, &out.join("drive"))?;
+    let (summary, log) = stages.run(
+        "a calibration drive on a site the twin has never seen",
+        |_| simulate_into(drive, &out.join("drive")),
+    )?;
     twindrive_workflow::simulate::print_summary(&summary, &out.join("drive"), stdout)?;
 
-    stage("drive simulated");
     // 2. Self-calibration: no tracker, the mount guessed as on the axle.
     let rec = ScanRecording::from_log(&log, Some("lidar"), [1.0, 1.0])?;
     let job = ScanJob {
@@ -203,11 +203,19 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         ticks_per_rev: rec.ticks_per_rev,
         time_origin_s: 0.0,
     };
-    let (cal, artefacts) = self_calibrate(job, |_, _| {})?;
-    write_scan_outputs(
-        &cal,
-        &artefacts,
-        &out.join("calibration").join("calib.json"),
+    let cal = stages.run(
+        "self-calibrating the wheels and the lidar's mount from the drive's scans",
+        |progress| {
+            let (cal, artefacts) = self_calibrate(job, |done, total| {
+                progress.set(done as u64, total as u64, "steps")
+            })?;
+            write_scan_outputs(
+                &cal,
+                &artefacts,
+                &out.join("calibration").join("calib.json"),
+            )?;
+            anyhow::Ok(cal)
+        },
     )?;
     let params = DiffDriveParams::new(cal.left_diameter_m, cal.right_diameter_m, cal.wheelbase_m);
     let mount = Pose::new(
@@ -216,7 +224,6 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         cal.lidar_mount.heading_rad,
     );
 
-    stage("self-calibrated");
     // 3. The site's map from the same drive, and the mission on it.
     let mut lidar = rec.lidar.clone();
     lidar.mount = mount;
@@ -237,7 +244,14 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         prior: None,
         time_origin_s: 0.0,
     };
-    let mapped = site_map::map_site(&map_job, |_, _| {})?;
+    let mapped = stages.run(
+        "mapping the hidden site from the drive (SLAM)",
+        |progress| {
+            site_map::map_site(&map_job, |done, total| {
+                progress.set(done as u64, total as u64, "scans, located then drawn")
+            })
+        },
+    )?;
     let mission_start = Pose::new(3.0, 0.4, 0.0);
     let mission_text = scenario_text(
         "hidden_site_wall_following",
@@ -254,87 +268,73 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
     };
     let site_dir = out.join("site");
     let report = mapped.report(&map_job);
-    site_map::write_site(&site_dir, &mapped, &report, |start| {
-        site_map::site_toml("mapped_site", &mapped, &map_job, &scenario, start)
-    })?;
-    let twin = Scenario::load(&site_dir.join("site.toml"))?;
+    let (twin, map_score) = stages.run(
+        "the mapped twin, its map scored against the hidden walls",
+        |_| {
+            site_map::write_site(&site_dir, &mapped, &report, |start| {
+                site_map::site_toml("mapped_site", &mapped, &map_job, &scenario, start)
+            })?;
+            let twin = Scenario::load(&site_dir.join("site.toml"))?;
+            let map_score = score_map(&mapped, &log, &truth_site, lidar_index, out)?;
+            anyhow::Ok((twin, map_score))
+        },
+    )?;
     // The robot is at the same site the twin mapped: one name.
     let mut true_site = parse(&mission_text, "hidden_site_wall_following.toml")?;
     true_site.name = twin.name.clone();
 
-    stage("mapped");
-    // The map against the hidden walls.
-    let grid = mapped.grid();
-    let true_walls = truth_site.world.walls();
-    let seen = site_map::seen_wall_points(&log, &truth_site, lidar_index);
-    let map_score = score(&grid, &true_walls, &seen, 0.05);
-    let occupied: Vec<(f64, f64)> = grid
-        .occupied_centres()
-        .into_iter()
-        .map(|c| (c[0], c[1]))
-        .collect();
-    let path: Vec<(f64, f64)> = mapped.mapping.poses.iter().map(|p| (p[0], p[1])).collect();
-    WorldFigure {
-        title: "the site's map from the robot's scans (occupied cells) over the hidden true walls",
-        regions: &[],
-        references: &[],
-        walls: &walls(&truth_site.world),
-        paths: &[Series {
-            label: "calibration drive (mapped poses)",
-            points: &path,
-            color: palette::ALT,
-        }],
-        markers: &[Markers {
-            label: "occupied cell of the map",
-            points: &occupied,
-            color: palette::BAD,
-        }],
-        outlines: &[],
-    }
-    .write(&out.join("map_vs_truth"))?;
-
-    stage("map scored");
     // 4. The mission rehearsed on the mapped twin, planned, verified.
     let rehearsal_dir = out.join("rehearsal");
-    let (_, rehearsal) = simulate_into(twin.clone(), &rehearsal_dir)?;
-    let plan_job = plan::Job {
-        log_sha256: plan::log_dir_sha256(&rehearsal_dir)?,
-        log: rehearsal,
-        params,
-        scenario: twin.clone(),
-        settings: PipelineSettings {
-            planner: Default::default(),
-            redundancy: RedundancyConfig::with_pinch_distance(twin.robot.footprint_radius_m),
-            filter: Default::default(),
-            freedom: Default::default(),
-        },
-        time_optimal: false,
-    };
-    let (the_plan, stages) = plan::make_plan(&plan_job)?;
     let plan_path = out.join("plan").join("plan.json");
-    plan::write_outputs(&the_plan, &stages, &twin, &plan_path)?;
-    let verification = verify_plan::verify(&the_plan, &twin)?;
-    verify_plan::write_outputs(&the_plan, &verification, &twin, &out.join("verification"))?;
+    let (the_plan, verification) = stages.run(
+        "the mission rehearsed, planned and verified on the mapped twin",
+        |_| {
+            let (_, rehearsal) = simulate_into(twin.clone(), &rehearsal_dir)?;
+            let plan_job = plan::Job {
+                log_sha256: plan::log_dir_sha256(&rehearsal_dir)?,
+                log: rehearsal,
+                params,
+                scenario: twin.clone(),
+                settings: PipelineSettings {
+                    planner: Default::default(),
+                    redundancy: RedundancyConfig::with_pinch_distance(
+                        twin.robot.footprint_radius_m,
+                    ),
+                    filter: Default::default(),
+                    freedom: Default::default(),
+                },
+                time_optimal: false,
+            };
+            let (the_plan, plan_stages) = plan::make_plan(&plan_job)?;
+            plan::write_outputs(&the_plan, &plan_stages, &twin, &plan_path)?;
+            let verification = verify_plan::verify(&the_plan, &twin)?;
+            verify_plan::write_outputs(&the_plan, &verification, &twin, &out.join("verification"))?;
+            anyhow::Ok((the_plan, verification))
+        },
+    )?;
     if !verification.report.verdict.passed {
         return Err(PlanFailed(verification.report.verdict.clone()).into());
     }
 
-    stage("planned and verified");
     // 5. The plan executed by the robot agent on the true site.
     let plan_json = std::fs::read(&plan_path)
         .with_context(|| format!("reading back {}", plan_path.display()))?;
     let world_toml = std::fs::read(site_dir.join("site.toml"))?;
-    let decoupled = decoupled::run_on_site(
-        &the_plan,
-        &plan_json,
-        &twin,
-        &world_toml,
-        &true_site,
-        &[],
-        &out.join("decoupled"),
+    let decoupled = stages.run(
+        "the plan over the lunar link to the robot on the hidden site",
+        |_| {
+            decoupled::run_on_site(
+                &the_plan,
+                &plan_json,
+                &twin,
+                &world_toml,
+                &true_site,
+                &[],
+                &out.join("decoupled"),
+            )
+        },
     )?;
 
-    stage("mission executed");
     let nominal = [
         np.left_diameter_m,
         np.right_diameter_m,
@@ -377,6 +377,45 @@ pub fn run(out: &Path, stdout: &mut impl std::io::Write) -> anyhow::Result<Mappe
         verified: verification.report.verdict.passed,
         decoupled,
     })
+}
+
+/// The map against the site's hidden walls, and the figure of it.
+fn score_map(
+    mapped: &site_map::SiteMap,
+    log: &twindrive_log::MissionLog,
+    truth_site: &Scenario,
+    lidar_index: usize,
+    out: &Path,
+) -> anyhow::Result<MapScore> {
+    let grid = mapped.grid();
+    let true_walls = truth_site.world.walls();
+    let seen = site_map::seen_wall_points(log, truth_site, lidar_index);
+    let map_score = score(&grid, &true_walls, &seen, 0.05);
+    let occupied: Vec<(f64, f64)> = grid
+        .occupied_centres()
+        .into_iter()
+        .map(|c| (c[0], c[1]))
+        .collect();
+    let path: Vec<(f64, f64)> = mapped.mapping.poses.iter().map(|p| (p[0], p[1])).collect();
+    WorldFigure {
+        title: "the site's map from the robot's scans (occupied cells) over the hidden true walls",
+        regions: &[],
+        references: &[],
+        walls: &walls(&truth_site.world),
+        paths: &[Series {
+            label: "calibration drive (mapped poses)",
+            points: &path,
+            color: palette::ALT,
+        }],
+        markers: &[Markers {
+            label: "occupied cell of the map",
+            points: &occupied,
+            color: palette::BAD,
+        }],
+        outlines: &[],
+    }
+    .write(&out.join("map_vs_truth"))?;
+    Ok(map_score)
 }
 
 /// The printed summary.

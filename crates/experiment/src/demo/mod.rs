@@ -13,6 +13,7 @@ use twindrive_files::Staging;
 use twindrive_kinematics::DiffDriveParams;
 use twindrive_mission::pipeline::PipelineSettings;
 use twindrive_mission::redundancy::RedundancyConfig;
+use twindrive_progress::Stages;
 use twindrive_workflow::plan;
 use twindrive_workflow::simulate::{print_summary, simulate_into};
 use twindrive_workflow::verify::{self as verify_plan, PlanFailed};
@@ -34,8 +35,35 @@ fn builtin(name: &str) -> anyhow::Result<Scenario> {
         .with_context(|| format!("the built-in {name} scenario"))
 }
 
-/// Runs the case study into `out`, saying what it found on `stdout`.
+/// The demo's stages, for the stage lines' `i/N`.
+const STAGES: usize = 15;
+
+/// Runs the case study into `out`, saying what it found on `stdout` and,
+/// on stderr, what it is doing (each stage as it starts, and at least
+/// every second while it runs).
 pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
+    let mut stages = Stages::new("demo", STAGES);
+    let result = run_stages(out, stdout, &mut stages);
+    let times = stages.times().to_vec();
+    drop(stages);
+    for t in &times {
+        tracing::info!(
+            stage = %t.name,
+            wall_s = t.wall_s,
+            cpu_s = t.cpu_s,
+            "demo stage"
+        );
+    }
+    tracing::info!(
+        wall_s = times.iter().map(|t| t.wall_s).sum::<f64>(),
+        cpu_s = times.iter().map(|t| t.cpu_s).sum::<Option<f64>>(),
+        stages = times.len(),
+        "demo"
+    );
+    result
+}
+
+fn run_stages(out: &Path, stdout: &mut impl Write, stages: &mut Stages) -> anyhow::Result<()> {
     // 1. The calibration drive on the twin, and its calibration.
     let cal_scenario = builtin("calibration_drive")?;
     let tracker = cal_scenario
@@ -50,22 +78,26 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         nominal.wheelbase_m,
     ];
     let cal_dir = out.join("calibration_drive");
-    let (cal_summary, cal_log) = simulate_into(cal_scenario, &cal_dir)?;
+    let (cal_summary, cal_log) = stages.run("the calibration drive on the twin", |_| {
+        simulate_into(cal_scenario, &cal_dir)
+    })?;
     print_summary(&cal_summary, &cal_dir, stdout)?;
 
-    let job = calibration_job(&cal_log, &tracker, nominal, Method::Smoother);
-    let bar = twindrive_progress::bar((job.wheels.len() + job.poses.len()) as u64, "calibrating");
-    let (report, mut artefacts) =
-        twindrive_calibrate::calibrate(job, |d, _| bar.set_position(d as u64))?;
-    // The drive was simulated: the figures show the truth against the band.
-    artefacts.truth = Some([
-        true_params.left_diameter_m,
-        true_params.right_diameter_m,
-        true_params.wheelbase_m,
-    ]);
-    bar.finish_and_clear();
     let calib_path = out.join("calibration").join("calib.json");
-    twindrive_calibrate::write_outputs(&report, &artefacts, &calib_path)?;
+    let report = stages.run("calibrating the wheels from the drive", |progress| {
+        let job = calibration_job(&cal_log, &tracker, nominal, Method::Smoother);
+        let total = (job.wheels.len() + job.poses.len()) as u64;
+        let (report, mut artefacts) =
+            twindrive_calibrate::calibrate(job, |d, _| progress.set(d as u64, total, "samples"))?;
+        // The drive was simulated: the figures show the truth against the band.
+        artefacts.truth = Some([
+            true_params.left_diameter_m,
+            true_params.right_diameter_m,
+            true_params.wheelbase_m,
+        ]);
+        twindrive_calibrate::write_outputs(&report, &artefacts, &calib_path)?;
+        anyhow::Ok(report)
+    })?;
     let calibrated = [
         report.left_diameter_m,
         report.right_diameter_m,
@@ -85,21 +117,27 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
 
     // 2. The wall-following mission (paper section 5.1).
     let wf_dir = out.join("wall_following");
-    let (wf_summary, wf_log) = simulate_into(builtin("wall_following")?, &wf_dir)?;
+    let (wf_summary, wf_log) = stages.run("the wall-following mission on the twin", |_| {
+        simulate_into(builtin("wall_following")?, &wf_dir)
+    })?;
     print_summary(&wf_summary, &wf_dir, stdout)?;
 
     // 3. The paper's evidence.
     let ev_dir = out.join("evidence");
-    let staging = Staging::new(&ev_dir, "demo")?;
-    let t1 = evidence::table1(&cal_log, nominal, calibrated, staging.dir())?;
-    let s6 = evidence::section6(&wf_log, calibrated, staging.dir())?;
-    let md = evidence::markdown(&t1, &s6, staging.dir())?;
-    staging.write_with("evidence.md", |w| Ok(w.write_all(md.as_bytes())?))?;
-    staging.write_with("evidence.json", |w| {
-        serde_json::to_writer_pretty(w, &serde_json::json!({ "table1": t1, "section6": s6 }))
-            .map_err(Into::into)
+    let (t1, s6) = stages.run("the paper's evidence (Table 1, Section 6)", |_| {
+        let staging = Staging::new(&ev_dir, "demo")?;
+        let t1 = evidence::table1(&cal_log, nominal, calibrated, staging.dir())?;
+        let s6 = evidence::section6(&wf_log, calibrated, staging.dir())?;
+        let md = evidence::markdown(&t1, &s6, staging.dir())?;
+        staging.write_with("evidence.md", |w| Ok(w.write_all(md.as_bytes())?))?;
+        staging.write_with("evidence.json", |w| {
+            serde_json::to_writer_pretty(w, &serde_json::json!({ "table1": t1, "section6": s6 }))
+                .map_err(Into::into)
+        })?;
+        staging.commit()?;
+        anyhow::Ok((t1, s6))
     })?;
-    staging.commit()?;
+
     for r in &t1.rows {
         writeln!(
             stdout,
@@ -146,16 +184,21 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         },
         time_optimal: false,
     };
-    let (the_plan, stages) = plan::make_plan(&plan_job)?;
     let plan_path = out.join("plan").join("plan.json");
-    plan::write_outputs(&the_plan, &stages, &plan_job.scenario, &plan_path)?;
-    let summary = stages.summary();
+    let (the_plan, summary) = stages.run("planning from the mission's log", |_| {
+        let (the_plan, plan_stages) = plan::make_plan(&plan_job)?;
+        plan::write_outputs(&the_plan, &plan_stages, &plan_job.scenario, &plan_path)?;
+        anyhow::Ok((the_plan, plan_stages.summary()))
+    })?;
     plan::print_summary(&summary, &the_plan, &plan_path, stdout)?;
 
     // 5. Verification on the twin's true robot.
-    let verification = verify_plan::verify(&the_plan, &plan_job.scenario)?;
     let verify_dir = out.join("verification");
-    verify_plan::write_outputs(&the_plan, &verification, &plan_job.scenario, &verify_dir)?;
+    let verification = stages.run("verifying the plan on the twin", |_| {
+        let verification = verify_plan::verify(&the_plan, &plan_job.scenario)?;
+        verify_plan::write_outputs(&the_plan, &verification, &plan_job.scenario, &verify_dir)?;
+        anyhow::Ok(verification)
+    })?;
     verify_plan::print_report(&verification.report, &verify_dir, stdout)?;
     if !verification.report.verdict.passed {
         // Nothing that fails verification goes to the robot.
@@ -169,12 +212,17 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         .with_context(|| format!("reading back {}", plan_path.display()))?;
     let world_toml = twindrive_sim::builtin::WALL_FOLLOWING.as_bytes();
     let decoupled_dir = out.join("decoupled");
-    let decoupled = decoupled::run(
-        &the_plan,
-        &plan_json,
-        &plan_job.scenario,
-        world_toml,
-        &decoupled_dir,
+    let decoupled = stages.run(
+        "decoupled operation: the plan over the lunar link to a site with a box",
+        |_| {
+            decoupled::run(
+                &the_plan,
+                &plan_json,
+                &plan_job.scenario,
+                world_toml,
+                &decoupled_dir,
+            )
+        },
     )?;
     decoupled::print(&decoupled, &decoupled_dir, stdout)?;
 
@@ -189,7 +237,10 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         plan_json: plan_json.clone(),
     };
     let experiment_dir = out.join("experiment");
-    let (exp_settings, exp_cells) = latency::demo_section(&mission, &experiment_dir)?;
+    let (exp_settings, exp_cells) = stages.run_with_bar(
+        "the latency experiment, short: direct against decoupled operation",
+        |_| latency::demo_section(&mission, &experiment_dir),
+    )?;
     for c in &exp_cells {
         writeln!(
             stdout,
@@ -207,7 +258,7 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
     // seen, self-calibration and its map from one drive, the mission
     // planned on the mapped twin and executed on the true site.
     let mapped_dir = out.join("mapped_site");
-    let mapped = mapped_site::run(&mapped_dir, stdout)?;
+    let mapped = mapped_site::run(&mapped_dir, stdout, stages)?;
     mapped_site::print(&mapped, &mapped_dir, stdout)?;
 
     let mut report = case_study_report(&CaseStudy {
@@ -230,12 +281,14 @@ pub fn run(out: &Path, stdout: &mut impl Write) -> anyhow::Result<()> {
         experiment: (&exp_settings, &exp_cells),
     });
     mapped_site::add_to(&mut report, &mapped);
-    let md = report.markdown(out)?;
-    let staging = Staging::new(out, "demo-report")?;
-    staging.write_with("report.md", |w| Ok(w.write_all(md.as_bytes())?))?;
-    let html = report.html("twindrive: the case study", out)?;
-    staging.write_with("report.html", |w| Ok(w.write_all(html.as_bytes())?))?;
-    staging.commit()?;
+    stages.run("the report", |_| {
+        let md = report.markdown(out)?;
+        let staging = Staging::new(out, "demo-report")?;
+        staging.write_with("report.md", |w| Ok(w.write_all(md.as_bytes())?))?;
+        let html = report.html("twindrive: the case study", out)?;
+        staging.write_with("report.html", |w| Ok(w.write_all(html.as_bytes())?))?;
+        staging.commit()
+    })?;
     writeln!(
         stdout,
         "the whole story: {}/report.md (and report.html)",

@@ -22,6 +22,8 @@ pub struct Cell {
     /// Mean over completed runs.
     pub completion_s: Option<f64>,
     pub collisions: f64,
+    /// Mean over completed runs.
+    pub collisions_completed: Option<f64>,
     pub bumps: f64,
     pub contact_s: f64,
     pub coverage_percent: f64,
@@ -45,6 +47,11 @@ pub fn cells(rows: &[RunRow], settings: &Settings) -> Vec<Cell> {
                 let n = these.len().max(1) as f64;
                 let mean = |f: &dyn Fn(&RunRow) -> f64| these.iter().map(|r| f(r)).sum::<f64>() / n;
                 let done: Vec<f64> = these.iter().filter_map(|r| r.completion_s).collect();
+                let done_collisions: Vec<f64> = these
+                    .iter()
+                    .filter(|r| r.completion_s.is_some())
+                    .map(|r| f64::from(r.collisions))
+                    .collect();
                 out.push(Cell {
                     method,
                     latency_s,
@@ -54,6 +61,9 @@ pub fn cells(rows: &[RunRow], settings: &Settings) -> Vec<Cell> {
                     completion_s: (!done.is_empty())
                         .then(|| done.iter().sum::<f64>() / done.len() as f64),
                     collisions: mean(&|r| f64::from(r.collisions)),
+                    collisions_completed: (!done_collisions.is_empty()).then(|| {
+                        done_collisions.iter().sum::<f64>() / done_collisions.len() as f64
+                    }),
                     bumps: mean(&|r| f64::from(r.bumps)),
                     contact_s: mean(&|r| r.contact_s),
                     coverage_percent: mean(&|r| r.coverage_percent),
@@ -200,10 +210,11 @@ pub fn csv(rows: &[RunRow]) -> String {
 }
 
 /// Completion time and collisions against latency, one line per method,
-/// one panel per loss. A method's cells that did not complete are marked in
-/// a row of their own in a strip above the axis, named "not completed" and
-/// without numbers (never drawn as if they completed); lines that coincide
-/// are told apart by the plot.
+/// one panel per loss, both over the runs that completed. A method's cells
+/// where no run completed are marked in a row of their own in a strip above
+/// the axis, named "not completed" and without numbers (never drawn as if
+/// they completed: the contacts of a run cut short are not comparable, they
+/// are in `results.md`); lines that coincide are told apart by the plot.
 pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Result<()> {
     let methods = settings.methods();
     for (base, title, y_label, value) in [
@@ -215,9 +226,9 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
         ),
         (
             "collisions",
-            "contacts per run",
-            "collisions",
-            &|c: &Cell| Some(c.collisions),
+            "contacts per completed run",
+            "collisions per completed run",
+            &|c: &Cell| c.collisions_completed,
         ),
     ] {
         let titles: Vec<String> = settings
@@ -245,7 +256,7 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
             })
             .collect();
         // Not completed: method k's row in a strip above the axis, which
-        // has no numbers, so the marks cannot be read as times.
+        // has no numbers, so the marks cannot be read as values.
         let missing: Vec<Vec<Vec<f64>>> = settings
             .losses
             .iter()
@@ -263,7 +274,7 @@ pub fn figures(cells: &[Cell], settings: &Settings, dir: &Path) -> anyhow::Resul
             .collect();
         let missing_labels: Vec<String> = methods
             .iter()
-            .map(|m| format!("{}: not completed (strip above the times)", m.name()))
+            .map(|m| format!("{}: not completed (strip above the axis)", m.name()))
             .collect();
         let series: Vec<Vec<Series>> = lines
             .iter()
@@ -326,11 +337,7 @@ pub fn paths_figure(
     base: &Path,
 ) -> anyhow::Result<()> {
     let route: Vec<(f64, f64)> = m.plan.samples.iter().map(|s| (s.x_m, s.y_m)).collect();
-    let mut series = vec![Series {
-        label: "intended route (the rehearsal's plan)",
-        points: &route,
-        color: palette::TRUTH,
-    }];
+    let mut series = Vec::new();
     for method in settings.methods() {
         if let Some(r) = rows.iter().find(|r| {
             r.method == method.name() && r.latency_s == latency_s && r.loss == loss && r.seed == 0
@@ -347,10 +354,16 @@ pub fn paths_figure(
         secs(latency_s),
         pct(loss)
     );
+    // The route a pale band under the paths: the decoupled run follows it
+    // closely and would hide a line.
     WorldFigure {
         title: &title,
         regions: &[],
-        references: &[],
+        references: &[Series {
+            label: "intended route (the rehearsal's plan)",
+            points: &route,
+            color: palette::TRUTH,
+        }],
         walls: &walls(&m.site.world),
         paths: &series,
         markers: &[],
@@ -402,7 +415,9 @@ mod tests {
             runs: 1,
             completed: usize::from(completion_s.is_some()),
             completion_s,
-            collisions: 0.0,
+            // Slower runs bump more: the lines differ where the times do.
+            collisions: completion_s.map_or(3.0, |t| (t / 20.0).round()),
+            collisions_completed: completion_s.map(|t| (t / 20.0).round()),
             bumps: 0.0,
             contact_s: 0.0,
             coverage_percent: 90.0,
@@ -414,7 +429,7 @@ mod tests {
     }
 
     #[test]
-    fn completion_figure_marks_runs_that_did_not_complete_and_coinciding_lines() {
+    fn figures_mark_runs_that_did_not_complete_and_coinciding_lines() {
         let settings = Settings::demo();
         let [hold, watchdog, move_wait, decoupled] = settings.methods();
         let mut cells = Vec::new();
@@ -432,8 +447,8 @@ mod tests {
         figures(&cells, &settings, dir.path()).unwrap();
         let svg = std::fs::read_to_string(dir.path().join("completion_time.svg")).unwrap();
         for text in [
-            "direct (a) hold-last: not completed (strip above the times)",
-            "direct (b) watchdog: not completed (strip above the times)",
+            "direct (a) hold-last: not completed (strip above the axis)",
+            "direct (b) watchdog: not completed (strip above the axis)",
             "direct (b) watchdog (dashed: same points as direct (a) hold-last)",
         ] {
             assert!(svg.contains(text), "no `{text}` in the figure");
@@ -448,5 +463,15 @@ mod tests {
         assert!(ticks.iter().all(|&v| v <= 504.0 * 1.05), "{ticks:?}");
         assert!(dir.path().join("completion_time.png").is_file());
         assert!(dir.path().join("collisions.png").is_file());
+        // Contacts are drawn for the runs that completed; the others are in
+        // the strip, not on the lines.
+        let svg = std::fs::read_to_string(dir.path().join("collisions.svg")).unwrap();
+        for text in [
+            "contacts per completed run",
+            "direct (a) hold-last: not completed (strip above the axis)",
+            "direct (b) watchdog: not completed (strip above the axis)",
+        ] {
+            assert!(svg.contains(text), "no `{text}` in the figure");
+        }
     }
 }

@@ -506,6 +506,7 @@ fn an_exported_log_reads_back_as_logged() {
             name: "gyro".into(),
             rate_hz: 50.0,
         }),
+        goals: Default::default(),
     });
     for k in 0..10u64 {
         log.steps.push(twindrive_log::StepRecord {

@@ -5,6 +5,7 @@
 use std::time::Instant;
 
 use anyhow::{Context, bail};
+use twindrive_calibrate::described_wheels::described_wheels;
 use twindrive_calibrate::inputs::{self, BagSource, INPUTS, Source};
 use twindrive_calibrate::scan_inputs::{self, BagScanSource, ScanRecording};
 use twindrive_calibrate::{Job, Method, Offset, ScanJob};
@@ -143,9 +144,7 @@ fn run_scans(
     let initial = match (&args.initial, rec.nominal) {
         (Some(text), _) => parse_initial(text).or_usage()?,
         (None, Some(i)) => i,
-        (None, None) => {
-            return Err(usage("--initial DL,DR,B (metres) is needed for bag inputs"));
-        }
+        (None, None) => described_initial(args, "bag inputs")?,
     };
     let (mount_guess, mount_source) = match &args.mount {
         Some(text) => (parse_mount(text).or_usage()?, "--mount".to_string()),
@@ -214,11 +213,7 @@ fn resolve(args: &CalibrateArgs, log: Option<&twindrive_log::MissionLog>) -> any
     let initial = match (&args.initial, recording.nominal) {
         (Some(text), _) => parse_initial(text).or_usage()?,
         (None, Some(i)) => i,
-        (None, None) => {
-            return Err(usage(
-                "--initial DL,DR,B (metres) is needed for CSV and bag inputs",
-            ));
-        }
+        (None, None) => described_initial(args, "CSV and bag inputs")?,
     };
     let offset = match args.time_offset.trim() {
         "auto" => Offset::Auto,
@@ -255,6 +250,25 @@ fn resolve(args: &CalibrateArgs, log: Option<&twindrive_log::MissionLog>) -> any
         truth: recording.truth,
         time_origin_s: recording.time_origin_s,
     })
+}
+
+/// The calibration's start without --initial for inputs (`what`) that
+/// carry no nominal wheels: a bag's robot description's, said on the
+/// terminal; else a usage error asking for --initial (with why the bag
+/// cannot give them).
+fn described_initial(args: &CalibrateArgs, what: &str) -> anyhow::Result<[f64; 3]> {
+    let need = format!("--initial DL,DR,B (metres) is needed for {what}");
+    let Some(bag) = &args.bag else {
+        return Err(usage(need));
+    };
+    match described_wheels(bag)? {
+        Ok(described) => {
+            println!("{}", described.summary());
+            let p = described.params();
+            Ok([p.left_diameter_m, p.right_diameter_m, p.wheelbase_m])
+        }
+        Err(why) => Err(usage(format!("{need} ({why})"))),
+    }
 }
 
 fn parse_initial(text: &str) -> anyhow::Result<[f64; 3]> {

@@ -5,11 +5,12 @@
 use std::time::Instant;
 
 use anyhow::Context;
+use twindrive_calibrate::described_wheels::described_wheels;
 use twindrive_calibrate::inputs;
 use twindrive_calibrate::scan_inputs::{self, BagScanSource, ScanRecording};
 use twindrive_calibrate::site_map::{self, MapJob, Motion, SiteRobot, SiteScenario};
 use twindrive_estimation::mapping::MappingSettings;
-use twindrive_kinematics::Pose;
+use twindrive_kinematics::{DiffDriveParams, Pose};
 use twindrive_ros::extract::{PoseSource, WheelSource};
 
 use crate::cli::MapArgs;
@@ -31,12 +32,24 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
              `twindrive calibrate`)",
         ));
     }
-    let (mut rec, start, robot) = match (&args.log_dir, &args.bag) {
+    // The site's robot's wheels when neither a calibration nor a mission
+    // gives them: the flags', else (a bag) the recording's robot
+    // description's.
+    let given = calibration.is_some() || args.mission.is_some();
+    let flag_wheels = match (args.wheel_diameter_m, args.wheelbase_m) {
+        (Some(d), Some(b)) => Some(DiffDriveParams {
+            left_diameter_m: d,
+            right_diameter_m: d,
+            wheelbase_m: b,
+        }),
+        _ => None,
+    };
+    let (mut rec, start, robot, nominal) = match (&args.log_dir, &args.bag) {
         _ if args.carmen.is_some() => {
             let path = args.carmen.as_deref().expect("matched on is_some");
             let rec = scan_inputs::from_carmen(path)?;
             let robot = described_robot(args, &rec);
-            (rec, Pose::new(0.0, 0.0, 0.0), robot)
+            (rec, Pose::new(0.0, 0.0, 0.0), robot, flag_wheels)
         }
         (Some(dir), None) => {
             let log = inputs::read_log_dir(dir)?;
@@ -50,7 +63,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
                 scan_rate_hz: scan_rate_hz(&rec),
                 gyro: h.gyro.as_ref().map(|g| (g.name.clone(), g.rate_hz)),
             };
-            (rec, h.start, robot)
+            (rec, h.start, robot, None)
         }
         (None, Some(path)) => {
             let wheels = match (&args.left_joint, &args.right_joint) {
@@ -67,17 +80,6 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
                     ));
                 }
             };
-            if wheels.is_some()
-                && calibration.is_none()
-                && args.mission.is_none()
-                && (args.wheel_diameter_m.is_none() || args.wheelbase_m.is_none())
-            {
-                return Err(usage(
-                    "mapping from the wheels needs their size to turn angles into metres: --calibration \
-                     (calib.json from `twindrive calibrate`), or the nominal --wheel-diameter-m and --wheelbase-m; \
-                     or map from --odom-topic",
-                ));
-            }
             if wheels.is_none() && args.odom_topic.is_none() {
                 return Err(usage(
                     "--bag: name how the robot moved: --odom-topic (nav_msgs/msg/Odometry, or a TF topic with odom -> base), \
@@ -85,6 +87,13 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
                      (`twindrive bag info` lists the bag's topics and suggests the command line)",
                 ));
             }
+            // Read before the drive: a bag that cannot give them is
+            // refused at once.
+            let nominal = match flag_wheels {
+                _ if given => None,
+                Some(p) => Some(p),
+                None => Some(described_nominal(args, path, wheels.is_some())?),
+            };
             let source = BagScanSource {
                 path: path.clone(),
                 stamps: stamps(args.stamps),
@@ -100,7 +109,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
             };
             let (rec, _) = scan_inputs::from_bag(&source, signs)?;
             let robot = described_robot(args, &rec);
-            (rec, Pose::new(0.0, 0.0, 0.0), robot)
+            (rec, Pose::new(0.0, 0.0, 0.0), robot, nominal)
         }
         _ => unreachable!("clap requires one of LOG_DIR, --bag and --carmen"),
     };
@@ -122,7 +131,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         None => SiteScenario::Hold(robot),
     };
     // The site's robot's wheels: the calibration's, else the mission's,
-    // else as given.
+    // else as given or described.
     let params = match (&calibration, &scenario) {
         (Some((params, _)), _) => *params,
         (None, SiteScenario::Mission { text, path }) => {
@@ -131,20 +140,13 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
                 .robot
                 .true_params
         }
-        (None, SiteScenario::Hold(_)) => match (args.wheel_diameter_m, args.wheelbase_m) {
-            (Some(d), Some(b)) => twindrive_kinematics::DiffDriveParams {
-                left_diameter_m: d,
-                right_diameter_m: d,
-                wheelbase_m: b,
-            },
-            _ => {
-                return Err(usage(if args.carmen.is_some() {
+        (None, SiteScenario::Hold(_)) => match nominal {
+            Some(p) => p,
+            None => {
+                return Err(usage(
                     "--carmen without --calibration: give site.toml's robot its wheels with \
-                     --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them"
-                } else {
-                    "--odom-topic without --calibration: give site.toml's robot its wheels with \
-                     --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them"
-                }));
+                     --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them",
+                ));
             }
         },
     };
@@ -223,6 +225,45 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         args.out.display(),
     );
     Ok(())
+}
+
+/// The nominal wheels of a bag mapped with neither a calibration nor a
+/// mission, and without both of --wheel-diameter-m and --wheelbase-m: the
+/// recording's robot description's (a flag given alone wins over its
+/// part), said on the terminal; a usage error with the flags' advice and
+/// why the recording cannot give them otherwise. `from_wheels`: the drive
+/// is dead-reckoned from the wheels (else the site's robot only needs them).
+fn described_nominal(
+    args: &MapArgs,
+    bag: &std::path::Path,
+    from_wheels: bool,
+) -> anyhow::Result<DiffDriveParams> {
+    let described = described_wheels(bag)?.map_err(|why| {
+        usage(if from_wheels {
+            format!(
+                "mapping from the wheels needs their size to turn angles into metres: --calibration \
+                 (calib.json from `twindrive calibrate`), or the nominal --wheel-diameter-m and --wheelbase-m; \
+                 or map from --odom-topic ({why})"
+            )
+        } else {
+            format!(
+                "--odom-topic without --calibration: give site.toml's robot its wheels with \
+                 --wheel-diameter-m and --wheelbase-m, or a --mission scenario that has them ({why})"
+            )
+        })
+    })?;
+    println!("{}", described.summary());
+    let mut params = described.params();
+    if let Some(d) = args.wheel_diameter_m {
+        println!("--wheel-diameter-m {d} given: both wheels' diameter is {d} m");
+        params.left_diameter_m = d;
+        params.right_diameter_m = d;
+    }
+    if let Some(b) = args.wheelbase_m {
+        println!("--wheelbase-m {b} given: the wheelbase is {b} m");
+        params.wheelbase_m = b;
+    }
+    Ok(params)
 }
 
 /// The site's robot of a recording that does not describe one (a bag, a

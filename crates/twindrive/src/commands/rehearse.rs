@@ -38,10 +38,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let out = args.out.as_deref().expect("clap requires --out");
     let (planned, summary) = rehearse_into(scenario, &goals, &zones, out)?;
     println!(
-        "route: {} waypoint(s), {:.2} m in {} leg(s), the footprint at least {:.3} m clear; planned in {:.1} ms",
+        "route: {} waypoint(s){}, {:.2} m in {} leg(s), about {:.0} s, the footprint at least {:.3} m clear; planned in {:.1} ms",
         goals.waypoints.len(),
+        if goals.return_home { " and home" } else { "" },
         planned.route.length_m,
         planned.route.points.len() - 1,
+        planned.duration_s,
         planned.route.min_clearance_m,
         planned.planning_ms
     );
