@@ -15,7 +15,7 @@ export PEERS=${PEERS:-1}
 # build shared dependencies again for one package's features.
 cargo test --workspace --no-run -q
 
-for script in sim_vs_irsim.sh ekf_vs_filterpy.sh prune_vs_distance_matrix.sh route_vs_python.sh calibrate_one_hour.sh rosbag_vs_rosbags.sh scan_match_vs_open3d.sh self_calibrate.sh map.sh slam_benchmark.sh; do
+for script in sim_vs_irsim.sh ekf_vs_filterpy.sh prune_vs_distance_matrix.sh route_vs_python.sh calibrate_one_hour.sh rosbag_vs_rosbags.sh scan_match_vs_open3d.sh self_calibrate.sh map.sh slam_benchmark.sh slam_paths.sh; do
     echo "== bench/$script (smoke, peers $PEERS)" >&2
     bash "bench/$script"
 done

@@ -137,6 +137,30 @@ pub struct MapReport {
     pub lidar: String,
     pub lidar_mount: [f64; 3],
     pub params: [f64; 3],
+    /// What the SLAM did: loop searches and closures (those of the global
+    /// search among them), closures switched off as false loops, and the
+    /// global search's matches that no second one confirmed (loops seen
+    /// but not taken: when one is real, the map is bent there).
+    pub slam: twindrive_estimation::slam::SlamStats,
+}
+
+impl MapReport {
+    /// The SLAM's loop closures in a line, for the terminal.
+    pub fn closures_line(&self) -> String {
+        let s = &self.slam;
+        let mut line = format!(
+            "loop closures: {} ({} by the global search), {} switched off as false loops",
+            s.loop_closures, s.global_closures, s.loops_rejected
+        );
+        if s.global_unconfirmed > 0 {
+            line.push_str(&format!(
+                "; {} match(es) of the global search left unconfirmed (a loop seen but not taken: \
+                 if it was real, the map does not close there)",
+                s.global_unconfirmed
+            ));
+        }
+        line
+    }
 }
 
 /// Maps the drive. `progress(done, total)` as it goes.
@@ -227,6 +251,7 @@ impl SiteMap {
                 job.params.right_diameter_m,
                 job.params.wheelbase_m,
             ],
+            slam: self.mapping.slam,
         }
     }
 

@@ -40,16 +40,18 @@ pub fn bar(total: u64, message: &str) -> ProgressBar {
 
 /// A stand-in terminal that writes each drawn line to stderr as a plain
 /// line, at most one per [`PIPED_EVERY`] (the first one after that long:
-/// work that ends sooner prints nothing).
+/// work that ends sooner prints nothing), and the line of finished work
+/// (100 %, drawn by `ProgressBar::finish`) always.
 #[derive(Debug)]
 pub struct Lines {
-    last: Mutex<Option<Instant>>,
+    /// When a line was last written, and whether the finished line was.
+    last: Mutex<(Option<Instant>, bool)>,
 }
 
 impl Default for Lines {
     fn default() -> Self {
         Self {
-            last: Mutex::new(Some(Instant::now())),
+            last: Mutex::new((Some(Instant::now()), false)),
         }
     }
 }
@@ -62,10 +64,18 @@ impl Lines {
         }
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
         let now = Instant::now();
-        if last.is_some_and(|t| now.duration_since(t) < PIPED_EVERY) {
+        // The line of finished work is said once, however soon: a log that
+        // ends at "50 %" would say the work stopped halfway.
+        let finished = s.contains("(100 %)");
+        let say = if finished {
+            !last.1
+        } else {
+            last.0.is_none_or(|t| now.duration_since(t) >= PIPED_EVERY)
+        };
+        if !say {
             return Ok(());
         }
-        *last = Some(now);
+        *last = (Some(now), last.1 || finished);
         writeln!(std::io::stderr().lock(), "{s}")
     }
 }

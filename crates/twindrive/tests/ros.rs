@@ -2348,3 +2348,146 @@ fn a_bag_self_calibrates_from_its_scans_as_its_log_does() {
     let o = twindrive(&args);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
 }
+
+/// Issue 55's first point, on a real recording: the first two minutes of
+/// the Freiburg 079 CARMEN log (`../shared/data/slam2d_benchmark/`) mapped
+/// as the log, and as a ROS 2 user converts it (`carmen_to_bag.py`, on
+/// rosbags): a sqlite3 bag with `/odom`, an MCAP bag with the odometry on
+/// `/tf` only, and a bag of two wheels' JointState positions made from the
+/// same odometry (mapped from the wheel angles). Every path's error on the
+/// set's relations inside the window is within 10 % of the CARMEN path's;
+/// each map_report.json counts the SLAM's loop closures, and the terminal
+/// says them; the piped progress ends at 100 %.
+#[test]
+fn one_recording_maps_alike_through_every_input_path() {
+    use twindrive_estimation::relations;
+    let dir = repo().join("../shared/data/slam2d_benchmark/fr079");
+    if !dir.is_dir() {
+        eprintln!("SKIPPED: ../shared/data/slam2d_benchmark is absent");
+        return;
+    }
+    let clf = dir.join("fr079.rebuilt.clf.gz");
+    let window_s = 120.0;
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let convert = |out: &str, extra: &[&str]| {
+        let o = Command::new(python())
+            .arg(repo().join("scripts/ros/carmen_to_bag.py"))
+            .arg(&clf)
+            .arg(d.join(out))
+            .args(["--until-s", &window_s.to_string()])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "carmen_to_bag.py: {}", text(&o.stderr));
+    };
+    convert("odom", &["--storage", "sqlite3", "--odom", "topic"]);
+    convert("tf", &["--storage", "mcap", "--odom", "tf"]);
+    let wheels = ["--wheel-diameter-m", "0.2", "--wheelbase-m", "0.4"];
+    convert(
+        "joints",
+        &[
+            &["--odom", "none", "--joints", "positions"][..],
+            &wheels[..],
+        ]
+        .concat(),
+    );
+    let until = window_s.to_string();
+    let clf_s = clf.to_str().unwrap();
+    let bag = |name: &str| d.join(name).to_str().unwrap().to_string();
+    let (odom, tf, joints) = (bag("odom"), bag("tf"), bag("joints"));
+    let paths: [(&str, Vec<&str>); 4] = [
+        ("carmen", vec!["--carmen", clf_s, "--until-s", &until]),
+        (
+            "sqlite3 bag, /odom",
+            vec![
+                "--bag",
+                &odom,
+                "--scan-topic",
+                "/scan",
+                "--odom-topic",
+                "/odom",
+            ],
+        ),
+        (
+            "MCAP bag, /tf",
+            vec!["--bag", &tf, "--scan-topic", "/scan", "--odom-topic", "/tf"],
+        ),
+        (
+            "wheel joints",
+            vec![
+                "--bag",
+                &joints,
+                "--scan-topic",
+                "/scan",
+                "--left-joint",
+                "wheel_left_joint",
+                "--right-joint",
+                "wheel_right_joint",
+            ],
+        ),
+    ];
+    let all =
+        relations::parse_relations(&std::fs::read_to_string(dir.join("fr079.relations")).unwrap())
+            .unwrap();
+    let log = twindrive_log::carmen::CarmenLog::read(&clf).unwrap();
+    let (start_s, end_s) = (log.lasers[0].t_s, log.lasers[0].t_s + window_s);
+    let inside: Vec<_> = all
+        .into_iter()
+        .filter(|r| {
+            [r.t1_s, r.t2_s]
+                .iter()
+                .all(|t| (start_s..=end_s).contains(t))
+        })
+        .collect();
+    assert!(inside.len() > 100, "{} relations", inside.len());
+    let mut errors = Vec::new();
+    for (k, (name, args)) in paths.iter().enumerate() {
+        let out = d.join(format!("map{k}"));
+        let mut all_args = vec!["map"];
+        all_args.extend_from_slice(args);
+        all_args.extend_from_slice(&wheels);
+        all_args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let o = twindrive(&all_args);
+        assert!(o.status.success(), "{name}: {}", text(&o.stderr));
+        let said = text(&o.stdout);
+        assert!(said.contains("loop closures: "), "{name}: {said}");
+        assert!(
+            text(&o.stderr).contains("(100 %)"),
+            "{name}: the progress does not end at 100 %: {}",
+            text(&o.stderr)
+        );
+        let report: Value =
+            serde_json::from_slice(&std::fs::read(out.join("map_report.json")).unwrap()).unwrap();
+        assert!(report["slam"]["nodes"].as_u64().unwrap() > 100, "{report}");
+        let poses: Vec<(f64, [f64; 3])> = std::fs::read_to_string(out.join("poses.tum"))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| {
+                let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+                (v[0], [v[1], v[2], 2.0 * v[6].atan2(v[7])])
+            })
+            .collect();
+        let scored = relations::score(&inside, &poses);
+        assert_eq!(scored.matched, inside.len(), "{name}: relations matched");
+        let e = scored.errors.unwrap();
+        eprintln!(
+            "{name}: {:.4} m, {:.3} deg on {} relations; {}",
+            e.abs_trans_m.mean,
+            e.abs_rot_deg.mean,
+            inside.len(),
+            said.lines()
+                .find(|l| l.starts_with("loop closures"))
+                .unwrap_or("")
+        );
+        errors.push((name, e.abs_trans_m.mean, e.abs_rot_deg.mean));
+    }
+    let (_, t0, r0) = errors[0];
+    for (name, t, r) in &errors[1..] {
+        assert!(
+            (t - t0).abs() <= 0.1 * t0 && (r - r0).abs() <= 0.1 * r0,
+            "{name}: {t:.4} m, {r:.3} deg against the CARMEN log's {t0:.4} m, {r0:.3} deg"
+        );
+    }
+}

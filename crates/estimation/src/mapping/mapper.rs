@@ -403,6 +403,9 @@ pub struct Mapping {
     /// With a prior map: how well the whole drive, located, agrees with it
     /// ([`super::drive_agreement`]).
     pub prior_agreement: Option<f64>,
+    /// What the SLAM that located the drive did: its loop closures, those
+    /// switched off, the loops it saw but did not take.
+    pub slam: crate::slam::SlamStats,
 }
 
 /// Maps a drive: `scans` with the robot's odometry pose at each, in time
@@ -430,10 +433,12 @@ pub fn map_drive(
     let passes = if prior.is_some() { 3 } else { 2 };
     let total = passes * scans.len();
     let mut placement = None;
+    let slam_stats;
     let located = match prior {
         None => {
             let slam =
                 crate::slam::locate_drive(scans, mount, settings.slam, |k, _| progress(k, total));
+            slam_stats = slam.stats;
             DriveLocated {
                 matched: slam.matched_each.iter().filter(|m| **m).count(),
                 unmatched: match slam.matched_each.iter().skip(1).filter(|m| !**m).count() {
@@ -446,9 +451,10 @@ pub fn map_drive(
             }
         }
         Some(g) => {
-            let own =
-                crate::slam::locate_drive(scans, mount, settings.slam, |k, _| progress(k, total))
-                    .poses;
+            let slam =
+                crate::slam::locate_drive(scans, mount, settings.slam, |k, _| progress(k, total));
+            slam_stats = slam.stats;
+            let own = slam.poses;
             let occupied = g.occupied_centres();
             placement = super::place(
                 &occupied,
@@ -518,6 +524,7 @@ pub fn map_drive(
         matched_each: located.matched_each,
         unmatched: located.unmatched,
         rms_m: located.rms_m,
+        slam: slam_stats,
     }
 }
 

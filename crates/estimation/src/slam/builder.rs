@@ -86,7 +86,7 @@ pub struct ScanOutcome {
 }
 
 /// Counts for the report.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct SlamStats {
     pub nodes: usize,
     pub submaps: usize,
@@ -98,6 +98,9 @@ pub struct SlamStats {
     pub global_closures: usize,
     /// Closures switched off after a solve (false loops).
     pub loops_rejected: usize,
+    /// Matches of the global search that no second match confirmed (a
+    /// loop the search saw but was not sure of, and did not take).
+    pub global_unconfirmed: usize,
     pub solves: usize,
 }
 
@@ -580,6 +583,7 @@ impl Slam {
     /// Solves the whole graph once more and gives the robot's pose at
     /// every scan added, in the frame of the first.
     pub fn finish(mut self) -> (Vec<[f64; 3]>, SlamStats) {
+        self.stats.global_unconfirmed += self.pending.len();
         if self.stats.loop_closures > 0 {
             self.solve(self.settings.final_iterations);
         }

@@ -82,8 +82,10 @@ impl Slam {
     /// both become loop closures and the graph is solved.
     fn consider(&mut self, c: Candidate) {
         let s = self.settings;
+        let before = self.pending.len();
         self.pending
             .retain(|p| p.node + s.global_pending_nodes >= c.node);
+        self.stats.global_unconfirmed += before - self.pending.len();
         let implied = |p: &Candidate| {
             let anchor = self.graph.poses[self.submaps[p.submap].anchor];
             // Where the match puts the current estimate's frame.
@@ -107,6 +109,7 @@ impl Slam {
             return;
         };
         let first = self.pending.remove(at);
+        self.stats.global_unconfirmed += self.pending.len();
         self.pending.clear();
         for p in [first, c] {
             let edge = self.graph.add_edge(Edge {

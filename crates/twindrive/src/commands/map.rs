@@ -193,9 +193,14 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         time_origin_s: rec.time_origin_s,
     };
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "read inputs");
-    let bar = twindrive_progress::bar(2 * job.scans.len() as u64, "mapping");
+    // Two passes over the scans: locating each (the SLAM), then drawing
+    // each into the map.
+    let bar = twindrive_progress::bar(
+        2 * job.scans.len() as u64,
+        &format!("mapping {} scans (locating, then drawing)", job.scans.len()),
+    );
     let map = site_map::map_site(&job, |done, _| bar.set_position(done as u64))?;
-    bar.finish_and_clear();
+    bar.finish();
     let name = args
         .out
         .file_name()
@@ -205,6 +210,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         site_map::site_toml(&name, &map, &job, &scenario, start)
     })?;
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "mapped");
+    println!("{}", report.closures_line());
     println!(
         "map: {} scans ({} matched to the map{}), {:.1} m driven; {} x {} cells of {} m: {} free, {} occupied, {} unknown -> {}/map.yaml, {}/site.toml",
         report.scans,
