@@ -110,6 +110,8 @@ pub struct SiteMap {
     pub times_s: Vec<f64>,
     /// The job's `time_origin_s`.
     pub time_origin_s: f64,
+    /// The index in the job's scans of each pose's scan.
+    pub scan_index: Vec<usize>,
     /// Scans outside the motion's time span (encoders or odometry), left out.
     pub scans_outside: usize,
     /// The matches' median RMS residual: the lidar's range noise and the
@@ -174,15 +176,17 @@ pub fn map_site(job: &MapJob, progress: impl FnMut(usize, usize)) -> anyhow::Res
     }
     let mut scans = Vec::with_capacity(job.scans.len());
     let mut times_s = Vec::with_capacity(job.scans.len());
+    let mut scan_index = Vec::with_capacity(job.scans.len());
     let mut outside = 0;
     let min_points = job.settings.matching.min_points;
-    for s in &job.scans {
+    for (k, s) in job.scans.iter().enumerate() {
         let Some(p) = pose_at(&track, s.t_s) else {
             outside += 1;
             continue;
         };
         scans.push((s.clone(), [p.x_m, p.y_m, p.heading_rad]));
         times_s.push(s.t_s);
+        scan_index.push(k);
     }
     let with_returns = scans
         .iter()
@@ -214,6 +218,7 @@ pub fn map_site(job: &MapJob, progress: impl FnMut(usize, usize)) -> anyhow::Res
         mapping,
         times_s,
         time_origin_s: job.time_origin_s,
+        scan_index,
         scans_outside: outside,
         range_noise_m,
     })
@@ -525,6 +530,7 @@ fn start_candidates(map: &SiteMap) -> Vec<Pose> {
 pub fn write_site(
     out: &Path,
     map: &SiteMap,
+    job: &MapJob,
     report: &MapReport,
     site: impl Fn(Pose) -> anyhow::Result<(String, Option<std::path::PathBuf>)>,
 ) -> anyhow::Result<()> {
@@ -589,13 +595,109 @@ pub fn write_site(
     let _ = std::fs::remove_file(staging.path("site.toml"));
     staging.commit()?;
     let why = first_error.map_or_else(|| "the drive has no pose".to_string(), |e| format!("{e:#}"));
+    let advice = candidates.first().map_or_else(String::new, |start| {
+        unplaced_advice(map, job, [start.x_m, start.y_m])
+    });
     bail!(
         "the map is written to {} (map.pgm, map.yaml, map.png, poses.tum, map_report.json), but no site.toml: \
-         at none of the drive's {} poses tried does the site load as a scenario on it (first: {why}); \
-         give the site's robot a smaller footprint (--footprint-radius-m) or a --mission whose robot fits",
+         at none of the drive's {} poses tried does the site load as a scenario on it (first: {why}); {advice}",
         out.display(),
         candidates.len()
     )
+}
+
+/// What to do when the site's robot fits at none of the drive's poses
+/// near `start` (where the drive started, in the map's frame): when scans
+/// long after the start drew walls there, the map does not close its loop
+/// at the start, and the drive up to them maps on its own; otherwise the
+/// robot is too big for the map.
+fn unplaced_advice(map: &SiteMap, job: &MapJob, start: [f64; 2]) -> String {
+    let drawn = drawn_over(map, job, start, DRAWN_OVER_RADIUS_M);
+    match drawn
+        .iter()
+        .find(|d| d.from_s - map.times_s[0] > RETURN_AFTER_S)
+    {
+        Some(d) => {
+            let t0 = map.times_s[0];
+            format!(
+                "the drive's own scans disagree there: the scans of {:.1} to {:.1} s after the first \
+                 ({} scans, the drive come back) draw walls where it started, so the map does not \
+                 close its loop at the start and is bent where the drive comes back (map.png shows \
+                 the path beside itself; map_report.json's `slam` counts the loop closures); the \
+                 drive up to then maps on its own: `--until-s {:.0}`",
+                d.from_s - t0,
+                d.to_s - t0,
+                d.scans,
+                (d.from_s - t0 - SPAN_GAP_S).floor()
+            )
+        }
+        None => "give the site's robot a smaller footprint (--footprint-radius-m) or a --mission \
+                 whose robot fits"
+            .to_string(),
+    }
+}
+
+/// Returns drawn within this of where the drive started conflict with the
+/// robot standing there (m): a robot's half-width.
+const DRAWN_OVER_RADIUS_M: f64 = 0.25;
+/// A span of scans this long after the start (s) is the drive come back.
+const RETURN_AFTER_S: f64 = 60.0;
+/// Scans closer in time than this (s) are one span.
+const SPAN_GAP_S: f64 = 5.0;
+
+/// A span of scans that drew returns at one place.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DrawnSpan {
+    /// The first and last scan's times (s, the job's clock).
+    pub from_s: f64,
+    pub to_s: f64,
+    pub scans: usize,
+}
+
+/// The spans of scans that put at least three returns within `radius_m`
+/// of `at` (the map's frame), by their located poses.
+pub fn drawn_over(map: &SiteMap, job: &MapJob, at: [f64; 2], radius_m: f64) -> Vec<DrawnSpan> {
+    let m = job.lidar.mount;
+    let mount = [m.x_m, m.y_m, m.heading_rad];
+    let mut spans: Vec<DrawnSpan> = Vec::new();
+    for ((&k, pose), &t) in map
+        .scan_index
+        .iter()
+        .zip(&map.mapping.poses)
+        .zip(&map.times_s)
+    {
+        let Some(scan) = job.scans.get(k) else {
+            continue;
+        };
+        let sensor = twindrive_estimation::se2::compose(*pose, mount);
+        let (s, c) = sensor[2].sin_cos();
+        let near = scan
+            .endpoints()
+            .flatten()
+            .filter(|p| {
+                let (x, y) = (
+                    sensor[0] + c * p[0] - s * p[1],
+                    sensor[1] + s * p[0] + c * p[1],
+                );
+                (x - at[0]).hypot(y - at[1]) <= radius_m
+            })
+            .count();
+        if near < 3 {
+            continue;
+        }
+        match spans.last_mut() {
+            Some(last) if t - last.to_s <= SPAN_GAP_S => {
+                last.to_s = t;
+                last.scans += 1;
+            }
+            _ => spans.push(DrawnSpan {
+                from_s: t,
+                to_s: t,
+                scans: 1,
+            }),
+        }
+    }
+    spans
 }
 
 /// Where the beams of range sensor `sensor` truly met the walls over a
@@ -696,5 +798,109 @@ mod tests {
                 .track(start, &params)
                 .is_empty()
         );
+    }
+
+    /// A drive that comes back to its start drawn off (its loop not
+    /// closed): the scans of its return put walls where it started, and
+    /// the advice names them by their time since the first scan and says
+    /// how much of the drive maps on its own; early scans near the start
+    /// (the robot turning by a wall) are not a return; a drive whose scans
+    /// never drew over its start is a robot too big for the map.
+    #[test]
+    fn a_start_drawn_over_by_the_drives_return_is_named_with_what_maps_alone() {
+        use twindrive_estimation::localize::Scan;
+        // A scan whose beams fan ±0.1 rad around straight ahead, all at
+        // `range_m`.
+        let scan = |t_s: f64, range_m: f32| Scan {
+            t_s,
+            angle_min_rad: -0.1,
+            increment_rad: 0.02,
+            range_min_m: 0.05,
+            range_max_m: 30.0,
+            ranges_m: vec![range_m; 11],
+        };
+        // (time, pose, range): standing at the origin seeing 3 m ahead; at
+        // 2 s a metre on, facing back at 0.9 m (near the start, early);
+        // then from 100 to 104 s, 1.5 m on facing back at 1.5 m (the
+        // return, drawn over the start); then away again.
+        let mut drive: Vec<(f64, [f64; 3], f32)> = vec![(0.0, [0.0, 0.0, 0.0], 3.0)];
+        drive.push((2.0, [1.0, 0.0, std::f64::consts::PI], 0.9));
+        for k in 0..5 {
+            drive.push((100.0 + f64::from(k), [1.5, 0.0, std::f64::consts::PI], 1.5));
+        }
+        drive.push((120.0, [4.0, 0.0, 0.0], 3.0));
+        let settings = MappingSettings::default();
+        let job = MapJob {
+            motion: Motion::Odometry(Vec::new()),
+            scans: drive.iter().map(|(t, _, r)| scan(*t, *r)).collect(),
+            lidar: RangeSensorInfo {
+                kind: twindrive_log::SensorKind::Lidar,
+                name: "lidar".into(),
+                mount: Pose::new(0.0, 0.0, 0.0),
+                beams: 11,
+                fov_rad: 0.22,
+                min_range_m: 0.05,
+                max_range_m: 30.0,
+            },
+            params: DiffDriveParams {
+                left_diameter_m: 0.07,
+                right_diameter_m: 0.07,
+                wheelbase_m: 0.2,
+            },
+            start: Pose::new(0.0, 0.0, 0.0),
+            settings,
+            prior: None,
+            time_origin_s: 0.0,
+        };
+        let map = SiteMap {
+            mapping: twindrive_estimation::mapping::Mapping {
+                poses: drive.iter().map(|d| d.1).collect(),
+                grid: LogOddsGrid::new(settings.resolution_m, settings.log_odds),
+                matched: drive.len(),
+                matched_each: vec![true; drive.len()],
+                unmatched: Vec::new(),
+                rms_m: Vec::new(),
+                placement: None,
+                prior_agreement: None,
+                slam: Default::default(),
+            },
+            times_s: drive.iter().map(|d| d.0).collect(),
+            time_origin_s: 0.0,
+            scan_index: (0..drive.len()).collect(),
+            scans_outside: 0,
+            range_noise_m: None,
+        };
+        let spans = drawn_over(&map, &job, [0.0, 0.0], DRAWN_OVER_RADIUS_M);
+        assert_eq!(
+            spans,
+            [
+                DrawnSpan {
+                    from_s: 2.0,
+                    to_s: 2.0,
+                    scans: 1
+                },
+                DrawnSpan {
+                    from_s: 100.0,
+                    to_s: 104.0,
+                    scans: 5
+                }
+            ]
+        );
+        let advice = unplaced_advice(&map, &job, [0.0, 0.0]);
+        assert!(
+            advice.contains("the scans of 100.0 to 104.0 s after the first (5 scans")
+                && advice.contains("`--until-s 95`"),
+            "{advice}"
+        );
+        // Nothing drawn over the start but the early scan: the robot is
+        // too big.
+        let elsewhere = unplaced_advice(&map, &job, [3.0, 2.0]);
+        assert!(elsewhere.contains("smaller footprint"), "{elsewhere}");
+        let early_only = SiteMap {
+            times_s: vec![0.0, 2.0, 10.0, 11.0, 12.0, 13.0, 14.0, 30.0],
+            ..map
+        };
+        let advice = unplaced_advice(&early_only, &job, [0.0, 0.0]);
+        assert!(advice.contains("smaller footprint"), "{advice}");
     }
 }

@@ -428,7 +428,7 @@ fn a_mission_log_extends_the_twins_map_from_wherever_it_starts_and_another_sites
             path: mission_path,
         };
         let dir = tmp.path().join("site");
-        write_site(&dir, &first, &first.report(&job), |start| {
+        write_site(&dir, &first, &job, &first.report(&job), |start| {
             site_toml("look", &first, &job, &scenario, start)
         })
         .unwrap();

@@ -271,7 +271,7 @@ pub fn run(
     let (twin, map_score) = stages.run(
         "the mapped twin, its map scored against the hidden walls",
         |_| {
-            site_map::write_site(&site_dir, &mapped, &report, |start| {
+            site_map::write_site(&site_dir, &mapped, &map_job, &report, |start| {
                 site_map::site_toml("mapped_site", &mapped, &map_job, &scenario, start)
             })?;
             let twin = Scenario::load(&site_dir.join("site.toml"))?;

@@ -206,7 +206,7 @@ pub fn run(args: &MapArgs) -> anyhow::Result<()> {
         .file_name()
         .map_or("site".into(), |n| n.to_string_lossy().into_owned());
     let report = map.report(&job);
-    site_map::write_site(&args.out, &map, &report, |start| {
+    site_map::write_site(&args.out, &map, &job, &report, |start| {
         site_map::site_toml(&name, &map, &job, &scenario, start)
     })?;
     tracing::info!(elapsed_s = started.elapsed().as_secs_f64(), "mapped");
