@@ -595,9 +595,8 @@ pub fn write_site(
     let _ = std::fs::remove_file(staging.path("site.toml"));
     staging.commit()?;
     let why = first_error.map_or_else(|| "the drive has no pose".to_string(), |e| format!("{e:#}"));
-    let advice = candidates.first().map_or_else(String::new, |start| {
-        unplaced_advice(map, job, [start.x_m, start.y_m])
-    });
+    let tried: Vec<[f64; 2]> = candidates.iter().map(|p| [p.x_m, p.y_m]).collect();
+    let advice = unplaced_advice(map, job, &tried);
     bail!(
         "the map is written to {} (map.pgm, map.yaml, map.png, poses.tum, map_report.json), but no site.toml: \
          at none of the drive's {} poses tried does the site load as a scenario on it (first: {why}); {advice}",
@@ -607,12 +606,12 @@ pub fn write_site(
 }
 
 /// What to do when the site's robot fits at none of the drive's poses
-/// near `start` (where the drive started, in the map's frame): when scans
-/// long after the start drew walls there, the map does not close its loop
-/// at the start, and the drive up to them maps on its own; otherwise the
-/// robot is too big for the map.
-fn unplaced_advice(map: &SiteMap, job: &MapJob, start: [f64; 2]) -> String {
-    let drawn = drawn_over(map, job, start, DRAWN_OVER_RADIUS_M);
+/// `tried` (where the drive started and the first poses after, in the
+/// map's frame): when scans long after the start drew walls there, the map
+/// does not close its loop at the start, and the drive up to them maps on
+/// its own; otherwise the robot is too big for the map.
+fn unplaced_advice(map: &SiteMap, job: &MapJob, tried: &[[f64; 2]]) -> String {
+    let drawn = drawn_over(map, job, tried, DRAWN_OVER_RADIUS_M);
     match drawn
         .iter()
         .find(|d| d.from_s - map.times_s[0] > RETURN_AFTER_S)
@@ -621,10 +620,10 @@ fn unplaced_advice(map: &SiteMap, job: &MapJob, start: [f64; 2]) -> String {
             let t0 = map.times_s[0];
             format!(
                 "the drive's own scans disagree there: the scans of {:.1} to {:.1} s after the first \
-                 ({} scans, the drive come back) draw walls where it started, so the map does not \
-                 close its loop at the start and is bent where the drive comes back (map.png shows \
-                 the path beside itself; map_report.json's `slam` counts the loop closures); the \
-                 drive up to then maps on its own: `--until-s {:.0}`",
+                 ({} scans, the drive come back) draw walls on its first metres, where the site's \
+                 robot would stand, so the map does not close its loop there and is bent where the \
+                 drive comes back (map.png shows the path beside itself; map_report.json's `slam` \
+                 counts the loop closures); the drive up to then maps on its own: `--until-s {:.0}`",
                 d.from_s - t0,
                 d.to_s - t0,
                 d.scans,
@@ -655,8 +654,15 @@ pub struct DrawnSpan {
 }
 
 /// The spans of scans that put at least three returns within `radius_m`
-/// of `at` (the map's frame), by their located poses.
-pub fn drawn_over(map: &SiteMap, job: &MapJob, at: [f64; 2], radius_m: f64) -> Vec<DrawnSpan> {
+/// of one of the points `at` (the map's frame), by their located poses.
+pub fn drawn_over(map: &SiteMap, job: &MapJob, at: &[[f64; 2]], radius_m: f64) -> Vec<DrawnSpan> {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in at {
+        for c in 0..2 {
+            lo[c] = lo[c].min(p[c] - radius_m);
+            hi[c] = hi[c].max(p[c] + radius_m);
+        }
+    }
     let m = job.lidar.mount;
     let mount = [m.x_m, m.y_m, m.heading_rad];
     let mut spans: Vec<DrawnSpan> = Vec::new();
@@ -679,7 +685,9 @@ pub fn drawn_over(map: &SiteMap, job: &MapJob, at: [f64; 2], radius_m: f64) -> V
                     sensor[0] + c * p[0] - s * p[1],
                     sensor[1] + s * p[0] + c * p[1],
                 );
-                (x - at[0]).hypot(y - at[1]) <= radius_m
+                (lo[0]..=hi[0]).contains(&x)
+                    && (lo[1]..=hi[1]).contains(&y)
+                    && at.iter().any(|a| (x - a[0]).hypot(y - a[1]) <= radius_m)
             })
             .count();
         if near < 3 {
@@ -870,7 +878,7 @@ mod tests {
             scans_outside: 0,
             range_noise_m: None,
         };
-        let spans = drawn_over(&map, &job, [0.0, 0.0], DRAWN_OVER_RADIUS_M);
+        let spans = drawn_over(&map, &job, &[[0.0, 0.0]], DRAWN_OVER_RADIUS_M);
         assert_eq!(
             spans,
             [
@@ -886,7 +894,7 @@ mod tests {
                 }
             ]
         );
-        let advice = unplaced_advice(&map, &job, [0.0, 0.0]);
+        let advice = unplaced_advice(&map, &job, &[[0.0, 0.0]]);
         assert!(
             advice.contains("the scans of 100.0 to 104.0 s after the first (5 scans")
                 && advice.contains("`--until-s 95`"),
@@ -894,13 +902,13 @@ mod tests {
         );
         // Nothing drawn over the start but the early scan: the robot is
         // too big.
-        let elsewhere = unplaced_advice(&map, &job, [3.0, 2.0]);
+        let elsewhere = unplaced_advice(&map, &job, &[[3.0, 2.0]]);
         assert!(elsewhere.contains("smaller footprint"), "{elsewhere}");
         let early_only = SiteMap {
             times_s: vec![0.0, 2.0, 10.0, 11.0, 12.0, 13.0, 14.0, 30.0],
             ..map
         };
-        let advice = unplaced_advice(&early_only, &job, [0.0, 0.0]);
+        let advice = unplaced_advice(&early_only, &job, &[[0.0, 0.0]]);
         assert!(advice.contains("smaller footprint"), "{advice}");
     }
 }
