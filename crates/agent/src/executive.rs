@@ -161,6 +161,10 @@ const REJOIN_REACHED_M: f64 = 0.1;
 /// Driving to a waypoint, at least this fast (m/s): slower, a real
 /// robot's motors may not turn the wheels against friction at all.
 const MIN_APPROACH_M_S: f64 = 0.03;
+/// The detour ends at the plan's sample nearest the robot within this,
+/// along the plan, of the planned rejoin point (m): twice the distance at
+/// which that point is reached.
+const REJOIN_WINDOW_M: f64 = 2.0 * REJOIN_REACHED_M;
 /// Facing the rejoin sample's heading within this, the detour ends (rad).
 const ALIGNED_RAD: f64 = 0.05;
 /// Heading errors beyond this are turned in place (rad).
@@ -698,11 +702,37 @@ impl Executive {
         ))
     }
 
-    /// Back on the plan at the detour's rejoin sample: the plan's clock
-    /// moves on to it, the residual starts afresh, and tracking resumes.
+    /// Back on the plan near the detour's rejoin sample: at the sample
+    /// nearest the robot within [`REJOIN_WINDOW_M`] along the plan of it
+    /// (a robot that turned in place beside the point, under a slow
+    /// control loop, stands a few centimetres before or after it; the
+    /// plan's clock set to the planned sample would start the tracker that
+    /// far behind or ahead). The plan's clock moves on to that sample, the
+    /// residual starts afresh, and tracking resumes.
     fn rejoin(&mut self, belief: &Belief, t: f64) -> [f64; 2] {
-        let g = self.detour.take().expect("on a detour");
+        let mut g = self.detour.take().expect("on a detour");
         let samples = &self.plan.samples;
+        let planned_m = g.planner.along_m(g.route.rejoin);
+        let near = |k: usize| (g.planner.along_m(k) - planned_m).abs() <= REJOIN_WINDOW_M;
+        let first = (0..g.route.rejoin)
+            .rev()
+            .take_while(|&k| k >= g.from_sample && near(k))
+            .last()
+            .unwrap_or(g.route.rejoin);
+        let last = (g.route.rejoin..samples.len())
+            .take_while(|&k| near(k))
+            .last()
+            .unwrap_or(g.route.rejoin);
+        let here = belief.pose;
+        g.route.rejoin = (first..=last)
+            .min_by(|&a, &b| {
+                let d = |k: usize| {
+                    let s = &samples[k];
+                    (s.x_m - here.x_m).hypot(s.y_m - here.y_m)
+                };
+                d(a).total_cmp(&d(b)).then(a.cmp(&b))
+            })
+            .unwrap_or(g.route.rejoin);
         let plan_t = samples[g.route.rejoin].t_s - samples[0].t_s;
         let gain_m = g.planner.along_m(g.route.rejoin) - g.planner.along_m(g.from_sample);
         self.events.push(Event::Rejoined {
