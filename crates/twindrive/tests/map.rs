@@ -1141,31 +1141,26 @@ fn an_exported_drive_calibrates_and_maps_from_its_description() {
         "--right-joint",
         "wheel_right_joint",
     ];
-    let mut args = vec![
-        "calibrate",
-        "--bag",
-        bag.to_str().unwrap(),
-        "--scan-topic",
-        "/lidar",
-    ];
-    args.extend(joints);
-    args.extend(["--out", calib.to_str().unwrap()]);
-    let o = run(&args);
-    assert!(o.status.success(), "{}", text(&o.stderr));
-    assert!(text(&o.stdout).contains(&said), "{}", text(&o.stdout));
     let site = tmp.path().join("site");
-    let mut args = vec![
-        "map",
-        "--bag",
-        bag.to_str().unwrap(),
-        "--scan-topic",
-        "/lidar",
-    ];
-    args.extend(joints);
-    args.extend(["--out", site.to_str().unwrap()]);
-    let o = run(&args);
-    assert!(o.status.success(), "{}", text(&o.stderr));
-    assert!(text(&o.stdout).contains(&said), "{}", text(&o.stdout));
+    // calibrate and map alike take the wheels from the description.
+    for (command, out) in [("calibrate", &calib), ("map", &site)] {
+        let mut args = vec![
+            command,
+            "--bag",
+            bag.to_str().unwrap(),
+            "--scan-topic",
+            "/lidar",
+        ];
+        args.extend(joints);
+        args.extend(["--out", out.to_str().unwrap()]);
+        let o = run(&args);
+        assert!(o.status.success(), "{command}: {}", text(&o.stderr));
+        assert!(
+            text(&o.stdout).contains(&said),
+            "{command}: {}",
+            text(&o.stdout)
+        );
+    }
     let robot = twindrive_sim::Scenario::load(&site.join("site.toml"))
         .unwrap()
         .robot;

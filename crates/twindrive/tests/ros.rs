@@ -1693,14 +1693,10 @@ fn a_goals_mission_planned_on_a_mapped_building_completes_on_a_physics_engine() 
     assert!(o.status.success(), "{}{}", text(&o.stdout), text(&o.stderr));
     // MuJoCo builds the building within the rehearsal's track, the lidar's
     // range and half a metre about it.
-    let track: Vec<[f64; 2]> = std::fs::read_to_string(rehearsal.join("ground_truth.tum"))
+    let track: Vec<[f64; 2]> = twindrive_log::read_tum(&rehearsal.join("ground_truth.tum"))
         .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .map(|l| {
-            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
-            [v[1], v[2]]
-        })
+        .into_iter()
+        .map(|(_, p)| [p.x_m, p.y_m])
         .collect();
     let reach_m = 3.5 + 0.5;
     let lo = track
@@ -2460,13 +2456,14 @@ fn one_recording_maps_alike_through_every_input_path() {
         let report: Value =
             serde_json::from_slice(&std::fs::read(out.join("map_report.json")).unwrap()).unwrap();
         assert!(report["slam"]["nodes"].as_u64().unwrap() > 100, "{report}");
-        let poses: Vec<(f64, [f64; 3])> = std::fs::read_to_string(out.join("poses.tum"))
+        let poses: Vec<(f64, [f64; 3])> = twindrive_log::read_tum(&out.join("poses.tum"))
             .unwrap()
-            .lines()
-            .filter(|l| !l.starts_with('#'))
-            .map(|l| {
-                let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
-                (v[0], [v[1], v[2], 2.0 * v[6].atan2(v[7])])
+            .into_iter()
+            .map(|(t, p)| {
+                (
+                    twindrive_log::seconds_from_ns(t),
+                    [p.x_m, p.y_m, p.heading_rad],
+                )
             })
             .collect();
         let scored = relations::score(&inside, &poses);
